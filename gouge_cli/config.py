@@ -1,0 +1,259 @@
+"""Run configuration: pydantic models loaded from YAML, with dotted overrides.
+
+Every field has a default, a unit and a range. Dimensional fields accept a plain
+dimensionless number (scales of physics.md section 1) or an SI string such as
+``"24 MPa"``. Unknown keys, wrong types and out-of-range values raise
+:class:`ConfigError` whose message names the key, the value and what is allowed.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal, Optional
+
+import yaml
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+
+from .units import Scales, to_dimensionless
+
+
+class ConfigError(ValueError):
+    """A config that cannot be run; the message is meant for the user."""
+
+
+def _quantity(dimension: str):
+    def convert(value: Any, info) -> Any:
+        if value is None:
+            return None
+        scales = (info.context or {}).get("scales", Scales())
+        return to_dimensionless(value, dimension, scales)
+
+    return BeforeValidator(convert)
+
+
+Stress = Annotated[float, _quantity("stress")]
+Velocity = Annotated[float, _quantity("velocity")]
+Time = Annotated[float, _quantity("time")]
+Length = Annotated[float, _quantity("length")]
+Permeability = Annotated[float, _quantity("permeability")]
+StiffnessPerLength = Annotated[float, _quantity("stiffness_per_length")]
+MassPerLength = Annotated[float, _quantity("mass_per_length")]
+Viscosity = Annotated[float, _quantity("viscosity")]
+Compressibility = Annotated[float, _quantity("compressibility")]
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+
+class ScalesConfig(_Section):
+    """SI size of the units (Table 1 of the thesis). Used to read SI strings and written to outputs."""
+
+    length_m: float = Field(5e-4, gt=0, description="mean grain diameter d [m]")
+    stress_pa: float = Field(8e10, gt=0, description="Young's modulus E [Pa]")
+    density_kg_m3: float = Field(2460.0, gt=0, description="grain density rho_s [kg/m3]")
+
+    def scales(self) -> Scales:
+        return Scales(self.length_m, self.stress_pa, self.density_kg_m3)
+
+
+class MaterialConfig(_Section):
+    """Grain material (thesis Table 1, Eqs. 8-11)."""
+
+    youngs_modulus: Stress = Field(1.0, gt=0, description="E [E]")
+    poisson_ratio: float = Field(0.2, ge=0, lt=0.5, description="nu [-]")
+    density: float = Field(1.0, gt=0, description="grain density [rho_s]")
+    friction: float = Field(0.5, ge=0, le=10, description="Coulomb friction mu at contacts [-]")
+    damping: float = Field(0.05, ge=0, le=10, description="normal dashpot rate gamma, F = -gamma m_ij v_n [1/t0]")
+    tangential_stiffness_factor: float = Field(
+        1.0, gt=0, le=10, description="multiplies the thesis k_s = 2^1.5 E/((2-nu)(1+nu)) sqrt(R xi) [-]"
+    )
+
+
+class PackingConfig(_Section):
+    """Seeded polydisperse packing between two rough walls (one row of glued grains each)."""
+
+    n_grains: int = Field(2000, ge=20, le=5_000_000, description="total grains, wall grains included")
+    width: Optional[Length] = Field(
+        None, gt=0, description="periodic length L_x [d]; default 200 sqrt(n_grains/1e4) (4:1 layer)"
+    )
+    diameter_min: float = Field(0.8, gt=0, description="smallest diameter [d]")
+    diameter_max: float = Field(1.2, gt=0, description="largest diameter [d]")
+    wall_spacing: float = Field(1.0, gt=0.2, le=2.0, description="centre spacing of wall grains [d]")
+    initial_spacing: float = Field(1.25, ge=1.0, le=3.0, description="lattice spacing of the loose start [d]")
+
+    @model_validator(mode="after")
+    def _diameters(self):
+        if self.diameter_max < self.diameter_min:
+            raise ValueError(
+                f"diameter_max ({self.diameter_max}) must be >= diameter_min ({self.diameter_min})"
+            )
+        if self.initial_spacing < self.diameter_max:
+            raise ValueError(
+                f"initial_spacing ({self.initial_spacing}) must be >= diameter_max ({self.diameter_max}) "
+                "so the loose start has no overlaps"
+            )
+        return self
+
+    def resolved_width(self) -> float:
+        return self.width if self.width is not None else float(round(200.0 * math.sqrt(self.n_grains / 1e4)))
+
+
+class CompactionConfig(_Section):
+    """Settling under the normal stress alone before the driver starts (physics.md section 3)."""
+
+    damping: float = Field(0.01, ge=0, le=1, description="background viscous rate on free grains while settling [1/t0]")
+    min_time: Time = Field(500.0, ge=0, description="settle at least this long [t0]")
+    max_time: Time = Field(5e4, gt=0, description="give up settling after this long [t0]")
+    wall_velocity_tol: float = Field(
+        1e-2, gt=0, description="settled when |v_z| of the top wall < tol * v_ref, v_ref = sigma/sqrt(E rho) [-]"
+    )
+
+
+class LoadingConfig(_Section):
+    """Top wall: constant normal stress, pulled by a spring at constant velocity (per unit length)."""
+
+    normal_stress: Stress = Field(3e-4, gt=0, le=0.1, description="sigma [E] (thesis 'Normal Force')")
+    spring_constant: StiffnessPerLength = Field(5e-7, gt=0, le=1.0, description="k per unit wall length [E/d]")
+    velocity: Velocity = Field(1e-5, ge=0, le=0.1, description="loading velocity V_s [v0]")
+    wall_mass: Optional[MassPerLength] = Field(
+        None, gt=0, description="top-wall mass per unit length m_b [rho d^2]; default: its grains' mass"
+    )
+
+
+class NumericsConfig(_Section):
+    """Time step, neighbour list and threads (physics.md section 5)."""
+
+    dt: Optional[Time] = Field(None, gt=0, description="time step [t0]; default dt_safety * stability bound")
+    dt_safety: float = Field(0.1, gt=0, le=1.0, description="fraction of the stability bound used as dt [-]")
+    skin: float = Field(0.2, gt=0, le=2.0, description="Verlet skin [d]")
+    threads: int = Field(0, ge=0, le=1024, description="numba threads; 0 = all cores")
+
+
+class RunConfig(_Section):
+    duration: Time = Field(1e5, gt=0, description="simulated time after compaction [t0]")
+
+
+class OutputConfig(_Section):
+    series_interval: Time = Field(10.0, gt=0, description="time-series cadence [t0]")
+    snapshot_interval: Time = Field(1e4, gt=0, description="grain-snapshot cadence [t0]")
+
+
+class FluidConfig(_Section):
+    """Pore fluid on a Goren pressure grid (thesis Eqs. 14-20, physics.md section 4)."""
+
+    permeability: Permeability = Field(
+        1e-5, gt=0, description="Carman-Kozeny prefactor kappa_c [d^2] (thesis 'Permeability')"
+    )
+    compressibility: Compressibility = Field(36.0, gt=0, description="beta [1/E] (4.5e-10 1/Pa)")
+    viscosity: Viscosity = Field(1.43e-7, gt=0, description="eta [E t0] (1e-3 Pa s)")
+    cell_size: float = Field(2.5, ge=0.5, le=20, description="target grid cell size [d]")
+    solver: Literal["implicit", "explicit"] = Field("implicit", description="pressure time stepping")
+    interval: int = Field(10, ge=1, le=10000, description="DEM steps per fluid update [-]")
+    explicit_safety: float = Field(0.5, gt=0, le=1.0, description="fraction of the FTCS bound per sub-step [-]")
+
+
+class Config(_Section):
+    """A whole run. Written, fully resolved, next to every output."""
+
+    name: str = Field("run", pattern=r"^[A-Za-z0-9_.-]+$", description="run name; output under runs/<name>/")
+    seed: int = Field(1, ge=0, description="random seed of the packing")
+    scales: ScalesConfig = ScalesConfig()
+    material: MaterialConfig = MaterialConfig()
+    packing: PackingConfig = PackingConfig()
+    compaction: CompactionConfig = CompactionConfig()
+    loading: LoadingConfig = LoadingConfig()
+    numerics: NumericsConfig = NumericsConfig()
+    run: RunConfig = RunConfig()
+    output: OutputConfig = OutputConfig()
+    fluid: Optional[FluidConfig] = Field(None, description="absent or 'none' for a dry scene")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _fluid_none(cls, data):
+        if isinstance(data, dict) and isinstance(data.get("fluid"), str) and data["fluid"].lower() == "none":
+            data = dict(data)
+            data["fluid"] = None
+        return data
+
+    def to_dict(self) -> dict:
+        return self.model_dump(mode="json")
+
+
+def _format_errors(err: ValidationError) -> str:
+    lines = []
+    for e in err.errors():
+        key = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        if e["type"] == "extra_forbidden":
+            lines.append(f"{key}: unknown key (check the spelling; see `gouge config --defaults`)")
+            continue
+        value = e.get("input")
+        msg = e["msg"].removeprefix("Value error, ")
+        lines.append(f"{key} = {value!r}: {msg}")
+    return "invalid config:\n  " + "\n  ".join(lines)
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+
+
+def apply_overrides(data: dict, overrides: list[str] | dict) -> dict:
+    """Apply ``key.sub=value`` overrides (values parsed as YAML) to a raw config dict."""
+    data = copy.deepcopy(data)
+    items = overrides.items() if isinstance(overrides, dict) else []
+    if not isinstance(overrides, dict):
+        parsed = []
+        for item in overrides:
+            if "=" not in item:
+                raise ConfigError(f"override {item!r} is not of the form key.sub=value")
+            key, value = item.split("=", 1)
+            parsed.append((key.strip(), _parse_value(value.strip())))
+        items = parsed
+    for key, value in items:
+        parts = key.split(".")
+        node = data
+        for part in parts[:-1]:
+            child = node.get(part)
+            if child is None or isinstance(child, str):
+                child = {}
+                node[part] = child
+            elif not isinstance(child, dict):
+                raise ConfigError(f"override {key!r}: {part!r} is not a section")
+            node = child
+        node[parts[-1]] = value
+    return data
+
+
+def build_config(data: dict | None, overrides: list[str] | dict | None = None) -> Config:
+    """Validate a raw dict (plus overrides) into a frozen Config, or raise ConfigError."""
+    data = dict(data or {})
+    if overrides:
+        data = apply_overrides(data, overrides)
+    try:
+        scales = ScalesConfig.model_validate(data.get("scales") or {}).scales()
+        return Config.model_validate(data, context={"scales": scales})
+    except ValidationError as err:
+        raise ConfigError(_format_errors(err)) from None
+
+
+def load_config(path: str | Path, overrides: list[str] | dict | None = None) -> Config:
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file {str(path)!r} does not exist")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError as err:
+        raise ConfigError(f"{path}: not valid YAML: {err}") from None
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: the top level must be a mapping of sections")
+    data.setdefault("name", path.stem)
+    return build_config(data, overrides)
+
+
+def dump_config(config: Config) -> str:
+    return yaml.safe_dump(config.to_dict(), sort_keys=False)

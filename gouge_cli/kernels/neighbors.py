@@ -1,0 +1,132 @@
+"""Cell lists and the Verlet half neighbour list, with tangential history carried across rebuilds.
+
+The list is CSR: the neighbours j > i of grain i are ``index[start[i]:start[i+1]]``;
+``shear`` (same layout) is the tangential displacement of each pair. The transposed
+list ``tr_pair[tr_start[j]:tr_start[j+1]]`` holds, in increasing i, the pair slots in
+which j is the second grain, so forces can be summed per grain in a fixed order
+(bitwise identical for any thread count).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from .. import NUMBA_CACHE
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def minimum_image(dx, width):
+    if dx > 0.5 * width:
+        return dx - width
+    if dx < -0.5 * width:
+        return dx + width
+    return dx
+
+
+@njit(cache=NUMBA_CACHE)
+def build_neighbors(x, z, radius, body, width, skin,
+                    start, index, shear, new_start, new_index, new_shear,
+                    tr_start, tr_pair, x_build, z_build):
+    """Rebuild the half list for pairs closer than R_i + R_j + skin.
+
+    x, z, radius: (N,) [d]; body: (N,) int8, grains of the same wall (body > 0) never pair.
+    All list arrays are preallocated; returns the number of pairs, or -(needed capacity)
+    if ``index`` is too short (nothing is modified then).
+    """
+    n = x.shape[0]
+    capacity = index.shape[0]
+    rmax = 0.0
+    zmin = z[0]
+    zmax = z[0]
+    for i in range(n):
+        rmax = max(rmax, radius[i])
+        zmin = min(zmin, z[i])
+        zmax = max(zmax, z[i])
+    cell = 2.0 * rmax + skin
+    ncx = int(width / cell)
+    if ncx < 3:
+        ncx = 1
+    ncz = int((zmax - zmin) / cell) + 1
+    cw = width / ncx
+    cell_of = np.empty(n, np.int64)
+    count = np.zeros(ncx * ncz + 1, np.int64)
+    for i in range(n):
+        cx = min(int(x[i] / cw), ncx - 1)
+        cz = min(int((z[i] - zmin) / cell), ncz - 1)
+        c = cz * ncx + cx
+        cell_of[i] = c
+        count[c + 1] += 1
+    for c in range(ncx * ncz):
+        count[c + 1] += count[c]
+    fill = count[:-1].copy()
+    order = np.empty(n, np.int64)
+    for i in range(n):
+        c = cell_of[i]
+        order[fill[c]] = i
+        fill[c] += 1
+
+    npairs = 0
+    overflow = False
+    for i in range(n):
+        new_start[i] = npairs
+        c = cell_of[i]
+        cz0 = c // ncx
+        cx0 = c - cz0 * ncx
+        xi = x[i]
+        zi = z[i]
+        for cz in range(max(cz0 - 1, 0), min(cz0 + 2, ncz)):
+            for ox in range(-1, 2) if ncx > 1 else range(0, 1):
+                cx = (cx0 + ox) % ncx
+                cc = cz * ncx + cx
+                for m in range(count[cc], count[cc + 1]):
+                    j = order[m]
+                    if j <= i or (body[i] == body[j] and body[i] != 0):
+                        continue
+                    dx = minimum_image(x[j] - xi, width)
+                    dz = z[j] - zi
+                    cut = radius[i] + radius[j] + skin
+                    if dx * dx + dz * dz < cut * cut:
+                        if npairs < capacity:
+                            new_index[npairs] = j
+                        else:
+                            overflow = True
+                        npairs += 1
+    new_start[n] = npairs
+    if overflow:
+        return -npairs
+
+    for i in range(n):
+        old_lo = start[i]
+        old_hi = start[i + 1]
+        for k in range(new_start[i], new_start[i + 1]):
+            j = new_index[k]
+            value = 0.0
+            for m in range(old_lo, old_hi):
+                if index[m] == j:
+                    value = shear[m]
+                    break
+            new_shear[k] = value
+    for i in range(n + 1):
+        start[i] = new_start[i]
+    for k in range(npairs):
+        index[k] = new_index[k]
+        shear[k] = new_shear[k]
+
+    for j in range(n + 1):
+        tr_start[j] = 0
+    for k in range(npairs):
+        tr_start[index[k] + 1] += 1
+    for j in range(n):
+        tr_start[j + 1] += tr_start[j]
+    for j in range(n):
+        new_start[j] = tr_start[j]
+    for i in range(n):
+        for k in range(start[i], start[i + 1]):
+            j = index[k]
+            tr_pair[new_start[j]] = k
+            new_start[j] += 1
+    for i in range(n):
+        x_build[i] = x[i]
+        z_build[i] = z[i]
+    return npairs

@@ -1,0 +1,212 @@
+"""The simulation loop: numba advances whole chunks of steps; callbacks fire between chunks.
+
+    build or restore state -> [compaction until settled] -> loading:
+        while step < end:
+            advance(steps to the next due callback)      # numba, no Python per step
+            for callback in order: if due: callback(sim) # output, guards, detector, progress
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .config import Config
+from .kernels import measure as M
+from .kernels import step as K
+from .packing import build_packing
+from .state import State
+from .timestep import choose_dt, contact_constants
+
+_EMPTY = np.zeros(0)
+
+
+class PhysicsError(RuntimeError):
+    """The physics went wrong (NaN, runaway overlap, unstable fluid step); names cause and fix."""
+
+    def __init__(self, cause: str, fix: str, time: float | None = None):
+        self.cause, self.fix, self.time = cause, fix, time
+        at = f" at t = {time:.6g} t0" if time is not None else ""
+        super().__init__(f"{cause}{at}. {fix}")
+
+
+@dataclass
+class Every:
+    """Call ``action(sim)`` every ``steps`` steps (step counts since step 0, so restarts line up)."""
+
+    steps: int
+    action: Callable
+
+    def next_step(self, step: int) -> int:
+        return (step // self.steps + 1) * self.steps
+
+    def due(self, step: int) -> bool:
+        return step % self.steps == 0
+
+
+@dataclass
+class Observation:
+    time: float
+    values: dict = field(default_factory=dict)
+
+
+class Simulation:
+    """A scene: config, arrays and the kernels' parameters. Dry unless ``config.fluid`` is set."""
+
+    def __init__(self, config: Config, arrays: dict | None = None):
+        self.config = config
+        self.dt = choose_dt(config)
+        self.state = build_packing(config)
+        s = self.state
+        top_mass = float(s.mass[s.top].sum()) / s.width
+        self.wall_mass_per_length = config.loading.wall_mass or top_mass
+        c_normal, c_tangential = contact_constants(config)
+        p = np.zeros(K.N_PARAMS)
+        p[K.DT] = self.dt
+        p[K.WIDTH] = s.width
+        p[K.SKIN] = config.numerics.skin
+        p[K.C_NORMAL] = c_normal
+        p[K.C_TANGENTIAL] = c_tangential
+        p[K.DAMPING] = config.material.damping
+        p[K.FRICTION] = config.material.friction
+        p[K.SIGMA] = config.loading.normal_stress
+        p[K.SPRING] = config.loading.spring_constant
+        p[K.V_LOAD] = config.loading.velocity
+        p[K.WALL_MASS] = self.wall_mass_per_length * s.width
+        self.params = p
+        self.fluid = None
+        self.drag = (_EMPTY, _EMPTY)
+        self._observables = np.zeros(M.N_OBSERVABLES)
+        if arrays is not None:
+            s.restore(arrays)
+        else:
+            self._rebuild()
+            K.compute_forces(s.grains(), s.lists(), s.pairs(), s.wall, p, *self.drag)
+        self._apply_phase()
+
+    # ---- phase -------------------------------------------------------------------------
+    @property
+    def phase(self) -> int:
+        return int(self.state.counters[K.K_PHASE])
+
+    def _apply_phase(self):
+        loading = self.phase == K.LOADING
+        self.params[K.DRIVE] = 1.0 if loading else 0.0
+        self.params[K.BG_DAMPING] = 0.0 if loading else self.config.compaction.damping
+
+    def start_loading(self):
+        """End compaction: zero the spring, start the driver clock."""
+        s = self.state
+        s.counters[K.K_PHASE] = K.LOADING
+        s.wall[K.W_X] = 0.0
+        s.wall[K.W_VX] = 0.0
+        s.clock[K.C_DRIVE_TIME] = 0.0
+        self._apply_phase()
+
+    # ---- stepping ----------------------------------------------------------------------
+    def _rebuild(self):
+        s = self.state
+        while not K.rebuild(s.grains(), s.lists(), self.params, s.counters):
+            s.grow_pairs(int(s.counters[K.K_NEEDED_CAPACITY]))
+
+    def advance(self, nsteps: int):
+        """Advance exactly nsteps steps (numba); grows the pair arrays if a rebuild overflows."""
+        s = self.state
+        left = int(nsteps)
+        while left > 0:
+            status, done = K.advance(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params,
+                                     s.counters, left, *self.drag)
+            left -= done
+            if status == K.LIST_OVERFLOW:
+                s.grow_pairs(int(s.counters[K.K_NEEDED_CAPACITY]))
+
+    def steps_for(self, duration: float) -> int:
+        return max(1, int(round(duration / self.dt)))
+
+    def run(self, duration: float, callbacks: list[Every] = (), should_stop: Callable[[], bool] = None):
+        """Advance by `duration` [t0], firing callbacks when due. Returns steps done."""
+        s = self.state
+        first = s.step
+        end = first + self.steps_for(duration)
+        while s.step < end:
+            target = min([cb.next_step(s.step) for cb in callbacks] + [end])
+            self.advance(target - s.step)
+            for cb in callbacks:
+                if cb.due(s.step):
+                    cb.action(self)
+            if should_stop is not None and should_stop():
+                break
+        return s.step - first
+
+    # ---- observation -------------------------------------------------------------------
+    def observe(self) -> dict:
+        """Time-series row (dimensionless); see output.SERIES for names and units."""
+        s, p = self.state, self.params
+        o = self._observables
+        M.observe(s.x, s.z, s.vx, s.vz, s.spin, s.radius, s.mass, s.body, s.force_x, s.force_z,
+                  s.start, s.index, s.width, o)
+        sigma = p[K.SIGMA]
+        stretch = p[K.V_LOAD] * s.clock[K.C_DRIVE_TIME] - s.wall[K.W_X] if self.phase == K.LOADING else 0.0
+        row = {
+            "time": s.clock[K.C_TIME],
+            "load_time": s.clock[K.C_DRIVE_TIME],
+            "wall_x": s.wall[K.W_X],
+            "wall_z": s.wall[K.W_Z],
+            "wall_vx": s.wall[K.W_VX],
+            "wall_vz": s.wall[K.W_VZ],
+            "spring_stretch": stretch,
+            "tau_over_sigma": p[K.SPRING] * stretch / sigma,
+            "wall_shear_stress": -s.wall[K.W_FX] / s.width,
+            "wall_normal_stress": s.wall[K.W_FZ] / s.width,
+            "thickness": o[M.THICKNESS],
+            "porosity": o[M.POROSITY],
+            "kinetic_energy": o[M.KINETIC],
+            "coordination": o[M.COORDINATION],
+            "max_overlap": o[M.MAX_OVERLAP],
+            "nonfinite": o[M.NONFINITE],
+        }
+        if self.fluid is not None:
+            row.update(self.fluid.observe())
+        return row
+
+    def check(self, row: dict | None = None):
+        """Stop with a PhysicsError on NaN/inf or a runaway overlap (keeps last checkpoint)."""
+        row = row or self.observe()
+        t = row["time"]
+        if row["nonfinite"] > 0 or not math.isfinite(row["wall_z"]) or not math.isfinite(row["wall_x"]):
+            raise PhysicsError(
+                f"non-finite grain state ({int(row['nonfinite'])} grains)",
+                f"the time step {self.dt:.4g} t0 is probably too large: lower numerics.dt_safety "
+                f"(now {self.config.numerics.dt_safety:g}) or numerics.dt", t)
+        if row["max_overlap"] > 0.5:
+            raise PhysicsError(
+                f"runaway overlap: {row['max_overlap']:.3g} of a grain radius",
+                "grains are too soft for the load or the step too large: lower loading.normal_stress, "
+                "numerics.dt_safety or loading.velocity", t)
+
+    # ---- compaction --------------------------------------------------------------------
+    def compact(self, on_chunk: Callable = None) -> dict:
+        """Settle under the normal stress alone until the top wall and grains are still."""
+        cfg = self.config.compaction
+        v_tol = cfg.wall_velocity_tol * self.config.loading.normal_stress
+        chunk = self.steps_for(100.0)
+        t0 = self.state.time
+        row = self.observe()
+        while True:
+            self.advance(chunk)
+            row = self.observe()
+            self.check(row)
+            elapsed = self.state.time - t0
+            if on_chunk is not None:
+                on_chunk(self, elapsed)
+            n_free = max(1, int((self.state.body == 0).sum()))
+            rms = math.sqrt(2.0 * row["kinetic_energy"] / (n_free * float(self.state.mass.mean())))
+            if elapsed >= cfg.min_time and abs(row["wall_vz"]) < v_tol and rms < v_tol:
+                break
+            if elapsed >= cfg.max_time:
+                break
+        self.start_loading()
+        return row

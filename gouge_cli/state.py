@@ -1,0 +1,136 @@
+"""All evolving state of a scene as flat numpy arrays (structure of arrays).
+
+Grains are discs in the x-z plane with sphere mass and inertia (physics.md section 1).
+``body``: 0 free grain, 1 bottom-wall grain (fixed), 2 top-wall grain (moves with the top body).
+Everything a restart needs to continue bit for bit is in :meth:`State.arrays` (the
+neighbour list too, since it fixes the order of force sums).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .kernels import step as K
+
+FREE, BOTTOM, TOP = 0, 1, 2
+
+GRAIN_FIELDS = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inertia", "body",
+                "force_x", "force_z", "torque", "top")
+LIST_FIELDS = ("start", "index", "shear", "tr_start", "tr_pair", "x_build", "z_build",
+               "new_start", "new_index", "new_shear")
+PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_fs")
+EVOLVING = ("x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
+            "start", "index", "shear", "tr_start", "tr_pair", "x_build", "z_build",
+            "wall", "clock", "counters")
+
+
+def sphere_mass(radius: np.ndarray, density: float) -> np.ndarray:
+    """m = rho pi D^3 / 6 (thesis: discs carry sphere mass)."""
+    return density * np.pi * (2.0 * radius) ** 3 / 6.0
+
+
+@dataclass
+class State:
+    """Arrays of one scene. Shapes: (N,) per grain, (capacity,) per pair slot."""
+
+    x: np.ndarray
+    z: np.ndarray
+    radius: np.ndarray
+    body: np.ndarray
+    density: float
+    width: float
+    vx: np.ndarray = None
+    vz: np.ndarray = None
+    spin: np.ndarray = None
+    wall: np.ndarray = field(default_factory=lambda: np.zeros(K.N_WALL))
+    clock: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    counters: np.ndarray = field(default_factory=lambda: np.zeros(K.N_COUNTERS, np.int64))
+
+    def __post_init__(self):
+        n = self.x.shape[0]
+        for name in ("vx", "vz", "spin"):
+            if getattr(self, name) is None:
+                setattr(self, name, np.zeros(n))
+        self.body = np.asarray(self.body, np.int8)
+        self.mass = sphere_mass(self.radius, self.density)
+        self.inv_mass = 1.0 / self.mass
+        self.inv_inertia = 1.0 / (self.mass * (2.0 * self.radius) ** 2 / 10.0)
+        self.force_x = np.zeros(n)
+        self.force_z = np.zeros(n)
+        self.torque = np.zeros(n)
+        self.top = np.flatnonzero(self.body == TOP).astype(np.int64)
+        self.bottom = np.flatnonzero(self.body == BOTTOM).astype(np.int64)
+        self.start = np.zeros(n + 1, np.int64)
+        self.tr_start = np.zeros(n + 1, np.int64)
+        self.new_start = np.zeros(n + 1, np.int64)
+        self.x_build = self.x.copy()
+        self.z_build = self.z.copy()
+        self._allocate_pairs(8 * n + 64)
+        self.counters[K.K_NEED_REBUILD] = 1
+        if self.top.size:
+            self.wall[K.W_Z] = self.z[self.top].mean()
+
+    @property
+    def n(self) -> int:
+        return self.x.shape[0]
+
+    def _allocate_pairs(self, capacity: int, keep: int = 0):
+        old = {name: getattr(self, name, None) for name in ("index", "shear", "tr_pair")}
+        self.index = np.zeros(capacity, np.int32)
+        self.shear = np.zeros(capacity)
+        self.tr_pair = np.zeros(capacity, np.int32)
+        for name, arr in old.items():
+            if arr is not None and keep:
+                getattr(self, name)[:keep] = arr[:keep]
+        self.new_index = np.zeros(capacity, np.int32)
+        self.new_shear = np.zeros(capacity)
+        self.pair_fx = np.zeros(capacity)
+        self.pair_fz = np.zeros(capacity)
+        self.pair_fs = np.zeros(capacity)
+
+    def grow_pairs(self, needed: int):
+        """Enlarge pair arrays to hold `needed` pairs (with 25 % headroom), keeping the list."""
+        self._allocate_pairs(int(needed * 1.25) + 64, keep=int(self.start[-1]))
+
+    def grains(self) -> tuple:
+        return tuple(getattr(self, name) for name in GRAIN_FIELDS)
+
+    def lists(self) -> tuple:
+        return tuple(getattr(self, name) for name in LIST_FIELDS)
+
+    def pairs(self) -> tuple:
+        return tuple(getattr(self, name) for name in PAIR_FIELDS)
+
+    @property
+    def time(self) -> float:
+        return float(self.clock[K.C_TIME])
+
+    @property
+    def step(self) -> int:
+        return int(self.counters[K.K_STEP])
+
+    def arrays(self) -> dict:
+        """Evolving arrays for a checkpoint (pair slots trimmed to the pairs in use)."""
+        npairs = int(self.start[-1])
+        out = {}
+        for name in EVOLVING:
+            arr = getattr(self, name)
+            out[name] = arr[:npairs].copy() if name in ("index", "shear", "tr_pair") else arr.copy()
+        return out
+
+    def restore(self, arrays: dict):
+        """Load evolving arrays written by :meth:`arrays` (bit-exact)."""
+        npairs = int(arrays["start"][-1])
+        if npairs > self.index.shape[0]:
+            self._allocate_pairs(int(npairs * 1.25) + 64)
+        for name in EVOLVING:
+            target = getattr(self, name)
+            source = np.asarray(arrays[name])
+            if name in ("index", "shear", "tr_pair"):
+                target[:npairs] = source
+            else:
+                if target.shape != source.shape:
+                    raise ValueError(f"checkpoint array {name!r} has shape {source.shape}, scene has {target.shape}")
+                target[...] = source
