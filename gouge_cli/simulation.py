@@ -9,7 +9,7 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -22,6 +22,24 @@ from .state import State
 from .timestep import choose_dt, contact_constants
 
 _EMPTY = np.zeros(0)
+
+
+def build_params(config: Config, dt: float, width: float, wall_mass: float) -> np.ndarray:
+    """Kernel parameter vector (layout: kernels.step DT..DRIVE). wall_mass: total m_b L_x; 0 = no top wall."""
+    c_normal, c_tangential = contact_constants(config)
+    p = np.zeros(K.N_PARAMS)
+    p[K.DT] = dt
+    p[K.WIDTH] = width
+    p[K.SKIN] = config.numerics.skin
+    p[K.C_NORMAL] = c_normal
+    p[K.C_TANGENTIAL] = c_tangential
+    p[K.DAMPING] = config.material.damping
+    p[K.FRICTION] = config.material.friction
+    p[K.SIGMA] = config.loading.normal_stress
+    p[K.SPRING] = config.loading.spring_constant
+    p[K.V_LOAD] = config.loading.velocity
+    p[K.WALL_MASS] = wall_mass
+    return p
 
 
 class PhysicsError(RuntimeError):
@@ -47,35 +65,19 @@ class Every:
         return step % self.steps == 0
 
 
-@dataclass
-class Observation:
-    time: float
-    values: dict = field(default_factory=dict)
-
-
 class Simulation:
     """A scene: config, arrays and the kernels' parameters. Dry unless ``config.fluid`` is set."""
 
-    def __init__(self, config: Config, arrays: dict | None = None):
+    def __init__(self, config: Config, arrays: dict | None = None, state: State | None = None):
+        """Build the scene from `config` (packing from its seed), or around a given `state`
+        (e.g. a few free grains in a test); `arrays` restores a checkpoint bit for bit."""
         self.config = config
         self.dt = choose_dt(config)
-        self.state = build_packing(config)
+        self.state = state if state is not None else build_packing(config)
         s = self.state
         top_mass = float(s.mass[s.top].sum()) / s.width
-        self.wall_mass_per_length = config.loading.wall_mass or top_mass
-        c_normal, c_tangential = contact_constants(config)
-        p = np.zeros(K.N_PARAMS)
-        p[K.DT] = self.dt
-        p[K.WIDTH] = s.width
-        p[K.SKIN] = config.numerics.skin
-        p[K.C_NORMAL] = c_normal
-        p[K.C_TANGENTIAL] = c_tangential
-        p[K.DAMPING] = config.material.damping
-        p[K.FRICTION] = config.material.friction
-        p[K.SIGMA] = config.loading.normal_stress
-        p[K.SPRING] = config.loading.spring_constant
-        p[K.V_LOAD] = config.loading.velocity
-        p[K.WALL_MASS] = self.wall_mass_per_length * s.width
+        self.wall_mass_per_length = (config.loading.wall_mass or top_mass) if s.top.size else 0.0
+        p = build_params(config, self.dt, s.width, self.wall_mass_per_length * s.width)
         self.params = p
         self.fluid = None
         self.drag = (_EMPTY, _EMPTY)

@@ -115,6 +115,8 @@ def _wall_kick(wall, clock, params):
     half = 0.5 * params[DT]
     width = params[WIDTH]
     mass = params[WALL_MASS]
+    if mass <= 0.0:
+        return
     fz = wall[W_FZ] - params[SIGMA] * width - params[BG_DAMPING] * mass * wall[W_VZ]
     wall[W_VZ] += half * fz / mass
     if params[DRIVE] > 0.0:

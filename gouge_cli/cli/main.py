@@ -1,0 +1,81 @@
+"""`gouge` command line. Exit codes: 0 done, 2 bad input, 3 physics failure, 130 interrupted."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+from rich.console import Console
+
+from ..config import ConfigError, build_config, dump_config, load_config
+
+EXIT_OK, EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_INTERRUPTED = 0, 2, 3, 130
+
+app = typer.Typer(add_completion=False, no_args_is_help=True,
+                  help="gouge: grain-scale stick-slip simulations of (water-saturated) fault gouge.")
+err = Console(stderr=True, soft_wrap=True)
+out = Console(soft_wrap=True)
+
+
+def fail(message: str, code: int = EXIT_BAD_INPUT):
+    err.print(f"[bold red]error:[/] {message}", highlight=False)
+    raise typer.Exit(code)
+
+
+def _set_threads(threads: int):
+    import numba
+
+    if threads:
+        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+
+
+@app.command()
+def run(
+    config: Path = typer.Argument(..., help="YAML run config"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="output directory (default runs/<name>)"),
+    set_: List[str] = typer.Option([], "--set", help="override, e.g. --set loading.velocity=2e-5"),
+    force: bool = typer.Option(False, "--force", help="overwrite an existing run directory"),
+    quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
+):
+    """Compact the packing, then shear it under the spring until config.run.duration."""
+    from ..runner import RunDirError, default_run_dir, run_scene
+    from ..simulation import PhysicsError
+
+    try:
+        cfg = load_config(config, set_)
+        _set_threads(cfg.numerics.threads)
+        target = out_dir or default_run_dir(cfg)
+        result = run_scene(cfg, target, force=force, quiet=quiet)
+    except (ConfigError, RunDirError) as e:
+        fail(str(e))
+    except PhysicsError as e:
+        fail(f"physics failure: {e}", EXIT_PHYSICS)
+    out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s, "
+              f"{result.grain_steps_per_second / 1e6:.2f} M grain-steps/s)", highlight=False)
+    if result.status == "interrupted":
+        raise typer.Exit(EXIT_INTERRUPTED)
+
+
+@app.command("config")
+def show_config(
+    config: Optional[Path] = typer.Argument(None, help="YAML config to validate and print resolved"),
+    set_: List[str] = typer.Option([], "--set", help="override key=value"),
+    defaults: bool = typer.Option(False, "--defaults", help="print the default config"),
+):
+    """Validate a config and print it fully resolved (dimensionless), or print the defaults."""
+    from ..timestep import choose_dt, stability_bound
+
+    try:
+        cfg = build_config({}, set_) if (defaults or config is None) else load_config(config, set_)
+        bound = stability_bound(cfg)
+        dt = choose_dt(cfg)
+    except ConfigError as e:
+        fail(str(e))
+    out.print(dump_config(cfg), highlight=False, end="")
+    out.print(f"# time step {dt:.6g} t0 (stability bound {bound.bound:.6g} t0, {bound.mode} mode)",
+              highlight=False)
+
+
+def main():
+    app()
