@@ -241,10 +241,22 @@ def build_config(data: dict | None, overrides: list[str] | dict | None = None) -
         raise ConfigError(_format_errors(err)) from None
 
 
+def find_config(name: str | Path) -> Path:
+    """A config path, or a scene name looked up as configs/<name>.yaml and configs/thesis/<name>.yaml."""
+    path = Path(name)
+    if path.is_file():
+        return path
+    roots = [Path.cwd() / "configs", Path(__file__).resolve().parents[1] / "configs"]
+    for root in roots:
+        for candidate in (root / f"{name}.yaml", root / "thesis" / f"{name}.yaml", root / f"{name}"):
+            if candidate.is_file():
+                return candidate
+    raise ConfigError(f"config file {str(path)!r} does not exist (nor configs/{name}.yaml, "
+                      f"configs/thesis/{name}.yaml)")
+
+
 def load_config(path: str | Path, overrides: list[str] | dict | None = None) -> Config:
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"config file {str(path)!r} does not exist")
+    path = find_config(path)
     try:
         data = yaml.safe_load(path.read_text()) or {}
     except yaml.YAMLError as err:

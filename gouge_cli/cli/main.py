@@ -77,5 +77,40 @@ def show_config(
               highlight=False)
 
 
+@app.command()
+def bench(
+    sizes: str = typer.Option("10000", help="comma-separated grain counts"),
+    threads: str = typer.Option("", help="comma-separated thread counts (default: 1 and all cores)"),
+    steps: int = typer.Option(5000, help="timed steps per repeat"),
+    repeats: int = typer.Option(3, help="repeats (min/median/max reported)"),
+    dt: float = typer.Option(0.89, help="time step [t0] (LAMMPS deck default)"),
+    skin: float = typer.Option(0.2, help="Verlet skin [d]"),
+    lammps: bool = typer.Option(True, help="also time LAMMPS (shared/bench deck) where lmp is installed"),
+    json_out: Path = typer.Option(Path("runs/bench/bench.json"), "--json", help="where to write the JSON results"),
+):
+    """Grain-steps per second on the sheared layer (steady shear only), 1 and all cores, vs LAMMPS."""
+    from rich.table import Table
+
+    from ..bench import run_benchmark, write_results
+
+    size_list = [int(v) for v in sizes.split(",") if v]
+    thread_list = [int(v) for v in threads.split(",") if v] or None
+    results = run_benchmark(size_list, thread_list, steps, repeats, dt, skin, lammps)
+    write_results(results, json_out)
+    table = Table(title=f"grain-steps per second (dt {dt}, skin {skin}; steady shear)")
+    for col in ("code", "N", "threads", "min", "median", "max", "bytes/grain", "bitwise = 1 thread", "gouge / this"):
+        table.add_column(col, justify="right")
+    ours = {(r["n_grains"], r["threads"]): r["rate_median"] for r in results["rows"] if r["code"] == "gouge"}
+    for r in results["rows"]:
+        mine = ours.get((r["n_grains"], r["threads"]))
+        ratio = f"{mine / r['rate_median']:.2f}" if mine and r["code"] != "gouge" else ""
+        table.add_row(r["code"], str(r["n_grains"]), str(r["threads"]), f"{r['rate_min']:.3g}",
+                      f"{r['rate_median']:.3g}", f"{r['rate_max']:.3g}",
+                      f"{r['bytes_per_grain']:.0f}" if r["bytes_per_grain"] else "",
+                      {None: "", True: "yes", False: "NO"}[r["identical_to_1_thread"]], ratio)
+    out.print(table)
+    out.print(f"peak RSS {results['peak_rss_mb']:.0f} MB; results in {json_out}")
+
+
 def main():
     app()

@@ -35,7 +35,7 @@ N_COUNTERS = 6
 # phases (counters[K_PHASE])
 COMPACTION, LOADING = 0, 1
 # return codes of advance
-OK, LIST_OVERFLOW = 0, 1
+OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
 
 
 @njit(parallel=True, cache=NUMBA_CACHE)
@@ -246,3 +246,4 @@ def advance(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, 
                 return LIST_OVERFLOW, s
         _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z)
     return OK, nsteps
+
