@@ -44,6 +44,15 @@ class Checkpoint:
         return int(self.state["counters"][0])
 
 
+def _plain(value):
+    """json default: numpy scalars and arrays as Python numbers and lists."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"cannot store {type(value).__name__} in a checkpoint")
+
+
 def _digest(groups: dict[str, dict[str, np.ndarray]]) -> str:
     h = hashlib.sha256()
     for group in sorted(groups):
@@ -73,7 +82,7 @@ def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
                 for name, arr in arrays.items():
                     g.create_dataset(name, data=arr)
             h5.attrs["config"] = dump_config(checkpoint.config)
-            h5.attrs["extra"] = json.dumps(checkpoint.extra)
+            h5.attrs["extra"] = json.dumps(checkpoint.extra, default=_plain)
             h5.attrs["version"] = __version__
             h5.attrs["checksum"] = _digest(groups)
         with open(tmp, "rb") as f:

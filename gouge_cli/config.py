@@ -139,6 +139,28 @@ class RunConfig(_Section):
 class OutputConfig(_Section):
     series_interval: Time = Field(10.0, gt=0, description="time-series cadence [t0]")
     snapshot_interval: Time = Field(1e4, gt=0, description="grain-snapshot cadence [t0]")
+    checkpoint_interval: Time = Field(2e4, gt=0, description="cadence of checkpoints/latest.h5 for resume [t0]")
+
+
+class SlipsConfig(_Section):
+    """Slip detection and the checkpoint kept before each slip (velocity thresholds relative to V_s)."""
+
+    start_factor: float = Field(10.0, gt=1, description="an event triggers when v_wall >= start_factor V_s [-]")
+    end_factor: float = Field(2.0, gt=0, description="an event spans v_wall >= end_factor V_s [-]")
+    min_duration: Time = Field(0.0, ge=0, description="drop events shorter than this [t0]")
+    min_slip: Length = Field(0.0, ge=0, description="drop events slipping less than this [d]")
+    merge_gap: Time = Field(0.0, ge=0, description="events closer than this merge into one slip [t0]")
+    lead_stress: float = Field(
+        0.005, gt=0, le=0.2,
+        description="checkpoint lead as a drop of tau/sigma: lead = lead_stress sigma / (k V_s) [-]")
+    lead: Optional[Time] = Field(None, gt=0, description="checkpoint lead time before onset [t0]; overrides lead_stress")
+    ring: int = Field(6, ge=2, le=100, description="in-memory states kept, spaced lead/4 apart [-]")
+
+    @model_validator(mode="after")
+    def _factors(self):
+        if self.end_factor >= self.start_factor:
+            raise ValueError(f"end_factor ({self.end_factor}) must be below start_factor ({self.start_factor})")
+        return self
 
 
 class FluidConfig(_Section):
@@ -168,6 +190,7 @@ class Config(_Section):
     numerics: NumericsConfig = NumericsConfig()
     run: RunConfig = RunConfig()
     output: OutputConfig = OutputConfig()
+    slips: SlipsConfig = SlipsConfig()
     fluid: Optional[FluidConfig] = Field(None, description="absent or 'none' for a dry scene")
 
     @model_validator(mode="before")

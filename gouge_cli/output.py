@@ -97,15 +97,23 @@ class RunFile:
             self._rows.clear()
         self.h5.flush()
 
-    def truncate_series(self, time_limit: float):
-        """Drop rows with time > time_limit (used by resume to avoid duplicated rows)."""
+    def truncate_after(self, time_limit: float, step_limit: int, slip_count: int):
+        """Drop series rows after time_limit, snapshots after step_limit and catalog entries
+        numbered above slip_count (resume: they are produced again)."""
         self.flush()
         group = self.h5["series"]
-        if "time" not in group:
-            return
-        keep = int(np.searchsorted(group["time"][...], time_limit, side="right"))
-        for name in group:
-            group[name].resize((keep,))
+        if "time" in group:
+            keep = int(np.searchsorted(group["time"][...], time_limit, side="right"))
+            for name in group:
+                group[name].resize((keep,))
+        for name in list(self.h5["snapshots"]):
+            if int(name) > step_limit:
+                del self.h5["snapshots"][name]
+        if "slips" in self.h5:
+            for name in list(self.h5["slips"]):
+                if int(name) > slip_count:
+                    del self.h5["slips"][name]
+        self.h5.flush()
 
     def snapshot(self, sim):
         s = sim.state

@@ -1,4 +1,5 @@
-"""Orchestration of `gouge run`: run directory, compaction, loading, outputs, clean stops."""
+"""Orchestration of `gouge run` and `gouge resume`: run directory, compaction, loading,
+outputs, slip checkpoints, periodic checkpoints and clean stops."""
 
 from __future__ import annotations
 
@@ -6,7 +7,11 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import h5py
+
+from .checkpoint import CheckpointError, read_checkpoint, snapshot_of, write_checkpoint
 from .config import Config, dump_config
+from .events import SlipRecorder
 from .output import RunFile
 from .progress import ProgressReport
 from .simulation import Every, PhysicsError, Simulation
@@ -24,6 +29,7 @@ class RunResult:
     wall_seconds: float
     grain_steps_per_second: float
     simulation: Simulation
+    slips: list
 
 
 def default_run_dir(config: Config, runs_root: Path = Path("runs")) -> Path:
@@ -32,68 +38,149 @@ def default_run_dir(config: Config, runs_root: Path = Path("runs")) -> Path:
 
 def prepare_run_dir(out_dir: Path, force: bool = False) -> Path:
     out_dir = Path(out_dir)
-    run_file = out_dir / "run.h5"
-    if run_file.exists() and not force:
+    if (out_dir / "run.h5").exists() and not force:
         raise RunDirError(f"{out_dir} already holds a run (run.h5); choose another --out, "
                           "another name (--set name=...), or pass --force to overwrite it")
     out_dir.mkdir(parents=True, exist_ok=True)
+    for old in (out_dir / "checkpoints").glob("*.h5") if (out_dir / "checkpoints").is_dir() else []:
+        old.unlink()
     return out_dir
 
 
-def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | None = None,
-              quiet: bool = False) -> RunResult:
-    """Compact, then load for config.run.duration, writing out_dir/{config.yaml, run.h5}.
+def check_run_dir(run_dir: Path) -> Path:
+    run_dir = Path(run_dir)
+    if not (run_dir / "run.h5").is_file():
+        raise RunDirError(f"{run_dir} is not a gouge run directory (no run.h5 in it)")
+    return run_dir
 
-    Ctrl-C stops cleanly (status 'interrupted', outputs flushed); a PhysicsError is
-    recorded in the run file's status and re-raised.
-    """
-    out_dir = prepare_run_dir(out_dir, force)
-    (out_dir / "config.yaml").write_text(dump_config(config))
-    sim = Simulation(config)
-    writer = RunFile(out_dir / "run.h5", config, sim.dt,
-                     extra_attrs={"n_grains": sim.state.n, "width": sim.state.width,
-                                  "wall_mass_per_length": sim.wall_mass_per_length})
-    n = sim.state.n
-    status = "finished"
-    t_start = time.perf_counter()
-    steps0 = sim.state.step
-    progress = None
-    try:
-        if not quiet:
-            progress = ProgressReport("compaction", config.compaction.max_time, n, live=live)
-        sim.compact(on_chunk=(lambda s, el: progress.update(el, s.state.step)) if progress else None)
+
+def latest_run(runs_root: Path = Path("runs")) -> Path:
+    """The most recently modified run directory under runs_root."""
+    candidates = [p.parent for p in runs_root.glob("*/run.h5")]
+    if not candidates:
+        raise RunDirError(f"no runs under {runs_root}/; run `gouge run CONFIG` first or name the run directory")
+    return max(candidates, key=lambda p: (p / "run.h5").stat().st_mtime)
+
+
+def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float, *, live=None,
+               quiet=False, label="loading", recorder_state: dict | None = None,
+               checkpoints: bool = True, stop_after_slip: bool = False) -> tuple[str, SlipRecorder]:
+    """Shear until sim time reaches end_time, firing the output, guard, slip and checkpoint
+    callbacks. Returns (status, recorder); raises PhysicsError after recording it."""
+    config = sim.config
+    ck_dir = out_dir / "checkpoints" if checkpoints else None
+    recorder = SlipRecorder(config, sim, writer, ck_dir, recorder_state)
+    progress = None if quiet else ProgressReport(label, end_time - sim.state.time, sim.state.n, live=live)
+    t_begin = sim.state.time
+    stop = {"now": False}
+
+    def record(s: Simulation):
+        row = s.observe()
+        s.check(row)
+        writer.append(row)
+        slip = recorder.observe(row)
+        if slip is not None and stop_after_slip:
+            stop["now"] = True
         if progress:
-            progress.close()
-        writer.set_attr("compaction_end_time", sim.state.time)
+            progress.update(s.state.time - t_begin, s.state.step,
+                            info=f"tau/sigma {row['tau_over_sigma']:.3f}, slips {recorder.count}")
 
-        load_t0 = sim.state.time
-        if not quiet:
-            progress = ProgressReport(f"loading {config.name}", config.run.duration, n, live=live)
+    def latest(s: Simulation):
+        if ck_dir is not None:
+            writer.flush()
+            write_checkpoint(ck_dir / "latest.h5", snapshot_of(s, {"slip_recorder": recorder.state_dict()}))
 
-        def record(s: Simulation):
-            row = s.observe()
-            s.check(row)
-            writer.append(row)
-            if progress:
-                progress.update(s.state.time - load_t0, s.state.step,
-                                info=f"tau/sigma {row['tau_over_sigma']:.3f}")
-
-        callbacks = [
-            Every(sim.steps_for(config.output.series_interval), record),
-            Every(sim.steps_for(config.output.snapshot_interval), writer.snapshot),
-        ]
-        record(sim)
-        writer.snapshot(sim)
-        sim.run(config.run.duration, callbacks)
+    callbacks = [Every(sim.steps_for(config.output.series_interval), record),
+                 Every(sim.steps_for(config.output.snapshot_interval), writer.snapshot),
+                 Every(recorder.ring_every, recorder.keep),
+                 Every(sim.steps_for(config.output.checkpoint_interval), latest)]
+    status = "finished"
+    try:
+        if sim.state.time < end_time:
+            sim.run(end_time - sim.state.time, callbacks, should_stop=lambda: stop["now"])
+        latest(sim)
     except KeyboardInterrupt:
         status = "interrupted"
+        latest(sim)
     except PhysicsError as err:
-        status = f"failed: {err}"
+        writer.close(f"failed: {err}")
         raise
     finally:
         if progress:
             progress.close()
-        writer.close(status)
+    return status, recorder
+
+
+def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | None = None,
+              quiet: bool = False) -> RunResult:
+    """Compact, then load for config.run.duration, writing out_dir/{config.yaml, run.h5,
+    checkpoints/}. Ctrl-C stops cleanly (status 'interrupted', outputs flushed)."""
+    out_dir = prepare_run_dir(out_dir, force)
+    (out_dir / "config.yaml").write_text(dump_config(config))
+    t_start = time.perf_counter()
+    sim = Simulation(config)
+    writer = RunFile(out_dir / "run.h5", config, sim.dt,
+                     extra_attrs={"n_grains": sim.state.n, "width": sim.state.width,
+                                  "wall_mass_per_length": sim.wall_mass_per_length})
+    n, steps0 = sim.state.n, sim.state.step
+    try:
+        progress = None if quiet else ProgressReport("compaction", config.compaction.max_time, n, live=live)
+        try:
+            sim.compact(on_chunk=(lambda s, el: progress.update(el, s.state.step)) if progress else None)
+        finally:
+            if progress:
+                progress.close()
+        sim.start_fluid()
+        writer.set_attr("load_start_time", sim.state.time)
+        writer.set_attr("end_time", sim.state.time + config.run.duration)
+        writer.append(sim.observe())
+        writer.snapshot(sim)
+        status, recorder = load_phase(sim, writer, out_dir, sim.state.time + config.run.duration,
+                                      live=live, quiet=quiet, label=f"loading {config.name}")
+    except KeyboardInterrupt:
+        status, recorder = "interrupted", None
+    except PhysicsError as err:
+        writer.close(f"failed: {err}")
+        raise
+    writer.close(status)
     wall = time.perf_counter() - t_start
     steps = sim.state.step - steps0
-    return RunResult(out_dir, status, steps, wall, steps * n / max(wall, 1e-9), sim)
+    return RunResult(out_dir, status, steps, wall, steps * n / max(wall, 1e-9), sim,
+                     recorder.slips if recorder else [])
+
+
+def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> RunResult:
+    """Continue an interrupted run from checkpoints/latest.h5; rows, snapshots and catalog
+    entries written after that checkpoint are dropped and produced again."""
+    run_dir = check_run_dir(run_dir)
+    latest = run_dir / "checkpoints" / "latest.h5"
+    if not latest.is_file():
+        raise RunDirError(f"{run_dir} has no checkpoints/latest.h5 (it stopped before loading began); "
+                          "start it again with `gouge run ... --force`")
+    ck = read_checkpoint(latest)
+    with h5py.File(run_dir / "run.h5", "r") as h5:
+        end_time = float(h5.attrs["end_time"])
+        status = str(h5.attrs["status"])
+    if status == "finished":
+        raise RunDirError(f"{run_dir} already finished; nothing to resume")
+    t_start = time.perf_counter()
+    sim = Simulation(ck.config, arrays=ck.state, fluid_arrays=ck.fluid)
+    rec_state = ck.extra.get("slip_recorder", {})
+    writer = RunFile(run_dir / "run.h5", ck.config, sim.dt, mode="a")
+    writer.truncate_after(ck.time, ck.step, int(rec_state.get("count", 0)))
+    writer.set_attr("status", "running")
+    steps0 = sim.state.step
+    try:
+        status, recorder = load_phase(sim, writer, run_dir, end_time, live=live, quiet=quiet,
+                                      label=f"resume {ck.config.name}", recorder_state=rec_state)
+    except KeyboardInterrupt:
+        status, recorder = "interrupted", None
+    writer.close(status)
+    wall = time.perf_counter() - t_start
+    steps = sim.state.step - steps0
+    return RunResult(run_dir, status, steps, wall, steps * sim.state.n / max(wall, 1e-9), sim,
+                     recorder.slips if recorder else [])
+
+
+__all__ = ["RunDirError", "RunResult", "run_scene", "resume_run", "load_phase", "latest_run",
+           "check_run_dir", "CheckpointError"]

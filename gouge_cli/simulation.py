@@ -68,9 +68,12 @@ class Every:
 class Simulation:
     """A scene: config, arrays and the kernels' parameters. Dry unless ``config.fluid`` is set."""
 
-    def __init__(self, config: Config, arrays: dict | None = None, state: State | None = None):
+    def __init__(self, config: Config, arrays: dict | None = None, state: State | None = None,
+                 fluid_arrays: dict | None = None):
         """Build the scene from `config` (packing from its seed), or around a given `state`
-        (e.g. a few free grains in a test); `arrays` restores a checkpoint bit for bit."""
+        (e.g. a few free grains in a test); `arrays` restores a checkpoint bit for bit and
+        `fluid_arrays` its pressure grid (without them a fluid scene starts at P = 0 from the
+        restored packing: a fork from a dry checkpoint)."""
         self.config = config
         self.dt = choose_dt(config)
         self.state = state if state is not None else build_packing(config)
@@ -82,12 +85,41 @@ class Simulation:
         self.fluid = None
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(M.N_OBSERVABLES)
+        self._fluid_status = np.zeros(1, np.int64)
         if arrays is not None:
             s.restore(arrays)
         else:
             self._rebuild()
             K.compute_forces(s.grains(), s.lists(), s.pairs(), s.wall, p, *self.drag)
         self._apply_phase()
+        if self.phase == K.LOADING:
+            self.start_fluid(fluid_arrays)
+
+    # ---- fluid -------------------------------------------------------------------------
+    def wall_planes(self) -> tuple[float, float]:
+        """(z_bottom, z_top): mean z of the bottom- and top-wall grain centres [d]."""
+        s = self.state
+        return float(s.z[s.bottom].mean()), float(s.wall[K.W_Z])
+
+    def start_fluid(self, fluid_arrays: dict | None = None):
+        """Build the pressure grid if the config has a fluid section (never for a dry scene).
+        With no saved arrays P starts at 0 on the current packing; the grain forces then
+        include its (zero) drag from the next step on."""
+        if self.config.fluid is None or self.fluid is not None:
+            return
+        from .fluid import FluidGrid
+
+        s = self.state
+        z_bot, z_top = self.wall_planes()
+        self.fluid = FluidGrid.from_config(self.config.fluid, s.width, z_bot, z_top, s.n)
+        if fluid_arrays:
+            self.fluid.restore(fluid_arrays)
+        else:
+            status = self.fluid.init(s.x, s.z, s.vx, s.vz, s.radius, z_bot, z_top)
+            if status != 0:
+                raise PhysicsError("the pressure grid could not be initialised (layer thickness <= 0)",
+                                   "check the packing and fluid.cell_size", s.time)
+        self.drag = (self.fluid.drag_x, self.fluid.drag_z)
 
     # ---- phase -------------------------------------------------------------------------
     @property
@@ -119,11 +151,25 @@ class Simulation:
         s = self.state
         left = int(nsteps)
         while left > 0:
-            status, done = K.advance(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params,
-                                     s.counters, left, *self.drag)
+            if self.fluid is None:
+                status, done = K.advance(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params,
+                                         s.counters, left, *self.drag)
+            else:
+                status, done = self._advance_fluid(left)
             left -= done
             if status == K.LIST_OVERFLOW:
                 s.grow_pairs(int(s.counters[K.K_NEEDED_CAPACITY]))
+            elif status == K.FLUID_FAILED:
+                raise PhysicsError(*self.fluid.failure(int(self._fluid_status[0])), s.time)
+
+    def _advance_fluid(self, nsteps: int):
+        from .kernels.coupled import advance_fluid
+
+        s = self.state
+        args = self.fluid.kernel_args()
+        return advance_fluid(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params, s.counters,
+                             nsteps, args[-2], args[-1], args[:-2], self.config.fluid.interval,
+                             self.wall_planes()[0], self._fluid_status)
 
     def steps_for(self, duration: float) -> int:
         return max(1, int(round(duration / self.dt)))

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 from typing import List, Optional
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from ..config import ConfigError, build_config, dump_config, load_config
 
@@ -14,12 +16,13 @@ EXIT_OK, EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_INTERRUPTED = 0, 2, 3, 130
 
 app = typer.Typer(add_completion=False, no_args_is_help=True,
                   help="gouge: grain-scale stick-slip simulations of (water-saturated) fault gouge.")
-err = Console(stderr=True, soft_wrap=True)
-out = Console(soft_wrap=True)
+_WIDE = None if sys.stdout.isatty() else 200
+err = Console(stderr=True, soft_wrap=True, width=_WIDE)
+out = Console(soft_wrap=True, width=_WIDE)
 
 
 def fail(message: str, code: int = EXIT_BAD_INPUT):
-    err.print(f"[bold red]error:[/] {message}", highlight=False)
+    err.print(f"[bold red]error:[/] {escape(message)}", highlight=False)
     raise typer.Exit(code)
 
 
@@ -55,6 +58,98 @@ def run(
               f"{result.grain_steps_per_second / 1e6:.2f} M grain-steps/s)", highlight=False)
     if result.status == "interrupted":
         raise typer.Exit(EXIT_INTERRUPTED)
+
+
+def _run_dir(run_dir: Optional[Path]) -> Path:
+    from ..runner import check_run_dir, latest_run
+
+    return check_run_dir(run_dir) if run_dir else latest_run()
+
+
+@app.command()
+def restart(
+    run_dir: Optional[Path] = typer.Argument(None, help="run directory (default: the latest under runs/)"),
+    slip: int = typer.Option(..., "--slip", help="slip number (see `gouge slips RUN`)"),
+    perm: List[float] = typer.Option([], "--perm", help="kappa_c [d^2] of an undrained branch; repeatable"),
+    set_: List[str] = typer.Option([], "--set", help="override key=value for both branches"),
+    duration: Optional[float] = typer.Option(None, "--duration", help="run each branch this long [t0]"),
+    until_slip_ends: bool = typer.Option(True, "--until-slip-ends/--full",
+                                         help="stop each branch when its first slip ends (default)"),
+    force: bool = typer.Option(False, "--force", help="run an existing fork again"),
+    quiet: bool = typer.Option(False, "--quiet"),
+):
+    """Fork drained and undrained branches from the packing kept just before slip N."""
+    import json
+
+    from ..checkpoint import CheckpointError
+    from ..forks import run_fork
+    from ..runner import RunDirError
+    from ..simulation import PhysicsError
+
+    try:
+        target = _run_dir(run_dir)
+        if not perm:
+            fail("give at least one --perm K (kappa_c in d^2, e.g. --perm 1e-5)")
+        if duration is None and not until_slip_ends:
+            fail("--full needs --duration")
+        summary = run_fork(target, slip, perm, set_, duration, force=force, quiet=quiet)
+    except (ConfigError, RunDirError, CheckpointError) as e:
+        fail(str(e))
+    except PhysicsError as e:
+        fail(f"physics failure: {e}", EXIT_PHYSICS)
+    out.print(json.dumps(summary, indent=2, default=str), highlight=False)
+
+
+@app.command()
+def resume(
+    run_dir: Optional[Path] = typer.Argument(None, help="run directory (default: the latest under runs/)"),
+    quiet: bool = typer.Option(False, "--quiet"),
+):
+    """Continue an interrupted run (Ctrl-C, kill -9, power loss) from its latest checkpoint."""
+    from ..checkpoint import CheckpointError
+    from ..runner import RunDirError, resume_run
+    from ..simulation import PhysicsError
+
+    try:
+        result = resume_run(_run_dir(run_dir), quiet=quiet)
+    except (ConfigError, RunDirError, CheckpointError) as e:
+        fail(str(e))
+    except PhysicsError as e:
+        fail(f"physics failure: {e}", EXIT_PHYSICS)
+    out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s)",
+              highlight=False)
+    if result.status == "interrupted":
+        raise typer.Exit(EXIT_INTERRUPTED)
+
+
+@app.command()
+def slips(
+    run_dir: Optional[Path] = typer.Argument(None, help="run directory (default: the latest under runs/)"),
+    as_json: bool = typer.Option(False, "--json", help="machine-readable output"),
+):
+    """List the slips detected in a run (the catalog written while it ran)."""
+    import json
+
+    from rich.table import Table
+
+    from ..forks import slip_catalog
+    from ..runner import RunDirError
+
+    try:
+        catalog = slip_catalog(_run_dir(run_dir))
+    except RunDirError as e:
+        fail(str(e))
+    if as_json:
+        print(json.dumps(catalog, default=str))
+        return
+    table = Table(title="slips")
+    cols = ("number", "onset_time", "duration", "static_strength", "stress_drop", "peak_velocity", "slip",
+            "checkpoint")
+    for c in cols:
+        table.add_column(c, justify="right")
+    for e in catalog:
+        table.add_row(*[f"{e[c]:.5g}" if isinstance(e[c], float) else str(e[c]) for c in cols])
+    out.print(table)
 
 
 @app.command("config")

@@ -1,0 +1,113 @@
+"""Slips during a run: the streaming detector, and the checkpoint kept from before each slip.
+
+:class:`SlipRecorder` is fed every time-series row. It keeps the last ``slips.ring`` states
+in memory, spaced lead/4 apart. When the wall velocity first crosses the trigger
+threshold, it sets aside the newest kept state that is at least ``lead`` older than the
+last quiet sample (v < end threshold), i.e. from before the onset. When the detector
+reports the finished slip, that state is written as ``checkpoints/slip_NNN.h5`` and the
+slip goes into the run file's catalog (``/slips/NNN``) at once. An event the detector
+drops (too small) discards its pending state.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from pathlib import Path
+
+import numpy as np
+
+from .checkpoint import Checkpoint, snapshot_of, write_checkpoint
+from .config import Config
+from .detector import Slip, SlipDetector
+
+
+def lead_time(config: Config) -> float:
+    """Checkpoint lead before onset [t0]: slips.lead, or lead_stress sigma / (k V_s)."""
+    s = config.slips
+    if s.lead is not None:
+        return s.lead
+    rate = config.loading.spring_constant * max(config.loading.velocity, 1e-300)
+    return s.lead_stress * config.loading.normal_stress / rate
+
+
+def make_detector(config: Config) -> SlipDetector:
+    s = config.slips
+    return SlipDetector(config.loading.velocity, s.start_factor, s.end_factor, s.min_duration,
+                        s.min_slip, s.merge_gap)
+
+
+class SlipRecorder:
+    """Time-series callback: detect slips, persist the pre-slip checkpoint, write the catalog."""
+
+    def __init__(self, config: Config, sim, run_file, checkpoint_dir: Path | None, state: dict | None = None):
+        self.config = config
+        self.run_file = run_file
+        self.checkpoint_dir = checkpoint_dir
+        self.lead = lead_time(config)
+        self.ring_every = sim.steps_for(self.lead / 4.0)
+        self.ring: deque[Checkpoint] = deque(maxlen=config.slips.ring)
+        self.hi = config.slips.start_factor * config.loading.velocity
+        self.lo = config.slips.end_factor * config.loading.velocity
+        state = state or {}
+        self.detector = (SlipDetector.from_state_dict(state["detector"]) if "detector" in state
+                         else make_detector(config))
+        self.count = int(state.get("count", 0))
+        self.last_quiet = float(state.get("last_quiet", sim.state.time))
+        self.above = bool(state.get("above", False))
+        self.pending: Checkpoint | None = None
+        self.slips: list[dict] = []
+
+    def state_dict(self) -> dict:
+        return {"detector": self.detector.state_dict(), "count": self.count,
+                "last_quiet": self.last_quiet, "above": self.above}
+
+    def keep(self, sim):
+        """Ring callback (every lead/4)."""
+        self.ring.append(snapshot_of(sim, {"slip_recorder": self.state_dict()}))
+
+    def _choose(self, onset_estimate: float) -> Checkpoint | None:
+        for ck in reversed(self.ring):
+            if ck.time <= onset_estimate - self.lead:
+                return ck
+        return self.ring[0] if self.ring else None
+
+    def observe(self, row: dict) -> Slip | None:
+        """Series callback; returns a slip the moment it is finished."""
+        t, v = row["time"], row["wall_vx"]
+        if v < self.lo:
+            self.last_quiet = t
+        if v >= self.hi and not self.above and self.pending is None:
+            self.pending = self._choose(self.last_quiet)
+        self.above = v >= self.hi
+        slip = self.detector.update(t, row["wall_x"], v, row["tau_over_sigma"], row["porosity"])
+        if slip is not None:
+            self._record(slip)
+            self.pending = None
+        elif self.pending is not None and self.detector.raw is None and self.detector.pending is None \
+                and not self.above and v < self.lo:
+            self.pending = None
+        return slip
+
+    def _record(self, slip: Slip):
+        self.count += 1
+        entry = slip.to_dict()
+        subevents = entry.pop("subevents")
+        entry["number"] = self.count
+        entry["checkpoint"] = ""
+        entry["checkpoint_time"] = float("nan")
+        if self.pending is not None and self.checkpoint_dir is not None:
+            name = f"slip_{self.count:03d}.h5"
+            extra = dict(self.pending.extra)
+            extra.update(slip=self.count, onset_time=slip.onset_time)
+            write_checkpoint(self.checkpoint_dir / name,
+                             Checkpoint(self.pending.config, self.pending.state, self.pending.fluid, extra))
+            entry["checkpoint"] = f"checkpoints/{name}"
+            entry["checkpoint_time"] = self.pending.time
+        self.slips.append(entry)
+        if self.run_file is not None:
+            group = self.run_file.h5.require_group("slips").create_group(f"{self.count:03d}")
+            for key, value in entry.items():
+                group.attrs[key] = value
+            group.create_dataset("subevent_time", data=np.array([s["time"] for s in subevents], float))
+            group.create_dataset("subevent_velocity", data=np.array([s["velocity"] for s in subevents], float))
+            self.run_file.h5.flush()

@@ -1,0 +1,132 @@
+"""`gouge restart`: drained and undrained branches from the packing kept before a slip.
+
+Both branches start from the identical checkpoint (grains, walls, contact history, clock).
+The drained branch is the dry model: with unchanged parameters it retraces the original
+run bit for bit. Each undrained branch adds the pore fluid with kappa_c = K, starting from
+P = 0 on that packing. Outputs: ``RUN/forks/slip_NNN/{drained,perm_K}/run.h5`` and
+``RUN/forks/slip_NNN/pair.json`` (first slip of each branch, and undrained/drained ratios).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import h5py
+
+from .checkpoint import read_checkpoint
+from .config import Config, ConfigError, build_config
+from .events import lead_time
+from .output import RunFile
+from .runner import RunDirError, check_run_dir, load_phase
+from .simulation import Simulation
+
+
+def slip_catalog(run_dir: Path) -> list[dict]:
+    """The run's slip catalog (one dict of attributes per slip, in order)."""
+    with h5py.File(Path(run_dir) / "run.h5", "r") as h5:
+        if "slips" not in h5:
+            return []
+        out = []
+        for name in sorted(h5["slips"]):
+            g = h5["slips"][name]
+            entry = {k: (v.item() if hasattr(v, "item") else v) for k, v in g.attrs.items()}
+            entry["subevent_time"] = g["subevent_time"][...].tolist()
+            entry["subevent_velocity"] = g["subevent_velocity"][...].tolist()
+            out.append(entry)
+        return out
+
+
+def branch_name(perm: float | None) -> str:
+    return "drained" if perm is None else f"perm_{perm:g}"
+
+
+def branch_config(base: Config, perm: float | None) -> Config:
+    data = base.to_dict()
+    if perm is None:
+        data["fluid"] = None
+    else:
+        fluid = dict(data.get("fluid") or {})
+        fluid["permeability"] = perm
+        data["fluid"] = fluid
+    return build_config(data)
+
+
+@dataclass
+class BranchResult:
+    name: str
+    out_dir: Path
+    status: str
+    wall_seconds: float
+    steps: int
+    first_slip: dict | None
+
+
+def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
+             duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
+    """Fork the drained branch and one undrained branch per permeability from slip `slip`."""
+    run_dir = check_run_dir(run_dir)
+    catalog = slip_catalog(run_dir)
+    numbers = [int(e["number"]) for e in catalog if e.get("checkpoint")]
+    if slip not in numbers:
+        listed = ", ".join(str(n) for n in numbers) or "none yet"
+        raise RunDirError(f"{run_dir} has no checkpoint for slip {slip}; slips with checkpoints: {listed}")
+    for perm in perms:
+        if not (perm > 0 and math.isfinite(perm)):
+            raise ConfigError(f"--perm = {perm:g}: the permeability prefactor kappa_c must be a positive number [d^2]")
+    entry = next(e for e in catalog if int(e["number"]) == slip)
+    ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
+    fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
+    branches = [None] + list(perms)
+    for perm in branches:
+        target = fork_dir / branch_name(perm) / "run.h5"
+        if target.exists() and not force:
+            raise RunDirError(f"{target} exists; pass --force to run this fork again")
+    configs = {branch_name(p): branch_config(ck.config, p) for p in branches}
+    stop_after_slip = duration is None
+    if duration is None:
+        span = float(entry["end_time"]) - ck.time
+        duration = 5.0 * span + 2.0 * lead_time(ck.config)
+    results = []
+    for name, config in configs.items():
+        out_dir = fork_dir / name
+        out_dir.mkdir(parents=True, exist_ok=True)
+        t0 = time.perf_counter()
+        sim = Simulation(config, arrays=ck.state)
+        writer = RunFile(out_dir / "run.h5", config, sim.dt, extra_attrs={
+            "parent_run": str(run_dir), "parent_checkpoint": str(entry["checkpoint"]), "fork_slip": slip,
+            "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
+            "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
+            "end_time": ck.time + duration})
+        writer.append(sim.observe())
+        step0 = sim.state.step
+        status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
+                                      label=f"slip {slip} {name}", checkpoints=False,
+                                      stop_after_slip=stop_after_slip)
+        writer.close(status)
+        first = recorder.slips[0] if recorder.slips else None
+        results.append(BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first))
+    summary = pair_summary(run_dir, slip, ck.time, results)
+    (fork_dir / "pair.json").write_text(json.dumps(summary, indent=2, default=str))
+    return summary
+
+
+def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[BranchResult]) -> dict:
+    keys = ("onset_time", "static_strength", "stress_drop", "peak_velocity", "mean_velocity", "duration", "slip")
+    branches = {}
+    for r in results:
+        branches[r.name] = {"status": r.status, "dir": str(r.out_dir), "wall_seconds": round(r.wall_seconds, 3),
+                            "steps": r.steps,
+                            "first_slip": {k: r.first_slip[k] for k in keys} if r.first_slip else None}
+    drained = branches["drained"]["first_slip"]
+    for name, b in branches.items():
+        if name == "drained" or not (drained and b["first_slip"]):
+            continue
+        u = b["first_slip"]
+        b["ratio_to_drained"] = {k: (u[k] / drained[k] if drained[k] else None)
+                                 for k in ("peak_velocity", "stress_drop", "duration")}
+        b["stronger_than_drained"] = u["static_strength"] > drained["static_strength"]
+    return {"run": str(run_dir), "slip": slip, "start_time": start_time, "branches": branches}
