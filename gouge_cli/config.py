@@ -205,7 +205,17 @@ class Config(_Section):
         return self.model_dump(mode="json")
 
 
-def _format_errors(err: ValidationError) -> str:
+def _as_written(data: dict, loc: tuple):
+    """The value the user wrote at `loc` (before unit conversion), if there is one."""
+    node = data
+    for part in loc:
+        if not isinstance(node, dict) or part not in node:
+            return None
+        node = node[part]
+    return node
+
+
+def _format_errors(err: ValidationError, data: dict) -> str:
     lines = []
     for e in err.errors():
         key = ".".join(str(p) for p in e["loc"]) or "(top level)"
@@ -213,8 +223,11 @@ def _format_errors(err: ValidationError) -> str:
             lines.append(f"{key}: unknown key (check the spelling; see `gouge config --defaults`)")
             continue
         value = e.get("input")
+        written = _as_written(data, e["loc"])
+        shown = f"{written!r} (= {value!r} dimensionless)" if isinstance(written, str) and written != value \
+            else repr(value)
         msg = e["msg"].removeprefix("Value error, ")
-        lines.append(f"{key} = {value!r}: {msg}")
+        lines.append(f"{key} = {shown}: {msg}")
     return "invalid config:\n  " + "\n  ".join(lines)
 
 
@@ -261,7 +274,7 @@ def build_config(data: dict | None, overrides: list[str] | dict | None = None) -
         scales = ScalesConfig.model_validate(data.get("scales") or {}).scales()
         return Config.model_validate(data, context={"scales": scales})
     except ValidationError as err:
-        raise ConfigError(_format_errors(err)) from None
+        raise ConfigError(_format_errors(err, data)) from None
 
 
 def find_config(name: str | Path) -> Path:

@@ -20,7 +20,7 @@ GRAIN_FIELDS = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv
                 "force_x", "force_z", "torque", "top")
 LIST_FIELDS = ("start", "index", "shear", "tr_start", "tr_pair", "x_build", "z_build",
                "new_start", "new_index", "new_shear")
-PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_fs")
+PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj")
 EVOLVING = ("x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
             "start", "index", "shear", "tr_start", "tr_pair", "x_build", "z_build",
             "wall", "clock", "counters")
@@ -88,7 +88,8 @@ class State:
         self.new_shear = np.zeros(capacity)
         self.pair_fx = np.zeros(capacity)
         self.pair_fz = np.zeros(capacity)
-        self.pair_fs = np.zeros(capacity)
+        self.pair_ti = np.zeros(capacity)
+        self.pair_tj = np.zeros(capacity)
 
     def grow_pairs(self, needed: int):
         """Enlarge pair arrays to hold `needed` pairs (with 25 % headroom), keeping the list."""

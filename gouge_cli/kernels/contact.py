@@ -1,8 +1,14 @@
 """Hertz-Mindlin contact law for one pair of discs (thesis Eqs. 8-11, physics.md section 2).
 
 Convention: n points from grain i to grain j, t = (-n_z, n_x). The pair record
-holds the force ON j (the force on i is its negative) and ``-F_s``; the torque on
-each grain of the pair is ``radius * (-F_s)``.
+holds the force ON j (the force on i is its negative) and the torque on each grain.
+
+Lever arms [choice, departs from physics.md]: the tangential force acts at the contact
+point, a_i = R_i - xi/2 from centre i and a_j = R_j - xi/2 from centre j, so a_i + a_j = r
+and the pair's torques balance the moment of its forces: angular momentum is conserved
+exactly (with arms R_i, R_j each contact would inject a net torque xi F_s). The same arms
+enter the slip velocity v_t, so the tangential spring does no net work. The difference to
+the thesis's R_i, R_j is O(xi / R) (about 1 % at sigma = 3e-4).
 """
 
 from __future__ import annotations
@@ -15,28 +21,31 @@ from .. import NUMBA_CACHE
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
-def hertz_mindlin(dx, dz, dvx, dvz, spin_sum, r_i, r_j, m_ij, shear, dt,
+def hertz_mindlin(dx, dz, dvx, dvz, spin_i, spin_j, r_i, r_j, m_ij, shear, dt,
                   c_normal, c_tangential, damping, friction):
     """Contact force of a touching pair.
 
     dx, dz: x_j - x_i (minimum image) [d]; dvx, dvz: v_j - v_i [v0];
-    spin_sum: R_i w_i + R_j w_j [v0]; m_ij: reduced mass [rho d^3];
+    spin_i, spin_j: angular velocities [1/t0]; m_ij: reduced mass [rho d^3];
     shear: tangential displacement ds before this step [d];
     c_normal = sqrt(2) E / (3 (1 - nu^2)), c_tangential = 2^1.5 E / ((2 - nu)(1 + nu)) * factor.
-    Returns (fx_j, fz_j, minus_fs, new_shear, overlap, normal_force); overlap <= 0: no contact.
+    Returns (fx_j, fz_j, torque_i, torque_j, new_shear, overlap, normal_force); all zero
+    when not touching. torque = a (-F_s) with a = R - overlap/2 (thesis Eq. 11).
     """
     r2 = dx * dx + dz * dz
     rsum = r_i + r_j
     if r2 >= rsum * rsum:
-        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
     r = math.sqrt(r2)
     nx = dx / r
     nz = dz / r
     overlap = rsum - r
+    arm_i = r_i - 0.5 * overlap
+    arm_j = r_j - 0.5 * overlap
     r_ij = 2.0 * r_i * r_j / rsum
     root = math.sqrt(r_ij * overlap)
     v_n = dvx * nx + dvz * nz
-    v_t = -dvx * nz + dvz * nx - spin_sum
+    v_t = -dvx * nz + dvz * nx - (arm_i * spin_i + arm_j * spin_j)
     f_n = c_normal * root * overlap - damping * m_ij * v_n
     if f_n < 0.0:
         f_n = 0.0
@@ -50,4 +59,4 @@ def hertz_mindlin(dx, dz, dvx, dvz, spin_sum, r_i, r_j, m_ij, shear, dt,
     elif f_s < -limit:
         f_s = -limit
         ds = -f_s / k_s
-    return f_n * nx - f_s * nz, f_n * nz + f_s * nx, -f_s, ds, overlap, f_n
+    return f_n * nx - f_s * nz, f_n * nz + f_s * nx, -f_s * arm_i, -f_s * arm_j, ds, overlap, f_n

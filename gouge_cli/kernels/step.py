@@ -40,8 +40,8 @@ OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
 
 @njit(parallel=True, cache=NUMBA_CACHE)
 def pair_forces(x, z, vx, vz, spin, radius, mass, start, index, shear,
-                pair_fx, pair_fz, pair_fs, params):
-    """Per-pair forces (on j) and -F_s into pair_*; updates shear history in place."""
+                pair_fx, pair_fz, pair_ti, pair_tj, params):
+    """Per-pair force on j and torques on i and j into pair_*; updates shear history in place."""
     n = x.shape[0]
     dt = params[DT]
     width = params[WIDTH]
@@ -55,23 +55,24 @@ def pair_forces(x, z, vx, vz, spin, radius, mass, start, index, shear,
         vxi = vx[i]
         vzi = vz[i]
         ri = radius[i]
-        si = ri * spin[i]
+        wi = spin[i]
         mi = mass[i]
         for k in range(start[i], start[i + 1]):
             j = index[k]
             dx = minimum_image(x[j] - xi, width)
             mj = mass[j]
-            fx, fz, mfs, ds, overlap, fn = hertz_mindlin(
-                dx, z[j] - zi, vx[j] - vxi, vz[j] - vzi, si + radius[j] * spin[j], ri, radius[j],
+            fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
+                dx, z[j] - zi, vx[j] - vxi, vz[j] - vzi, wi, spin[j], ri, radius[j],
                 mi * mj / (mi + mj), shear[k], dt, c_n, c_t, damping, friction)
             pair_fx[k] = fx
             pair_fz[k] = fz
-            pair_fs[k] = mfs
+            pair_ti[k] = ti
+            pair_tj[k] = tj
             shear[k] = ds
 
 
 @njit(parallel=True, cache=NUMBA_CACHE)
-def sum_pair_forces(radius, start, tr_start, tr_pair, pair_fx, pair_fz, pair_fs,
+def sum_pair_forces(radius, start, tr_start, tr_pair, pair_fx, pair_fz, pair_ti, pair_tj,
                     force_x, force_z, torque, drag_x, drag_z):
     """force = sum over pairs (as i: minus, as j: plus) + drag; fixed order per grain."""
     n = radius.shape[0]
@@ -83,18 +84,18 @@ def sum_pair_forces(radius, start, tr_start, tr_pair, pair_fx, pair_fz, pair_fs,
         for k in range(start[i], start[i + 1]):
             fx -= pair_fx[k]
             fz -= pair_fz[k]
-            ts += pair_fs[k]
+            ts += pair_ti[k]
         for m in range(tr_start[i], tr_start[i + 1]):
             k = tr_pair[m]
             fx += pair_fx[k]
             fz += pair_fz[k]
-            ts += pair_fs[k]
+            ts += pair_tj[k]
         if has_drag:
             fx += drag_x[i]
             fz += drag_z[i]
         force_x[i] = fx
         force_z[i] = fz
-        torque[i] = ts * radius[i]
+        torque[i] = ts
 
 
 @njit(cache=NUMBA_CACHE)
@@ -190,9 +191,10 @@ def compute_forces(grains, lists, pair, wall, params, drag_x, drag_z):
     """Contact (+ drag) forces on every grain and on the top wall at the current state."""
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top = grains
     start, index, shear, tr_start, tr_pair, x_build, z_build, new_start, new_index, new_shear = lists
-    pair_fx, pair_fz, pair_fs = pair
-    pair_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, pair_fx, pair_fz, pair_fs, params)
-    sum_pair_forces(radius, start, tr_start, tr_pair, pair_fx, pair_fz, pair_fs,
+    pair_fx, pair_fz, pair_ti, pair_tj = pair
+    pair_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, pair_fx, pair_fz, pair_ti, pair_tj,
+                params)
+    sum_pair_forces(radius, start, tr_start, tr_pair, pair_fx, pair_fz, pair_ti, pair_tj,
                     force_x, force_z, torque, drag_x, drag_z)
     wall_force(force_x, force_z, top, wall)
 
