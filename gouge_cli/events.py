@@ -1,7 +1,8 @@
 """Slips during a run: the streaming detector, and the checkpoint kept from before each slip.
 
 :class:`SlipRecorder` is fed every time-series row. It keeps the last ``slips.ring`` states
-in memory, spaced lead/4 apart. When the wall velocity first crosses the trigger
+in memory, spaced lead/4 apart, taken only while the wall is quiet (v below the end
+threshold). When the wall velocity first crosses the trigger
 threshold, it sets aside the newest kept state that is at least ``lead`` older than the
 last quiet sample (v < end threshold), i.e. from before the onset. When the detector
 reports the finished slip, that state is written as ``checkpoints/slip_NNN.h5`` and the
@@ -19,6 +20,7 @@ import numpy as np
 from .checkpoint import Checkpoint, snapshot_of, write_checkpoint
 from .config import Config
 from .detector import Slip, SlipDetector
+from .kernels.step import W_VX
 
 
 def lead_time(config: Config) -> float:
@@ -62,8 +64,10 @@ class SlipRecorder:
                 "last_quiet": self.last_quiet, "above": self.above}
 
     def keep(self, sim):
-        """Ring callback (every lead/4)."""
-        self.ring.append(snapshot_of(sim, {"slip_recorder": self.state_dict()}))
+        """Ring callback (every lead/4): keep the state if the wall is quiet (v < end threshold),
+        so that the ring always reaches back from the last quiet moment before an onset."""
+        if sim.state.wall[W_VX] < self.lo:
+            self.ring.append(snapshot_of(sim, {"slip_recorder": self.state_dict()}))
 
     def _choose(self, onset_estimate: float) -> Checkpoint | None:
         for ck in reversed(self.ring):

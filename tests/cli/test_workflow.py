@@ -1,0 +1,208 @@
+"""The run -> slips -> restart/resume workflow through the CLI, and its bit-for-bit identities."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from gouge_cli.checkpoint import CheckpointError, read_checkpoint, snapshot_of, write_checkpoint
+from gouge_cli.cli.main import EXIT_BAD_INPUT, app
+from gouge_cli.forks import run_fork, slip_catalog
+from gouge_cli.simulation import Simulation
+
+SCENE = {
+    "name": "tiny",
+    "packing": {"n_grains": 300, "width": 15},
+    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
+    "numerics": {"dt_safety": 0.3},
+    "run": {"duration": 80000},
+    "output": {"series_interval": 10, "snapshot_interval": 20000, "checkpoint_interval": 5000},
+}
+runner = CliRunner()
+
+
+def gouge(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def scene_file(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cfg") / "tiny.yaml"
+    path.write_text(yaml.safe_dump(SCENE))
+    return path
+
+
+@pytest.fixture(scope="module")
+def finished_run(scene_file, tmp_path_factory):
+    out = tmp_path_factory.mktemp("runs") / "tiny"
+    result = gouge("run", scene_file, "--out", out, "--quiet")
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def series(path: Path) -> dict:
+    with h5py.File(path, "r") as h5:
+        return {k: v[...] for k, v in h5["series"].items()}
+
+
+def test_run_outputs_describe_themselves(finished_run):
+    with h5py.File(finished_run / "run.h5", "r") as h5:
+        assert h5.attrs["status"] == "finished"
+        assert "normal_stress" in h5.attrs["config"] and "time_s" in h5.attrs["scales"]
+        assert h5["series/tau_over_sigma"].attrs["unit"] == "-"
+        assert h5["series/time"].shape[0] > 7000
+        assert len(h5["snapshots"]) >= 4
+        snap = h5["snapshots"][sorted(h5["snapshots"])[-1]]
+        assert snap["contact_fx"].shape == snap["contact_i"].shape and snap["contact_i"].shape[0] > 300
+    assert (finished_run / "config.yaml").is_file()
+
+
+def test_catalog_has_slips_with_checkpoints(finished_run):
+    catalog = slip_catalog(finished_run)
+    big = [e for e in catalog if e["stress_drop"] > 0.05]
+    assert len(big) >= 2
+    for e in catalog:
+        assert e["end_time"] > e["onset_time"] and e["peak_velocity"] >= 10 * SCENE["loading"]["velocity"]
+        assert e["checkpoint_time"] < e["onset_time"]
+        assert (finished_run / e["checkpoint"]).is_file()
+    listed = gouge("slips", finished_run, "--json")
+    assert listed.exit_code == 0 and f'"number": {len(catalog)}' in listed.output
+
+
+def test_checkpoint_restart_is_bitwise(finished_run):
+    """N steps + checkpoint + N steps == 2N steps, bit for bit (dry)."""
+    ck = read_checkpoint(finished_run / "checkpoints" / "slip_002.h5")
+    straight = Simulation(ck.config, arrays=ck.state)
+    straight.advance(4000)
+    halfway = Simulation(ck.config, arrays=ck.state)
+    halfway.advance(2000)
+    path = finished_run / "mid.h5"
+    write_checkpoint(path, snapshot_of(halfway))
+    again = read_checkpoint(path)
+    resumed = Simulation(again.config, arrays=again.state)
+    resumed.advance(2000)
+    a, b = straight.state.arrays(), resumed.state.arrays()
+    assert a.keys() == b.keys()
+    for name in a:
+        assert np.array_equal(a[name], b[name]), name
+    assert a["counters"][1] > ck.state["counters"][1]   # rebuilds happened on the way
+
+
+def test_drained_fork_retraces_the_original(finished_run):
+    summary = run_fork(finished_run, 2, [], quiet=True)
+    drained = summary["branches"]["drained"]
+    assert drained["status"] == "finished" and drained["first_slip"] is not None
+    original = series(finished_run / "run.h5")
+    fork = series(finished_run / "forks" / "slip_002" / "drained" / "run.h5")
+    idx = np.searchsorted(original["time"], fork["time"][1:])
+    assert np.array_equal(original["time"][idx], fork["time"][1:])
+    for name in ("wall_x", "wall_vx", "tau_over_sigma", "porosity", "kinetic_energy", "max_overlap"):
+        assert np.array_equal(original[name][idx], fork[name][1:]), name
+    entry = next(e for e in slip_catalog(finished_run) if e["number"] == 2)
+    assert drained["first_slip"]["onset_time"] == entry["onset_time"]
+    again = gouge("restart", finished_run, "--slip", 2, "--perm", "1e-5")
+    assert again.exit_code == EXIT_BAD_INPUT and "--force" in again.output
+
+
+@pytest.mark.parametrize("args,words", [
+    (["--slip", 99, "--perm", "1e-5"], ["no checkpoint for slip 99", "1, 2"]),
+    (["--slip", 2, "--perm", "-1e-5"], ["--perm", "positive"]),
+    (["--slip", 2], ["--perm"]),
+])
+def test_restart_bad_input(finished_run, args, words):
+    result = gouge("restart", finished_run, *args)
+    assert result.exit_code == EXIT_BAD_INPUT, result.output
+    for w in words:
+        assert w in result.output
+
+
+def test_restart_refuses_non_run_and_corrupt_checkpoint(finished_run, tmp_path):
+    result = gouge("restart", tmp_path, "--slip", 1, "--perm", "1e-5")
+    assert result.exit_code == EXIT_BAD_INPUT and "not a gouge run directory" in result.output
+    copy = tmp_path / "copy"
+    subprocess.run(["cp", "-r", str(finished_run), str(copy)], check=True)
+    ck = copy / "checkpoints" / "slip_001.h5"
+    with h5py.File(ck, "r+") as h5:
+        h5["state/x"][3] += 1e-9
+    result = gouge("restart", copy, "--slip", 1, "--perm", "1e-5")
+    assert result.exit_code == EXIT_BAD_INPUT and "corrupt" in result.output
+    ck.write_bytes(ck.read_bytes()[:5000])
+    with pytest.raises(CheckpointError, match="unreadable or truncated"):
+        read_checkpoint(ck)
+    assert not (copy / "forks" / "slip_001").exists()
+
+
+def test_bad_config_writes_nothing(scene_file, tmp_path):
+    out = tmp_path / "never"
+    result = gouge("run", scene_file, "--out", out, "--set", "loading.velocity=-1", "--set", "packing.n_grain=3")
+    assert result.exit_code == EXIT_BAD_INPUT
+    assert "loading.velocity" in result.output and "packing.n_grain: unknown key" in result.output
+    assert not out.exists()
+
+
+WRITER = """
+import sys, numpy as np
+from gouge_cli.checkpoint import Checkpoint, write_checkpoint
+from gouge_cli.config import build_config
+cfg = build_config({})
+i = 0
+while True:
+    i += 1
+    write_checkpoint(sys.argv[1], Checkpoint(cfg, {"x": np.full(3_000_000, float(i))}, {}, {"i": i}))
+"""
+
+
+def test_killed_writer_leaves_a_valid_checkpoint(tmp_path):
+    path = tmp_path / "latest.h5"
+    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(path)])
+    try:
+        deadline = time.time() + 60
+        while not path.exists() and time.time() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.7)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    ck = read_checkpoint(path)           # verifies the checksum
+    assert np.all(ck.state["x"] == ck.extra["i"])
+
+
+def test_resume_after_kill_9_matches_uninterrupted(scene_file, finished_run, tmp_path):
+    out = tmp_path / "killed"
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    proc = subprocess.Popen([sys.executable, "-m", "gouge_cli.cli", "run", str(scene_file), "--out", str(out),
+                             "--quiet"], env=env)
+    latest = out / "checkpoints" / "latest.h5"
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline and proc.poll() is None:
+            if latest.exists() and read_checkpoint(latest).time > 30000:
+                break
+            time.sleep(0.1)
+        assert proc.poll() is None, "the run finished before it could be killed"
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    with h5py.File(out / "run.h5", "r") as h5:
+        assert h5.attrs["status"] == "running"
+    result = gouge("resume", out, "--quiet")
+    assert result.exit_code == 0, result.output
+    a = read_checkpoint(finished_run / "checkpoints" / "latest.h5").state
+    b = read_checkpoint(latest).state
+    for name in a:
+        assert np.array_equal(a[name], b[name]), name
+    sa, sb = series(finished_run / "run.h5"), series(out / "run.h5")
+    assert np.array_equal(sa["time"], sb["time"])        # no duplicated or missing rows
+    assert np.array_equal(sa["wall_vx"], sb["wall_vx"])
+    ca, cb = slip_catalog(finished_run), slip_catalog(out)
+    assert [e["onset_time"] for e in ca] == [e["onset_time"] for e in cb]
