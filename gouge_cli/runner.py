@@ -3,6 +3,7 @@ outputs, slip checkpoints, periodic checkpoints and clean stops."""
 
 from __future__ import annotations
 
+import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,8 +43,9 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> Path:
         raise RunDirError(f"{out_dir} already holds a run (run.h5); choose another --out, "
                           "another name (--set name=...), or pass --force to overwrite it")
     out_dir.mkdir(parents=True, exist_ok=True)
-    for old in (out_dir / "checkpoints").glob("*.h5") if (out_dir / "checkpoints").is_dir() else []:
-        old.unlink()
+    for stale in ("checkpoints", "forks", "figures"):     # they belonged to the run being replaced
+        if (out_dir / stale).is_dir():
+            shutil.rmtree(out_dir / stale)
     return out_dir
 
 

@@ -168,8 +168,13 @@ class Simulation:
         s = self.state
         args = self.fluid.kernel_args()
         return advance_fluid(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params, s.counters,
-                             nsteps, args[-2], args[-1], args[:-2], self.config.fluid.interval,
+                             nsteps, args[-2], args[-1], args[:-2], self.fluid_interval,
                              self.wall_planes()[0], self._fluid_status)
+
+    @property
+    def fluid_interval(self) -> int:
+        """DEM steps per fluid update: fluid.step / dt rounded, at least 1."""
+        return max(1, int(round(self.config.fluid.step / self.dt)))
 
     def steps_for(self, duration: float) -> int:
         return max(1, int(round(duration / self.dt)))
@@ -230,10 +235,12 @@ class Simulation:
                 f"the time step {self.dt:.4g} t0 is probably too large: lower numerics.dt_safety "
                 f"(now {self.config.numerics.dt_safety:g}) or numerics.dt", t)
         if row["max_overlap"] > 0.5:
+            fluid_hint = (f"; with pore fluid, also lower fluid.step (now {self.config.fluid.step:g} t0, the lag "
+                          "of the drag)") if self.fluid is not None else ""
             raise PhysicsError(
                 f"runaway overlap: {row['max_overlap']:.3g} of a grain radius",
                 "grains are too soft for the load or the step too large: lower loading.normal_stress, "
-                "numerics.dt_safety or loading.velocity", t)
+                f"numerics.dt_safety or loading.velocity{fluid_hint}", t)
 
     # ---- compaction --------------------------------------------------------------------
     def compact(self, on_chunk: Callable = None) -> dict:

@@ -1,0 +1,36 @@
+"""The time-step loop with pore fluid: kernels.step plus a Goren pressure update every
+`interval` steps. Only scenes with a fluid section import this module."""
+
+from __future__ import annotations
+
+from numba import njit
+
+from .. import NUMBA_CACHE
+from .fluid import fluid_update
+from .step import DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, LIST_OVERFLOW, OK, W_Z, WIDTH, _step, rebuild
+
+
+@njit(cache=NUMBA_CACHE)
+def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, drag_z,
+                  fluid, interval, z_bottom, fluid_status):
+    """As advance, plus a pore-pressure update (kernels.fluid.fluid_update) after every
+    `interval`-th step (step count multiple of interval) over dt_f = interval * dt; the drag
+    it leaves in drag_x/drag_z acts on the grains until the next update. fluid: the tuple
+    FluidGrid.kernel_args() without drag. Returns (FLUID_FAILED, steps) with fluid_status[0]
+    set if the fluid update fails."""
+    x, z, vx, vz, spin, radius = grains[0], grains[1], grains[2], grains[3], grains[4], grains[5]
+    fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work = fluid
+    n = x.shape[0]
+    dt_f = interval * params[DT]
+    for st in range(nsteps):
+        if counters[K_NEED_REBUILD] != 0:
+            if not rebuild(grains, lists, params, counters):
+                return LIST_OVERFLOW, st
+        _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z)
+        if counters[K_STEP] % interval == 0:
+            status = fluid_update(x, z, vx, vz, radius, n, params[WIDTH], z_bottom, wall[W_Z], dt_f,
+                                  fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work, drag_x, drag_z)
+            if status != 0:
+                fluid_status[0] = status
+                return FLUID_FAILED, st + 1
+    return OK, nsteps

@@ -1,0 +1,280 @@
+"""Unit tests of the pore-fluid kernels and FluidGrid (gouge_cli/kernels/fluid.py, gouge_cli/fluid.py)."""
+
+import math
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from gouge_cli.config import FluidConfig
+from gouge_cli.fluid import FluidGrid
+from gouge_cli.kernels import fluid as kernels
+
+
+def numeric_cap(h, r):
+    zz = np.linspace(-r, r, 200001)
+    chord = 2.0 * np.sqrt(np.maximum(r * r - zz * zz, 0.0))
+    return np.trapezoid(np.where(zz > h, chord, 0.0), zz)
+
+
+def test_segment_and_in_domain_area():
+    r = 0.6
+    assert kernels.segment_area(r, r) == 0.0
+    assert kernels.segment_area(-r, r) == pytest.approx(math.pi * r * r)
+    assert kernels.segment_area(0.0, r) == pytest.approx(0.5 * math.pi * r * r)
+    assert kernels.segment_area(0.23, r) == pytest.approx(numeric_cap(0.23, r), rel=1e-4)
+    assert kernels.in_domain_area(5.0, r, 0.0, 10.0) == pytest.approx(math.pi * r * r)
+    assert kernels.in_domain_area(0.0, r, 0.0, 10.0) == pytest.approx(0.5 * math.pi * r * r)
+    assert kernels.in_domain_area(10.0 + r, r, 0.0, 10.0) == pytest.approx(0.0, abs=1e-15)
+    assert kernels.in_domain_area(10.0 + 2 * r, r, 0.0, 10.0) == 0.0
+    assert kernels.in_domain_area(-0.1, r, 0.0, 10.0) == pytest.approx(numeric_cap(0.1, r), rel=1e-4)
+
+
+def test_cell_weights_periodic_and_clamped():
+    i0, i1, j0, fx, fz, slope = kernels.cell_weights(-0.25, 0.0, 1.0, 1.0, 0.0, 4, 3)
+    assert (i0, i1) == (3, 0) and fx == pytest.approx(0.25)
+    assert (j0, fz, slope) == (0, 0.0, 0.0)
+    i0, i1, j0, fx, fz, slope = kernels.cell_weights(8.5, 2.9, 1.0, 1.0, 0.0, 4, 3)
+    assert (i0, i1, fx) == (0, 1, 0.0)
+    assert (j0, fz, slope) == (1, 1.0, 0.0)
+    _, _, j0, _, fz, slope = kernels.cell_weights(0.5, 1.25, 1.0, 0.5, 0.0, 4, 3)
+    assert (j0, fz, slope) == (0, pytest.approx(0.125), 0.5)
+
+
+def _grains(seed=0, n=130, width=12.0, z_bot=0.5, z_top=10.5):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(0, width, n)
+    z = rng.uniform(z_bot - 0.3, z_top + 0.3, n)
+    radius = rng.uniform(0.4, 0.6, n)
+    return x, z, radius
+
+
+def test_deposit_conserves_area_and_is_periodic():
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains()
+    v = np.full(x.size, 2e-3)
+    s, ux, uz, gx, gz = (np.empty((5, 4)) for _ in range(5))
+    kernels.deposit(x, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
+    cell_area = width / 5 * (z_top - z_bot) / 4
+    total = sum(kernels.in_domain_area(zk, rk, z_bot, z_top) for zk, rk in zip(z, radius))
+    assert (s * cell_area).sum() == pytest.approx(total, rel=1e-12)
+    np.testing.assert_allclose(ux, 2e-3, rtol=1e-12)
+    np.testing.assert_allclose(uz, -2e-3, rtol=1e-12)
+    shifted = np.empty_like(s)
+    kernels.deposit(x + width, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, shifted, ux, uz, gx, gz)
+    np.testing.assert_allclose(shifted, s, rtol=1e-12)
+
+
+def test_solid_fraction_gradient_is_the_derivative_of_the_deposit():
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains()
+    inside = (z > z_bot + 0.6) & (z < z_top - 0.6)
+    x, z, radius = x[inside], z[inside], radius[inside]
+    v = np.zeros_like(x)
+    s, ux, uz, gx, gz = (np.empty((5, 4)) for _ in range(5))
+    kernels.deposit(x, z, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
+    shift = 1e-7
+    for dxk, dzk, slope in ((shift, 0.0, gx), (0.0, shift, gz)):
+        s_plus, s_minus = np.empty((5, 4)), np.empty((5, 4))
+        scratch = [np.empty((5, 4)) for _ in range(4)]
+        kernels.deposit(x + dxk, z + dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_plus, *scratch)
+        kernels.deposit(x - dxk, z - dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_minus, *scratch)
+        # moving every grain by +delta is moving the cells by -delta
+        np.testing.assert_allclose(-(s_plus - s_minus) / (2 * shift), slope, atol=1e-6)
+
+
+def test_deposit_velocity_is_relative_to_the_stretching_grid():
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains()
+    rate = 1e-3
+    vz = rate * (z - z_bot)
+    s, ux, uz, gx, gz = (np.empty((5, 4)) for _ in range(5))
+    kernels.deposit(x, z, 0 * x, vz, radius, x.size, width, z_bot, z_top, 0.0, rate * (z_top - z_bot),
+                    s, ux, uz, gx, gz)
+    assert np.abs(uz).max() < 1e-15
+
+
+def _random_system(nx=7, nz=5, seed=1):
+    rng = np.random.default_rng(seed)
+    beta, eta = 36.0, 1.43e-7
+    s = rng.uniform(0.7, 0.9, (nx, nz))
+    pressure = rng.normal(0, 1e-3, (nx, nz))
+    perm = np.empty((nx, nz))
+    capacity = np.empty((nx, nz))
+    kernels.permeability_field(s, 1e-3, 0.05, 0.9, perm, capacity, beta)
+    tx, tz, tb = (np.empty((nx, nz)) for _ in range(3))
+    kernels.face_conductances(pressure, perm, 2.0, 1.7, beta, eta, tx, tz, tb)
+    return pressure, capacity, tx, tz, tb
+
+
+def _sparse_operator(capacity_over_dt, tx, tz, tb):
+    nx, nz = tx.shape
+    idx = np.arange(nx * nz).reshape(nx, nz)
+    rows, cols, vals = [], [], []
+    for i in range(nx):
+        for j in range(nz):
+            neighbours = [((i + 1) % nx, j, tx[i, j]), ((i - 1) % nx, j, tx[(i - 1) % nx, j])]
+            if j < nz - 1:
+                neighbours.append((i, j + 1, tz[i, j]))
+            if j > 0:
+                neighbours.append((i, j - 1, tz[i, j - 1]))
+            diag = capacity_over_dt[i, j] + tb[i, j]
+            for a, b, t in neighbours:
+                diag += t
+                rows.append(idx[i, j]); cols.append(idx[a, b]); vals.append(-t)
+            rows.append(idx[i, j]); cols.append(idx[i, j]); vals.append(diag)
+    return sp.csr_matrix((vals, (rows, cols)), shape=(nx * nz, nx * nz))
+
+
+def test_conjugate_gradient_matches_sparse_direct_solve():
+    pressure, capacity, tx, tz, tb = _random_system()
+    nx, nz = pressure.shape
+    dt = 50.0
+    matrix = _sparse_operator(capacity / dt, tx, tz, tb)
+    assert abs(matrix - matrix.T).max() == 0.0
+    diag = matrix.diagonal().reshape(nx, nz).copy()
+    rhs = capacity / dt * pressure
+    solution = pressure.copy()
+    work = np.zeros((kernels.N_WORK, nx, nz))
+    iterations, residual, converged = kernels.conjugate_gradient(solution, rhs, diag, tx, tz, work, 1e-12, 500)
+    assert converged and residual <= 1e-12 and iterations > 1
+    exact = spla.spsolve(matrix.tocsc(), rhs.ravel()).reshape(nx, nz)
+    np.testing.assert_allclose(solution, exact, rtol=1e-9, atol=1e-9 * np.abs(exact).max())
+
+
+def test_explicit_diffusion_matches_implicit_for_small_steps():
+    pressure, capacity, tx, tz, tb = _random_system()
+    bound = kernels.explicit_bound(capacity, tx, tz, tb)
+    total = 20 * bound
+    explicit = pressure.copy()
+    kernels.explicit_diffusion(explicit, capacity, tx, tz, tb, total / 4000, 4000, np.empty_like(pressure))
+    matrix = _sparse_operator(capacity / total * 0, tx, tz, tb).toarray()
+    from scipy.linalg import expm
+
+    c_inv = np.diag(1.0 / capacity.ravel())
+    exact = (expm(-total * c_inv @ matrix) @ pressure.ravel()).reshape(pressure.shape)
+    np.testing.assert_allclose(explicit, exact, atol=1e-3 * np.abs(pressure).max())
+
+
+def test_explicit_bound_equals_ftcs_formula_for_uniform_diffusivity():
+    nx, nz, dx, dz = 6, 5, 2.0, 1.5
+    beta, eta, kappa_c, phi = 36.0, 1.43e-7, 1e-5, 0.15
+    s = np.full((nx, nz), 1 - phi)
+    perm, capacity = np.empty((nx, nz)), np.empty((nx, nz))
+    kernels.permeability_field(s, kappa_c, 0.05, 0.9, perm, capacity, beta)
+    tx, tz, tb = (np.empty((nx, nz)) for _ in range(3))
+    kernels.face_conductances(np.zeros((nx, nz)), perm, dx, dz, beta, eta, tx, tz, tb)
+    diffusivity = kappa_c * phi**3 / (1 - phi) ** 2 / (eta * beta * phi)
+    assert diffusivity == pytest.approx(0.0605, rel=1e-3)
+    formula = 1.0 / (2.0 * diffusivity * (1 / dx**2 + 1 / dz**2))
+    assert kernels.explicit_bound(capacity, tx, tz, tb) == pytest.approx(formula, rel=1e-12)
+    grid = FluidGrid(nx, nz, nx * dx, 0.0, nz * dz, 1, kappa_c, beta, eta)
+    grid.permeability[:] = perm
+    grid.solid_fraction[:] = 1 - phi
+    assert grid.explicit_bound() == pytest.approx(formula, rel=1e-12)
+    assert grid.deborah(10.0, 1e-3) == pytest.approx(10.0 * 1e-3 / diffusivity, rel=1e-12)
+
+
+def test_from_config_and_kernel_args():
+    grid = FluidGrid.from_config(FluidConfig(), 200.0, 1.0, 51.0, 10_000)
+    assert (grid.nx, grid.nz) == (80, 20)
+    assert grid.pressure.shape == (80, 20) and grid.drag_x.shape == (10_000,)
+    assert grid.params[kernels.P_KAPPA_C] == 1e-5
+    assert grid.params[kernels.P_SOLVER] == kernels.SOLVER_IMPLICIT
+    assert len(grid.kernel_args()) == 12
+    thin = FluidGrid.from_config(FluidConfig(cell_size=20.0), 5.0, 0.0, 3.0, 4)
+    assert (thin.nx, thin.nz) == (1, 2)
+    explicit = FluidGrid.from_config(FluidConfig(solver="explicit"), 20.0, 0.0, 10.0, 4)
+    assert explicit.params[kernels.P_SOLVER] == kernels.SOLVER_EXPLICIT
+
+
+def test_status_codes():
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains()
+    v = np.zeros_like(x)
+    grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-3, 36.0, 1.43e-7, solver="explicit", max_substeps=2)
+    assert grid.init(x, z, v, v, radius, z_bot, z_top) == kernels.STATUS_OK
+    grid.pressure[:] = 1e-5
+    assert grid.update(x, z, v, v, radius, z_bot, z_top, 1e4) == kernels.STATUS_SOLVER
+    assert grid.state[kernels.S_SUBSTEPS] > 2
+    assert grid.update(x, z, v, v, radius, z_bot, z_top, -1.0) == kernels.STATUS_SOLVER
+    bad = v.copy()
+    bad[3] = np.nan
+    grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-3, 36.0, 1.43e-7)
+    grid.init(x, z, v, v, radius, z_bot, z_top)
+    assert grid.update(x, z, bad, v, radius, z_bot, z_top, 1.0) == kernels.STATUS_NONFINITE
+    assert np.abs(grid.drag_x).max() == 0.0
+    for position, expected in ((np.nan, kernels.STATUS_NONFINITE), (np.inf, kernels.STATUS_OK),
+                               (-np.inf, kernels.STATUS_OK)):
+        lost = z.copy()
+        lost[5] = position
+        grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-3, 36.0, 1.43e-7)
+        grid.init(x, z, v, v, radius, z_bot, z_top)
+        # a grain at infinite distance has no area in the layer and is ignored
+        assert grid.update(lost, lost, v, v, radius, z_bot, z_top, 1.0) == expected
+
+
+def test_fluid_update_callable_from_njit():
+    from numba import njit
+
+    @njit
+    def loop(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, steps, *args):
+        status = kernels.fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, *args)
+        for _ in range(steps):
+            status = max(status, kernels.fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, *args))
+        return status
+
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains()
+    v = np.zeros_like(x)
+    grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-5, 36.0, 1.43e-7)
+    assert loop(x, z, v, v, radius, x.size, width, z_bot, z_top, 1.0, 3, *grid.kernel_args()) == 0
+    assert grid.state[kernels.S_UPDATES] == 3
+
+
+def test_restart_from_checkpoint_arrays_is_bit_for_bit():
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains()
+    rng = np.random.default_rng(5)
+    vx, vz = rng.normal(0, 1e-3, x.size), rng.normal(0, 1e-3, x.size)
+
+    def step(grid, k):
+        top = z_top - 1e-3 * k
+        return grid.update(x + vx * k, z + vz * k, vx, vz, radius, z_bot, top, 1.0)
+
+    straight = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-4, 36.0, 1.43e-7)
+    straight.init(x, z, vx, vz, radius, z_bot, z_top)
+    for k in range(1, 4):
+        step(straight, k)
+    saved = straight.arrays()
+    for k in range(4, 7):
+        step(straight, k)
+    restarted = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-4, 36.0, 1.43e-7)
+    restarted.restore(saved)
+    for k in range(4, 7):
+        step(restarted, k)
+    for name, array in straight.arrays().items():
+        np.testing.assert_array_equal(restarted.arrays()[name], array)
+    assert np.abs(straight.pressure).max() > 0.0
+    other_count = FluidGrid(6, 5, width, z_bot, z_top, x.size, 1e-4, 36.0, 1.43e-7)
+    other_count.restore(saved)
+    assert other_count.pressure.shape == (5, 4) and other_count.work.shape[1:] == (5, 4)
+    with pytest.raises(ValueError, match="grains"):
+        FluidGrid(5, 4, width, z_bot, z_top, x.size + 1, 1e-4, 36.0, 1.43e-7).restore(saved)
+
+
+def test_observe_snapshot_and_failure_messages():
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains()
+    vx = np.full(x.size, 2e-3)
+    grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-5, 36.0, 1.43e-7)
+    grid.init(x, z, vx, 0 * vx, radius, z_bot, z_top)
+    row = grid.observe()
+    assert set(row) == {"pressure_mean", "pressure_min", "pressure_max", "deborah"}
+    assert row["deborah"] == pytest.approx(5.0 * 2e-3 / grid.mean_diffusivity())
+    fields = grid.snapshot_fields()
+    assert fields["pressure"].shape == fields["porosity"].shape == (5, 4)
+    for status in (1, 2, 7):
+        cause, fix = grid.failure(status)
+        assert cause and fix
