@@ -58,6 +58,7 @@ class SlipRecorder:
         self.above = bool(state.get("above", False))
         self.pending: Checkpoint | None = None
         self.slips: list[dict] = []
+        self._deborah: list[float] = []
 
     def state_dict(self) -> dict:
         return {"detector": self.detector.state_dict(), "count": self.count,
@@ -84,6 +85,10 @@ class SlipRecorder:
             self.pending = self._choose(self.last_quiet)
         self.above = v >= self.hi
         slip = self.detector.update(t, row["wall_x"], v, row["tau_over_sigma"], row["porosity"])
+        if "deborah" in row and (self.detector.raw is not None or slip is not None):
+            self._deborah.append(row["deborah"])
+        elif slip is None and self.detector.pending is None:
+            self._deborah.clear()
         if slip is not None:
             self._record(slip)
             self.pending = None
@@ -97,6 +102,8 @@ class SlipRecorder:
         entry = slip.to_dict()
         subevents = entry.pop("subevents")
         entry["number"] = self.count
+        entry["deborah"] = float(np.mean(self._deborah)) if self._deborah else float("nan")
+        self._deborah.clear()
         entry["checkpoint"] = ""
         entry["checkpoint_time"] = float("nan")
         if self.pending is not None and self.checkpoint_dir is not None:

@@ -142,6 +142,11 @@ class RunFile:
     def close(self, status: str = "finished"):
         if self.h5.id.valid:
             self.flush()
+            if "deborah" in self.h5["series"]:
+                deborah = self.h5["series/deborah"][...]
+                if deborah.size:
+                    self.h5.attrs["deborah_mean"] = float(np.nanmean(deborah))
+                    self.h5.attrs["deborah_max"] = float(np.nanmax(deborah))
             self.h5.attrs["status"] = status
             self.h5.close()
 
