@@ -10,7 +10,7 @@ which j is the second grain, so forces can be summed per grain in a fixed order
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .. import NUMBA_CACHE
 
@@ -25,6 +25,36 @@ def minimum_image(dx, width):
 
 
 @njit(cache=NUMBA_CACHE)
+def _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, ncz, out, at, write):
+    """Neighbours j > i of grain i within R_i + R_j + skin, in cell scan order; written to
+    out[at:] when `write`. Returns how many."""
+    c = cell_of[i]
+    cz0 = c // ncx
+    cx0 = c - cz0 * ncx
+    xi = x[i]
+    zi = z[i]
+    ri = radius[i]
+    found = 0
+    span = 3 if ncx > 1 else 1
+    for cz in range(max(cz0 - 1, 0), min(cz0 + 2, ncz)):
+        for o in range(span):
+            cx = (cx0 + o - 1) % ncx if ncx > 1 else 0
+            cc = cz * ncx + cx
+            for m in range(count[cc], count[cc + 1]):
+                j = order[m]
+                if j <= i or (body[i] == body[j] and body[i] != 0):
+                    continue
+                dx = minimum_image(x[j] - xi, width)
+                dz = z[j] - zi
+                cut = ri + radius[j] + skin
+                if dx * dx + dz * dz < cut * cut:
+                    if write:
+                        out[at + found] = j
+                    found += 1
+    return found
+
+
+@njit(parallel=True, cache=NUMBA_CACHE)
 def build_neighbors(x, z, radius, body, width, skin,
                     start, index, shear, new_start, new_index, new_shear,
                     tr_start, tr_pair, x_build, z_build):
@@ -66,37 +96,20 @@ def build_neighbors(x, z, radius, body, width, skin,
         order[fill[c]] = i
         fill[c] += 1
 
-    npairs = 0
-    overflow = False
+    # pass 1 (parallel): neighbours per grain; pass 2 (parallel): write them. The order within
+    # a row is the cell scan order, identical for any thread count.
+    for i in prange(n):
+        new_start[i + 1] = _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, ncz,
+                                     new_index, 0, False)
+    new_start[0] = 0
     for i in range(n):
-        new_start[i] = npairs
-        c = cell_of[i]
-        cz0 = c // ncx
-        cx0 = c - cz0 * ncx
-        xi = x[i]
-        zi = z[i]
-        for cz in range(max(cz0 - 1, 0), min(cz0 + 2, ncz)):
-            for ox in range(-1, 2) if ncx > 1 else range(0, 1):
-                cx = (cx0 + ox) % ncx
-                cc = cz * ncx + cx
-                for m in range(count[cc], count[cc + 1]):
-                    j = order[m]
-                    if j <= i or (body[i] == body[j] and body[i] != 0):
-                        continue
-                    dx = minimum_image(x[j] - xi, width)
-                    dz = z[j] - zi
-                    cut = radius[i] + radius[j] + skin
-                    if dx * dx + dz * dz < cut * cut:
-                        if npairs < capacity:
-                            new_index[npairs] = j
-                        else:
-                            overflow = True
-                        npairs += 1
-    new_start[n] = npairs
-    if overflow:
+        new_start[i + 1] += new_start[i]
+    npairs = new_start[n]
+    if npairs > capacity:
         return -npairs
-
-    for i in range(n):
+    for i in prange(n):
+        _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, ncz,
+                  new_index, new_start[i], True)
         old_lo = start[i]
         old_hi = start[i + 1]
         for k in range(new_start[i], new_start[i + 1]):
@@ -109,7 +122,7 @@ def build_neighbors(x, z, radius, body, width, skin,
             new_shear[k] = value
     for i in range(n + 1):
         start[i] = new_start[i]
-    for k in range(npairs):
+    for k in prange(npairs):
         index[k] = new_index[k]
         shear[k] = new_shear[k]
 
