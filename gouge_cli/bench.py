@@ -40,8 +40,10 @@ class BenchRow:
     identical_to_1_thread: bool | None = None
 
 
-def bench_config(n_grains: int, dt: float, skin: float):
+def bench_config(n_grains: int, dt: float, skin: float, permeability: float | None = None):
+    fluid = {"permeability": permeability} if permeability else None
     return build_config({
+        "fluid": fluid,
         "name": f"bench{n_grains}",
         "packing": {"n_grains": n_grains},
         "loading": {"normal_stress": 3e-4, "spring_constant": 1e-2, "velocity": 1e-3},
@@ -102,13 +104,42 @@ def time_lammps(n_grains: int, ranks: int, steps: int, dt: float, skin: float, s
     return float(match.group(1)) if match else None
 
 
+def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability: float, threads: int,
+                steps: int, repeats: int) -> dict:
+    """Undrained (implicit fluid, kappa_c = permeability) vs dry from the same state: rates and the
+    fluid share of a step, 1 - rate_undrained / rate_dry."""
+    wet = Simulation(bench_config(n_grains, dt, skin, permeability), arrays=start)
+    dry = Simulation(bench_config(n_grains, dt, skin), arrays=start)
+    wet_start = (wet.state.arrays(), wet.fluid.arrays())
+    numba.set_num_threads(threads)
+    rates = {"dry": [], "undrained": []}
+    for _ in range(repeats):
+        for name, sim in (("dry", dry), ("undrained", wet)):
+            sim.state.restore(start)
+            if sim.fluid is not None:
+                sim.fluid.restore(wet_start[1])
+            sim.advance(5)
+            t0 = time.perf_counter()
+            sim.advance(steps)
+            rates[name].append(steps * sim.state.n / (time.perf_counter() - t0))
+    dry_rate, wet_rate = float(np.median(rates["dry"])), float(np.median(rates["undrained"]))
+    return {"n_grains": n_grains, "threads": threads, "permeability": permeability,
+            "fluid_interval_steps": wet.fluid_interval, "grid": list(wet.fluid.pressure.shape),
+            "rate_dry": dry_rate, "rate_undrained": wet_rate, "fluid_share": 1.0 - wet_rate / dry_rate}
+
+
 def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int = 3, dt: float = 0.89,
-                  skin: float = 0.2, lammps: bool = True, lammps_styles=("granular", "hh")) -> dict:
+                  skin: float = 0.2, lammps: bool = True, lammps_styles=("granular", "hh"),
+                  permeability: float | None = 1e-5) -> dict:
     all_threads = numba.config.NUMBA_NUM_THREADS
     threads = threads or sorted({1, all_threads})
     rows: list[BenchRow] = []
+    fluid = []
     for n in sizes:
         sim, start = prepare(n, dt, skin)
+        if permeability:
+            for t in threads:
+                fluid.append(fluid_share(n, start, dt, skin, permeability, t, steps, repeats))
         per_grain = state_bytes(sim) / sim.state.n
         reference = None
         for t in threads:
@@ -130,6 +161,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
         "dt": dt, "skin": skin,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "rows": [asdict(r) for r in rows],
+        "fluid": fluid,
     }
 
 

@@ -181,6 +181,8 @@ def bench(
     dt: float = typer.Option(0.89, help="time step [t0] (LAMMPS deck default)"),
     skin: float = typer.Option(0.2, help="Verlet skin [d]"),
     lammps: bool = typer.Option(True, help="also time LAMMPS (shared/bench deck) where lmp is installed"),
+    perm: float = typer.Option(1e-5, "--perm", help="also time the undrained scene (implicit fluid, this "
+                               "kappa_c) and report the fluid share of a step; 0 to skip"),
     json_out: Path = typer.Option(Path("runs/bench/bench.json"), "--json", help="where to write the JSON results"),
 ):
     """Grain-steps per second on the sheared layer (steady shear only), 1 and all cores, vs LAMMPS."""
@@ -190,7 +192,7 @@ def bench(
 
     size_list = [int(v) for v in sizes.split(",") if v]
     thread_list = [int(v) for v in threads.split(",") if v] or None
-    results = run_benchmark(size_list, thread_list, steps, repeats, dt, skin, lammps)
+    results = run_benchmark(size_list, thread_list, steps, repeats, dt, skin, lammps, permeability=perm or None)
     write_results(results, json_out)
     table = Table(title=f"grain-steps per second (dt {dt}, skin {skin}; steady shear)")
     for col in ("code", "N", "threads", "min", "median", "max", "bytes/grain", "bitwise = 1 thread", "gouge / this"):
@@ -204,7 +206,16 @@ def bench(
                       f"{r['bytes_per_grain']:.0f}" if r["bytes_per_grain"] else "",
                       {None: "", True: "yes", False: "NO"}[r["identical_to_1_thread"]], ratio)
     out.print(table)
+    for f in results["fluid"]:
+        out.print(f"undrained (kappa_c {f['permeability']:g}, grid {f['grid'][0]}x{f['grid'][1]}, fluid update every "
+                  f"{f['fluid_interval_steps']} steps), N {f['n_grains']}, {f['threads']} thread(s): "
+                  f"{f['rate_undrained']:.3g} vs dry {f['rate_dry']:.3g} grain-steps/s, fluid share of a step "
+                  f"{100 * f['fluid_share']:.1f} %", highlight=False)
     out.print(f"peak RSS {results['peak_rss_mb']:.0f} MB; results in {json_out}")
+
+
+from .analysis_cmds import register as _register_analysis
+_register_analysis(app)
 
 
 def main():
