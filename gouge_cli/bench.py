@@ -67,7 +67,7 @@ def prepare(n_grains: int, dt: float, skin: float) -> tuple[Simulation, dict]:
 
 
 def time_gouge(sim: Simulation, start: dict, threads: int, steps: int, repeats: int) -> tuple[list[float], dict]:
-    numba.set_num_threads(threads)
+    sim.threads = threads
     sim.state.restore(start)
     sim.advance(10)  # warm-up (compiled already; touches memory)
     rates = []
@@ -111,7 +111,7 @@ def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability
     wet = Simulation(bench_config(n_grains, dt, skin, permeability), arrays=start)
     dry = Simulation(bench_config(n_grains, dt, skin), arrays=start)
     wet_start = (wet.state.arrays(), wet.fluid.arrays())
-    numba.set_num_threads(threads)
+    wet.threads = dry.threads = threads
     rates = {"dry": [], "undrained": []}
     for _ in range(repeats):
         for name, sim in (("dry", dry), ("undrained", wet)):
@@ -155,7 +155,6 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
                     rate = time_lammps(n, t, steps, dt, skin, style)
                     if rate is not None:
                         rows.append(BenchRow(f"lammps-{style}", n, t, steps, rate, rate, rate))
-    numba.set_num_threads(all_threads)
     return {
         "machine": {"cpus": os.cpu_count(), "numba_threads": all_threads},
         "dt": dt, "skin": skin,

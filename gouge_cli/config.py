@@ -129,7 +129,10 @@ class NumericsConfig(_Section):
     dt: Optional[Time] = Field(None, gt=0, description="time step [t0]; default dt_safety * stability bound")
     dt_safety: float = Field(0.1, gt=0, le=1.0, description="fraction of the stability bound used as dt [-]")
     skin: float = Field(0.2, gt=0, le=2.0, description="Verlet skin [d]")
-    threads: int = Field(0, ge=0, le=1024, description="numba threads; 0 = all cores")
+    threads: int = Field(
+        0, ge=0, le=1024,
+        description="numba threads; 0 = auto: 1 below 4000 grains (parallel regions cost more than they "
+                    "save there), else all cores")
 
 
 class RunConfig(_Section):

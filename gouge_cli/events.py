@@ -2,9 +2,11 @@
 
 :class:`SlipRecorder` is fed every time-series row. It keeps the last ``slips.ring`` states
 in memory, spaced lead/4 apart, taken only while the wall is quiet (v below the end
-threshold). When the wall velocity first crosses the trigger
-threshold, it sets aside the newest kept state that is at least ``lead`` older than the
-last quiet sample (v < end threshold), i.e. from before the onset. When the detector
+threshold) and the stress is near its peak since the last slip (within lead_stress/4), so
+that a slow pre-slip creep does not push the ring past the stress peak. When the wall
+velocity first crosses the trigger threshold, it sets aside the newest kept state that is
+at least ``lead`` older than both the stress peak and the last quiet sample: a packing from
+before the static strength was reached, so an undrained branch can fail earlier. When the detector
 reports the finished slip, that state is written as ``checkpoints/slip_NNN.h5`` and the
 slip goes into the run file's catalog (``/slips/NNN``) at once. An event the detector
 drops (too small) discards its pending state.
@@ -56,21 +58,28 @@ class SlipRecorder:
         self.count = int(state.get("count", 0))
         self.last_quiet = float(state.get("last_quiet", sim.state.time))
         self.above = bool(state.get("above", False))
+        self.peak_tau = float(state.get("peak_tau", -np.inf))
+        self.peak_time = float(state.get("peak_time", sim.state.time))
+        self.peak_band = 0.25 * config.slips.lead_stress
         self.pending: Checkpoint | None = None
         self.slips: list[dict] = []
         self._deborah: list[float] = []
 
     def state_dict(self) -> dict:
         return {"detector": self.detector.state_dict(), "count": self.count,
-                "last_quiet": self.last_quiet, "above": self.above}
+                "last_quiet": self.last_quiet, "above": self.above,
+                "peak_tau": self.peak_tau, "peak_time": self.peak_time}
 
     def keep(self, sim):
         """Ring callback (every lead/4): keep the state if the wall is quiet (v < end threshold),
         so that the ring always reaches back from the last quiet moment before an onset."""
-        if sim.state.wall[W_VX] < self.lo:
+        tau = sim.tau_over_sigma()
+        if sim.state.wall[W_VX] < self.lo and tau >= self.peak_tau - self.peak_band:
             self.ring.append(snapshot_of(sim, {"slip_recorder": self.state_dict()}))
 
     def _choose(self, onset_estimate: float) -> Checkpoint | None:
+        """Newest kept state at least `lead` before the onset estimate, else the oldest kept
+        (a shorter lead); None if nothing was kept since the previous slip."""
         for ck in reversed(self.ring):
             if ck.time <= onset_estimate - self.lead:
                 return ck
@@ -81,8 +90,10 @@ class SlipRecorder:
         t, v = row["time"], row["wall_vx"]
         if v < self.lo:
             self.last_quiet = t
+        if row["tau_over_sigma"] > self.peak_tau and self.pending is None:
+            self.peak_tau, self.peak_time = row["tau_over_sigma"], t
         if v >= self.hi and not self.above and self.pending is None:
-            self.pending = self._choose(self.last_quiet)
+            self.pending = self._choose(min(self.last_quiet, self.peak_time))
         self.above = v >= self.hi
         slip = self.detector.update(t, row["wall_x"], v, row["tau_over_sigma"], row["porosity"])
         if "deborah" in row and (self.detector.raw is not None or slip is not None):
@@ -91,11 +102,19 @@ class SlipRecorder:
             self._deborah.clear()
         if slip is not None:
             self._record(slip)
-            self.pending = None
+            self._reset(recorded=True)
         elif self.pending is not None and self.detector.raw is None and self.detector.pending is None \
                 and not self.above and v < self.lo:
-            self.pending = None
+            self._reset()
         return slip
+
+    def _reset(self, recorded: bool = False):
+        """After a slip: forget the pending state and the stress peak; after a recorded slip
+        also the kept states (a later slip's checkpoint must not contain this slip)."""
+        self.pending = None
+        self.peak_tau = -np.inf
+        if recorded:
+            self.ring.clear()
 
     def _record(self, slip: Slip):
         self.count += 1

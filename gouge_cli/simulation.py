@@ -12,6 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
+import numba
 import numpy as np
 
 from .config import Config
@@ -22,6 +23,7 @@ from .state import State
 from .timestep import choose_dt, contact_constants
 
 _EMPTY = np.zeros(0)
+AUTO_PARALLEL_MIN_GRAINS = 4000
 
 
 def build_params(config: Config, dt: float, width: float, wall_mass: float) -> np.ndarray:
@@ -82,6 +84,7 @@ class Simulation:
         self.wall_mass_per_length = (config.loading.wall_mass or top_mass) if s.top.size else 0.0
         p = build_params(config, self.dt, s.width, self.wall_mass_per_length * s.width)
         self.params = p
+        self.threads = self._choose_threads(config.numerics.threads, s.n)
         self.fluid = None
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(M.N_OBSERVABLES)
@@ -132,15 +135,25 @@ class Simulation:
         self.params[K.BG_DAMPING] = 0.0 if loading else self.config.compaction.damping
 
     def start_loading(self):
-        """End compaction: zero the spring, start the driver clock."""
+        """End compaction and start the driver clock. The spring is attached in equilibrium
+        with the residual grain shear force on the wall (initial stretch s0 = -F_x / (k L_x)),
+        so the wall does not jump when it is released along x."""
         s = self.state
         s.counters[K.K_PHASE] = K.LOADING
+        s.clock[K.C_ANCHOR] = -s.wall[K.W_FX] / (self.params[K.SPRING] * s.width)
         s.wall[K.W_X] = 0.0
         s.wall[K.W_VX] = 0.0
         s.clock[K.C_DRIVE_TIME] = 0.0
         self._apply_phase()
 
     # ---- stepping ----------------------------------------------------------------------
+    @staticmethod
+    def _choose_threads(requested: int, n_grains: int) -> int:
+        available = numba.config.NUMBA_NUM_THREADS
+        if requested:
+            return min(requested, available)
+        return 1 if n_grains < AUTO_PARALLEL_MIN_GRAINS else available
+
     def _rebuild(self):
         s = self.state
         while not K.rebuild(s.grains(), s.lists(), self.params, s.counters):
@@ -150,6 +163,15 @@ class Simulation:
         """Advance exactly nsteps steps (numba); grows the pair arrays if a rebuild overflows."""
         s = self.state
         left = int(nsteps)
+        previous = numba.get_num_threads()
+        numba.set_num_threads(self.threads)
+        try:
+            self._advance(left)
+        finally:
+            numba.set_num_threads(previous)
+
+    def _advance(self, left: int):
+        s = self.state
         while left > 0:
             if self.fluid is None:
                 status, done = K.advance(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params,
@@ -195,6 +217,16 @@ class Simulation:
         return s.step - first
 
     # ---- observation -------------------------------------------------------------------
+    def spring_stretch(self) -> float:
+        """V_s t_load + s0 - x_wall [d] (0 before loading)."""
+        s, p = self.state, self.params
+        if self.phase != K.LOADING:
+            return 0.0
+        return float(p[K.V_LOAD] * s.clock[K.C_DRIVE_TIME] + s.clock[K.C_ANCHOR] - s.wall[K.W_X])
+
+    def tau_over_sigma(self) -> float:
+        return float(self.params[K.SPRING] * self.spring_stretch() / self.params[K.SIGMA])
+
     def observe(self) -> dict:
         """Time-series row (dimensionless); see output.SERIES for names and units."""
         s, p = self.state, self.params
@@ -202,7 +234,7 @@ class Simulation:
         M.observe(s.x, s.z, s.vx, s.vz, s.spin, s.radius, s.mass, s.body, s.force_x, s.force_z,
                   s.start, s.index, s.width, o)
         sigma = p[K.SIGMA]
-        stretch = p[K.V_LOAD] * s.clock[K.C_DRIVE_TIME] - s.wall[K.W_X] if self.phase == K.LOADING else 0.0
+        stretch = self.spring_stretch()
         row = {
             "time": s.clock[K.C_TIME],
             "load_time": s.clock[K.C_DRIVE_TIME],

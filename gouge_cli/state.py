@@ -45,7 +45,7 @@ class State:
     vz: np.ndarray = None
     spin: np.ndarray = None
     wall: np.ndarray = field(default_factory=lambda: np.zeros(K.N_WALL))
-    clock: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    clock: np.ndarray = field(default_factory=lambda: np.zeros(K.N_CLOCK))
     counters: np.ndarray = field(default_factory=lambda: np.zeros(K.N_COUNTERS, np.int64))
 
     def __post_init__(self):

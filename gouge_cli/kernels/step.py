@@ -5,7 +5,7 @@ One step (``_step``):
   2. free grains: half kick (v, w) with last step's force; every grain drifts (x periodic)
   3. contact forces at the new positions with the half-step velocities (tangential
      history ds += v_t dt), summed per grain in a fixed order
-  4. top wall: grain force + spring k L_x (V_s t - x) along x, - sigma L_x along z; half kick
+  4. top wall: grain force + spring k L_x (V_s t + s0 - x) along x, - sigma L_x along z; half kick
   5. free grains: half kick; flag a neighbour rebuild if any grain may pass skin/2 next step
 The neighbour list is rebuilt at the start of a step, never in the middle.
 Arrays named in ``GRAIN``/``LIST`` order are passed as tuples from :mod:`gouge_cli.state`.
@@ -27,8 +27,9 @@ N_PARAMS = 13
 # wall: float64 array, the top body
 W_X, W_Z, W_VX, W_VZ, W_FX, W_FZ = range(6)
 N_WALL = 6
-# clock: float64 array
-C_TIME, C_DRIVE_TIME = range(2)
+# clock: float64 array (C_ANCHOR: spring stretch at the start of loading [d])
+C_TIME, C_DRIVE_TIME, C_ANCHOR = range(3)
+N_CLOCK = 3
 # counters: int64 array
 K_STEP, K_REBUILDS, K_PAIRS, K_NEED_REBUILD, K_NEEDED_CAPACITY, K_PHASE = range(6)
 N_COUNTERS = 6
@@ -121,7 +122,7 @@ def _wall_kick(wall, clock, params):
     fz = wall[W_FZ] - params[SIGMA] * width - params[BG_DAMPING] * mass * wall[W_VZ]
     wall[W_VZ] += half * fz / mass
     if params[DRIVE] > 0.0:
-        stretch = params[V_LOAD] * clock[C_DRIVE_TIME] - wall[W_X]
+        stretch = params[V_LOAD] * clock[C_DRIVE_TIME] + clock[C_ANCHOR] - wall[W_X]
         fx = wall[W_FX] + params[SPRING] * width * stretch
         wall[W_VX] += half * fx / mass
     else:

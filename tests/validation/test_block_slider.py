@@ -101,7 +101,7 @@ def test_block_slider(length):
     m, k, sigma, mu_s, mu_d, v_load, dt = 1.0, 1e-2, 1e-2, 0.6, 0.5, 1e-5, 0.02
     dmu = mu_s - mu_d
     params = make_params(dt, length, sigma, k, v_load, m)
-    wall, clock = np.zeros(K.N_WALL), np.zeros(2)
+    wall, clock = np.zeros(K.N_WALL), np.zeros(K.N_CLOCK)
     events = np.zeros((3, 5))
     t_end = (mu_s * sigma + 2.5 * 2 * dmu * sigma) / (k * v_load)     # three slips
     n = stick_slip(wall, clock, params, mu_s, mu_d, int(t_end / dt), events)

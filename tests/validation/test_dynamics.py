@@ -248,20 +248,14 @@ def test_oblique_impact_angular_momentum_conserved(free_grains, single_thread):
 # ---- determinism --------------------------------------------------------------------------
 
 def _run_scene(threads, n_grains=400, steps=(1500, 1000)):
-    import numba
-
     from gouge_cli.simulation import Simulation
-    before = numba.get_num_threads()
-    numba.set_num_threads(threads)
-    try:
-        cfg = build_config({"packing": {"n_grains": n_grains}, "seed": 5})
-        sim = Simulation(cfg)
-        sim.advance(steps[0])             # compaction phase (background damping on)
-        sim.start_loading()
-        sim.advance(steps[1])             # spring drive on
-        return sim.state.arrays() | {"pair_ti": sim.state.pair_ti[:sim.state.start[-1]].copy()}
-    finally:
-        numba.set_num_threads(before)
+    cfg = build_config({"packing": {"n_grains": n_grains}, "seed": 5, "numerics": {"threads": threads}})
+    sim = Simulation(cfg)
+    assert sim.threads == threads
+    sim.advance(steps[0])             # compaction phase (background damping on)
+    sim.start_loading()
+    sim.advance(steps[1])             # spring drive on
+    return sim.state.arrays() | {"pair_ti": sim.state.pair_ti[:sim.state.start[-1]].copy()}
 
 
 def test_determinism_bitwise():

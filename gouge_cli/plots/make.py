@@ -1,0 +1,106 @@
+"""`gouge plot`: which figures to draw for a run (and one of its slips)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..analysis.report import (
+    NoSlipsError,
+    RunReader,
+    find_slip,
+    fork_branches,
+    read_catalog,
+    run_pairs,
+    slip_friction,
+)
+from .campaign import campaign_figure
+from .series import friction_figure, overview_figure, pair_figure, slip_figure
+from .snapshot import snapshot_figure
+
+
+def _nearest_snapshot(reader: RunReader, t: float) -> str | None:
+    names = reader.snapshot_names()
+    if not names:
+        return None
+    times = np.array(reader.snapshot_times())
+    return names[int(np.argmin(np.abs(times - t)))]
+
+
+def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | str | None = None,
+                 notch: bool = True) -> list[Path]:
+    """Draw the figures of one run into ``out_dir`` (default ``RUN/figures``); returns the files.
+
+    Always: ``overview.png`` (four panels, slips shaded) and ``snapshot_<step>.png`` (the run's
+    last snapshot); ``campaign.png`` when the run has two or more drained/undrained pairs.
+    With ``slip=N``: ``slip_NNN.png`` (the slip magnified, Eq. 3 fit), ``slip_NNN_friction.png``
+    (mu_d(t), Eq. 7), and for a fork of that slip, per undrained branch B:
+    ``slip_NNN_pair_B.png`` (drained black, undrained blue, pore pressure),
+    ``slip_NNN_friction_B.png`` (R/sigma, Eq. 6) and ``slip_NNN_snapshot_B.png`` (the branch's
+    snapshot nearest its peak velocity, pressure shaded) when the branch wrote snapshots.
+    Raises :class:`~gouge_cli.analysis.report.AnalysisError` subclasses for bad input.
+    """
+    run_dir = Path(run_dir)
+    written: list[Path] = []
+    with RunReader(run_dir) as reader:
+        out = Path(out_dir) if out_dir is not None else reader.info.run_dir / "figures"
+        catalog = read_catalog(reader)
+        entry = None
+        if slip is not None:
+            if not catalog:
+                raise NoSlipsError(f"{reader.info.describe()} has no slips, so there is no slip {slip} to plot")
+            entry = find_slip(catalog, slip)
+        written.append(overview_figure(reader, catalog, out / "overview.png"))
+        names = reader.snapshot_names()
+        if names:
+            snap = reader.snapshot(names[-1])
+            written.append(snapshot_figure(snap, reader.info.width, out / f"snapshot_{snap['step']:012d}.png",
+                                           title=reader.info.run_dir.name, sigma=reader.info.sigma,
+                                           time_offset=reader.time_offset()))
+        drained_mean = None
+        if entry is not None:
+            tag = f"slip_{slip:03d}"
+            written.append(slip_figure(reader, entry, out / f"{tag}.png"))
+            fr = slip_friction(reader, entry, notch=notch)
+            drained_mean = fr.mean_mu_d
+            written.append(friction_figure(fr, reader.info.V_s, out / f"{tag}_friction.png",
+                                           title=f"{reader.info.run_dir.name}, slip {slip}: "
+                                                 f"{'μ_d(t), Eq. 7' if fr.drained else 'R/σ, Eq. 6'}"))
+    pairs, _ = run_pairs(run_dir)
+    if entry is not None:
+        fork = run_dir / "forks" / f"slip_{slip:03d}"
+        drained_dir, undrained_dirs = fork_branches(fork)
+        mine = [p for p in pairs if p.drained_dir.parent == fork]
+        if drained_dir is not None and mine:
+            with RunReader(drained_dir) as d:
+                for pair in mine:
+                    with RunReader(pair.undrained_dir) as u:
+                        branch = pair.undrained_dir.name
+                        tag = f"slip_{slip:03d}"
+                        written.append(pair_figure(d, u, pair, out / f"{tag}_pair_{branch}.png"))
+                        main = pair.result.undrained_slip
+                        if main is not None:
+                            fr = slip_friction(u, {"number": slip, "onset_time": main.onset_time,
+                                                   "end_time": main.end_time,
+                                                   "static_strength": pair.result.undrained_strength},
+                                               notch=notch)
+                            written.append(friction_figure(
+                                fr, u.info.V_s, out / f"{tag}_friction_{branch}.png",
+                                title=f"slip {slip}, {branch}: R/σ = μ_d (1 − P*/σ), Eq. 6",
+                                drained_mean=drained_mean))
+                        if u.snapshot_names():
+                            if main is not None:
+                                t_peak = main.peak_time
+                            else:
+                                s = u.series(["time", "wall_vx"])
+                                t_peak = float(s["time"][int(np.argmax(s["wall_vx"]))])
+                            name = _nearest_snapshot(u, t_peak)
+                            snap = u.snapshot(name)
+                            written.append(snapshot_figure(
+                                snap, u.info.width, out / f"{tag}_snapshot_{branch}.png",
+                                title=f"slip {slip}, {branch}", sigma=u.info.sigma,
+                                time_offset=u.time_offset()))
+    if len(pairs) >= 2:
+        written.append(campaign_figure(pairs, out / "campaign.png", title=run_dir.name))
+    return written
