@@ -34,6 +34,7 @@ class FluidGrid:
     """
 
     EVOLVING = ("pressure", "solid_fraction", "state", "drag_x", "drag_z")
+    kernels = kernels  # the kernel module, for its index constants
 
     def __init__(self, nx: int, nz: int, Lx: float, z_bot: float, z_top: float, n_grains: int,
                  permeability: float, compressibility: float, viscosity: float,

@@ -13,6 +13,7 @@ import h5py
 from .checkpoint import CheckpointError, read_checkpoint, snapshot_of, write_checkpoint
 from .config import Config, dump_config
 from .events import SlipRecorder
+from .guards import guard_callbacks
 from .output import RunFile
 from .progress import ProgressReport
 from .simulation import Every, PhysicsError, Simulation
@@ -78,7 +79,6 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
 
     def record(s: Simulation):
         row = s.observe()
-        s.check(row)
         writer.append(row)
         slip = recorder.observe(row)
         if slip is not None and stop_after_slip:
@@ -92,7 +92,8 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
             writer.flush()
             write_checkpoint(ck_dir / "latest.h5", snapshot_of(s, {"slip_recorder": recorder.state_dict()}))
 
-    callbacks = [Every(sim.steps_for(config.output.series_interval), record),
+    callbacks = guard_callbacks(sim) + [
+                 Every(sim.steps_for(config.output.series_interval), record),
                  Every(sim.steps_for(config.output.snapshot_interval), writer.snapshot),
                  Every(recorder.ring_every, recorder.keep),
                  Every(sim.steps_for(config.output.checkpoint_interval), latest)]

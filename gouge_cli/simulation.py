@@ -232,7 +232,7 @@ class Simulation:
         s, p = self.state, self.params
         o = self._observables
         M.observe(s.x, s.z, s.vx, s.vz, s.spin, s.radius, s.mass, s.body, s.force_x, s.force_z,
-                  s.start, s.index, s.width, o)
+                  s.start, s.index, s.shear, s.width, p[K.C_NORMAL], p[K.C_TANGENTIAL], o)
         sigma = p[K.SIGMA]
         stretch = self.spring_stretch()
         row = {
@@ -252,6 +252,8 @@ class Simulation:
             "coordination": o[M.COORDINATION],
             "max_overlap": o[M.MAX_OVERLAP],
             "nonfinite": o[M.NONFINITE],
+            "contact_energy": o[M.CONTACT_ENERGY],
+            "worst_pair": (int(o[M.WORST_I]), int(o[M.WORST_J])),
         }
         if self.fluid is not None:
             row.update(self.fluid.observe())

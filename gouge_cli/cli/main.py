@@ -216,6 +216,8 @@ def bench(
 
 from .analysis_cmds import register as _register_analysis
 _register_analysis(app)
+from .accuracy_cmds import register as _register_accuracy
+_register_accuracy(app)
 
 
 def main():

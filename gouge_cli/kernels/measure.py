@@ -12,16 +12,18 @@ from .neighbors import minimum_image
 
 # indices of the vector returned by observe()
 KINETIC, COORDINATION, MAX_OVERLAP, POROSITY, THICKNESS, Z_BOTTOM, Z_TOP, BOTTOM_FX, BOTTOM_FZ, \
-    NONFINITE = range(10)
-N_OBSERVABLES = 10
+    NONFINITE, CONTACT_ENERGY, WORST_I, WORST_J = range(13)
+N_OBSERVABLES = 13
 
 
 @njit(cache=NUMBA_CACHE)
-def observe(x, z, vx, vz, spin, radius, mass, body, force_x, force_z, start, index, width, out):
+def observe(x, z, vx, vz, spin, radius, mass, body, force_x, force_z, start, index, shear, width,
+            c_normal, c_tangential, out):
     """Fill out[N_OBSERVABLES]: kinetic energy of free grains (translation + rotation) [E d^3],
-    contacts per free grain, largest overlap / smaller radius [-], porosity between the wall
-    centre lines (wall grains count half) [-], thickness [d], wall lines, grain force on the
-    bottom wall [E d^2], and the number of non-finite grain coordinates or velocities."""
+    contacts per free grain, largest overlap / smaller radius [-] and its pair (WORST_I, WORST_J),
+    porosity between the wall centre lines (wall grains count half) [-], thickness [d], wall
+    lines, grain force on the bottom wall [E d^2], the number of non-finite grain coordinates or
+    velocities, and the elastic contact energy sum 0.4 c_n sqrt(R_ij) xi^2.5 + 0.5 k_s ds^2 [E d^3]."""
     n = x.shape[0]
     kinetic = 0.0
     n_free = 0
@@ -57,6 +59,9 @@ def observe(x, z, vx, vz, spin, radius, mass, body, force_x, force_z, start, ind
     z_top /= max(n_top, 1)
     contacts = 0
     worst = 0.0
+    worst_i = -1
+    worst_j = -1
+    energy = 0.0
     for i in range(n):
         for k in range(start[i], start[i + 1]):
             j = index[k]
@@ -65,7 +70,11 @@ def observe(x, z, vx, vz, spin, radius, mass, body, force_x, force_z, start, ind
             overlap = radius[i] + radius[j] - math.sqrt(dx * dx + dz * dz)
             if overlap > 0.0:
                 contacts += (body[i] == 0) + (body[j] == 0)
-                worst = max(worst, overlap / min(radius[i], radius[j]))
+                relative = overlap / min(radius[i], radius[j])
+                if relative > worst:
+                    worst, worst_i, worst_j = relative, i, j
+                root = math.sqrt(2.0 * radius[i] * radius[j] / (radius[i] + radius[j]) * overlap)
+                energy += 0.4 * c_normal * root * overlap * overlap + 0.5 * c_tangential * root * shear[k] ** 2
     thickness = z_top - z_bot
     out[KINETIC] = kinetic
     out[COORDINATION] = contacts / max(n_free, 1)
@@ -77,6 +86,9 @@ def observe(x, z, vx, vz, spin, radius, mass, body, force_x, force_z, start, ind
     out[BOTTOM_FX] = bfx
     out[BOTTOM_FZ] = bfz
     out[NONFINITE] = bad
+    out[CONTACT_ENERGY] = energy
+    out[WORST_I] = worst_i
+    out[WORST_J] = worst_j
 
 
 @njit(cache=NUMBA_CACHE)

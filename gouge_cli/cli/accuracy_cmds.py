@@ -1,0 +1,98 @@
+"""`gouge accuracy`: error and run time of a scene at a ladder of numerical settings."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+from ..config import ConfigError, load_config
+from .main import EXIT_PHYSICS, err, fail, out
+
+
+def _fmt(value: float) -> str:
+    return "" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.3g}"
+
+
+def _print_report(result: dict):
+    from rich.table import Table
+
+    from ..accuracy import SCENE_ERRORS, order_value
+
+    scene, analytic, start = result["scene"], result["analytic"], result["start"]
+    if scene:
+        table = Table(title=f"scene ladders from {start.source} over {start.interval:.4g} t0 "
+                            "(relative error against the finest setting)")
+        for col in ("ladder", "setting", "dt / step / cell", "run time [s]", "steps", *SCENE_ERRORS, "status"):
+            table.add_column(col, justify="right")
+        for r in scene["results"]:
+            errors = ["ref" if r.level.reference and not r.errors else _fmt(r.errors.get(n)) for n in SCENE_ERRORS]
+            table.add_row(r.level.ladder, r.level.setting, f"{order_value(r):.4g}", f"{r.wall_seconds:.2f}",
+                          str(r.steps), *errors, r.status[:60])
+        out.print(table)
+        for ladder, orders in scene["orders"].items():
+            shown = ", ".join(f"{k} {v:.2f}" for k, v in orders.items() if not math.isnan(v))
+            out.print(f"observed order ({ladder}): {shown or 'n/a'}", highlight=False)
+    if analytic:
+        table = Table(title="analytic cases (relative error against the closed form)")
+        for col in ("case", "parameter", "run time [s]", "errors"):
+            table.add_column(col, justify="right")
+        for r in analytic["rows"]:
+            table.add_row(r.case, f"{r.parameter} = {r.value:.4g}", f"{r.wall_seconds:.3f}",
+                          ", ".join(f"{k} {_fmt(v)}" for k, v in r.errors.items()))
+        out.print(table)
+        for case, orders in analytic["orders"].items():
+            out.print(f"observed order ({case}): " + ", ".join(f"{k} {v:.2f}" for k, v in orders.items()),
+                      highlight=False)
+
+
+def accuracy(
+    config: Optional[Path] = typer.Argument(None, help="YAML scene config (optional with --slip-checkpoint)"),
+    slip_checkpoint: Optional[Path] = typer.Option(
+        None, "--slip-checkpoint", help="start every level from this checkpoint of `gouge run` (e.g. "
+                                        "runs/NAME/checkpoints/slip_001.h5) instead of the scene's first slip"),
+    quick: bool = typer.Option(False, "--quick", help="3 levels per ladder and short analytic cases"),
+    out_dir: Optional[Path] = typer.Option(None, "--out", help="output directory (default runs/accuracy/<name>)"),
+    interval: Optional[float] = typer.Option(None, "--interval", help="compared interval [t0] (default: lead "
+                                                                      "to the slip + 1.5 slip durations)"),
+    samples: int = typer.Option(400, "--samples", help="samples over the interval"),
+    set_: List[str] = typer.Option([], "--set", help="override key=value of the scene"),
+    analytic: bool = typer.Option(True, "--analytic/--no-analytic", help="also the analytic cases"),
+    fluid: bool = typer.Option(True, "--fluid/--no-fluid", help="also the fluid ladders (a dry scene gets "
+                                                                "kappa_c = 1e-5 for them)"),
+):
+    """Errors and run times of a scene at ladders of dt_safety, fluid cell size, fluid step and solver, and of analytic cases; observed orders.
+
+    Every level starts from the same pre-slip state and runs the same short interval (the DEM
+    is chaotic: longer intervals measure the chaotic spread, not the discretisation error).
+    Writes accuracy.csv and accuracy.png (work-precision: error vs run time)."""
+    from ..accuracy import run_accuracy
+    from ..checkpoint import CheckpointError
+    from ..simulation import PhysicsError
+
+    if config is None and slip_checkpoint is None:
+        fail("give a CONFIG, a --slip-checkpoint, or both")
+    try:
+        cfg = load_config(config, set_) if config is not None else None
+        if cfg is None and set_:
+            from ..checkpoint import read_checkpoint
+
+            cfg = read_checkpoint(slip_checkpoint, set_).config
+        name = cfg.name if cfg is not None else Path(slip_checkpoint).stem
+        target = out_dir or Path("runs") / "accuracy" / name
+        result = run_accuracy(cfg, target, checkpoint=slip_checkpoint, quick=quick, interval=interval,
+                              samples=samples, analytic=analytic, fluid=fluid,
+                              on_level=lambda r: err.print(f"{r.level.ladder} {r.level.setting}: {r.status[:80]} "
+                                                           f"({r.wall_seconds:.2f} s)", highlight=False))
+    except (ConfigError, CheckpointError) as e:
+        fail(str(e))
+    except PhysicsError as e:
+        fail(f"physics failure while preparing the scene: {e}", EXIT_PHYSICS)
+    _print_report(result)
+    out.print(f"results: {target / 'accuracy.csv'}, {target / 'accuracy.png'}", highlight=False)
+
+
+def register(app: typer.Typer):
+    app.command("accuracy")(accuracy)

@@ -1,0 +1,127 @@
+"""`gouge analyze` and `gouge plot` through the CLI on a tiny real run with one fork."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import h5py
+import matplotlib.image as mpimg
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from gouge_cli.analysis.report import CATALOG_COLUMNS, FIT_COLUMNS, PAIR_COLUMNS
+from gouge_cli.cli.main import EXIT_BAD_INPUT, app
+from gouge_cli.plots import DPI, FIGSIZE
+from gouge_cli.plots.snapshot import snapshot_pixels
+
+SCENE = {
+    "name": "tiny",
+    "packing": {"n_grains": 300, "width": 15},
+    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
+    "numerics": {"dt_safety": 0.3, "threads": 1},
+    "run": {"duration": 80000},
+    "output": {"series_interval": 10, "snapshot_interval": 20000},
+}
+runner = CliRunner()
+
+
+def gouge(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def forked_run(tmp_path_factory):
+    """The tiny scene (3 slips), forked before slip 2 with one undrained branch writing snapshots."""
+    base = tmp_path_factory.mktemp("analyze")
+    scene = base / "tiny.yaml"
+    scene.write_text(yaml.safe_dump(SCENE))
+    out = base / "tiny"
+    result = gouge("run", scene, "--out", out, "--quiet")
+    assert result.exit_code == 0, result.output
+    result = gouge("restart", out, "--slip", 2, "--perm", 1e-3, "--set", "output.snapshot_interval=500", "--quiet")
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def _rows(path):
+    with open(path, newline="") as fh:
+        reader = csv.DictReader(fh)
+        return reader.fieldnames, list(reader)
+
+
+def test_analyze_writes_tables(forked_run):
+    result = gouge("analyze", forked_run)
+    assert result.exit_code == 0, result.output
+    assert "block-slider fits" in result.output and "drained / undrained pairs" in result.output
+    with h5py.File(forked_run / "run.h5", "r") as h5:
+        n_slips = len(h5["slips"])
+        assert h5["analysis/catalog/number"].shape == (n_slips,)
+    assert n_slips >= 2
+    header, rows = _rows(forked_run / "analysis" / "catalog.csv")
+    assert header == list(CATALOG_COLUMNS) and len(rows) == n_slips
+    assert [int(r["number"]) for r in rows] == list(range(1, n_slips + 1))
+    assert all(float(r["duration"]) > 0 and float(r["peak_velocity_over_Vs"]) >= 10 for r in rows)
+    header, rows = _rows(forked_run / "analysis" / "fits.csv")
+    assert header == list(FIT_COLUMNS) and len(rows) == n_slips
+    assert all(float(r["predicted_half_period"]) > 0 for r in rows)
+    header, rows = _rows(forked_run / "analysis" / "pairs.csv")
+    assert header == list(PAIR_COLUMNS) and len(rows) == 1
+    assert rows[0]["branch"] == "perm_0.001" and int(rows[0]["slip"]) == 2
+    assert rows[0]["type"] in ("I", "II", "I-C", "II-C", "tie", "tie-C", "none")
+
+
+def test_analyze_json_and_bad_input(forked_run, tmp_path):
+    result = gouge("analyze", forked_run, "--json", "--no-notch")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.output)
+    assert data["runs"][0]["parameters"]["notch"] is False
+    assert data["campaign"]["n"] == 1
+    result = gouge("analyze", tmp_path)
+    assert result.exit_code == EXIT_BAD_INPUT and "not a gouge run directory" in result.output
+
+
+def _check_png(path, size_in):
+    assert path.is_file() and path.stat().st_size > 10_000, path
+    image = mpimg.imread(path)
+    assert image.shape[:2] == (round(size_in[1] * DPI), round(size_in[0] * DPI)), path
+    assert image[..., :3].std() > 0.05, f"{path} looks blank"
+
+
+def test_plot_run_and_slip(forked_run, tmp_path):
+    result = gouge("plot", forked_run)
+    assert result.exit_code == 0, result.output
+    figures = forked_run / "figures"
+    _check_png(figures / "overview.png", FIGSIZE["overview"])
+    snaps = sorted(figures.glob("snapshot_*.png"))
+    assert len(snaps) == 1
+
+    out = tmp_path / "figs"
+    result = gouge("plot", forked_run, "--slip", 2, "--out", out)
+    assert result.exit_code == 0, result.output
+    names = {p.name for p in out.glob("*.png")}
+    expected = {"overview.png", "slip_002.png", "slip_002_friction.png", "slip_002_pair_perm_0.001.png",
+                "slip_002_snapshot_perm_0.001.png"}
+    assert expected <= names, names
+    _check_png(out / "slip_002.png", FIGSIZE["slip"])
+    _check_png(out / "slip_002_friction.png", FIGSIZE["friction"])
+    _check_png(out / "slip_002_pair_perm_0.001.png", FIGSIZE["pair"])
+    # the undrained snapshot has a pressure field: colorbar makes it wider than the dry one
+    wet = mpimg.imread(out / "slip_002_snapshot_perm_0.001.png")
+    dry = mpimg.imread(snaps[0])
+    sizes = set()
+    with h5py.File(forked_run / "forks/slip_002/perm_0.001/run.h5", "r") as h5:
+        width = float(h5.attrs["width"])
+        for grp in h5["snapshots"].values():
+            assert "pressure" in grp
+            snap = {k: grp[k][...] for k in ("x", "z", "radius", "pressure")}
+            sizes.add(snapshot_pixels(width, snap))
+    assert (wet.shape[1], wet.shape[0]) in sizes
+    assert wet.shape[1] > dry.shape[1]
+
+
+def test_plot_missing_slip_is_bad_input(forked_run):
+    result = gouge("plot", forked_run, "--slip", 99)
+    assert result.exit_code == EXIT_BAD_INPUT
+    assert "no slip number 99" in result.output

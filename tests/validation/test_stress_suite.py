@@ -1,0 +1,195 @@
+"""The stress scenes of configs/stress/: each runs stably within the bounds its header states,
+or stops early with a PhysicsError / ConfigError naming the cause and the parameter; never a
+silent NaN, never a traceback.
+
+The default suite runs every scene, the three slowest with a shortened loading phase (their
+full runs are marked ``validation``); about 30 s in all on two cores.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from gouge_cli.cli.main import EXIT_BAD_INPUT, EXIT_PHYSICS, app
+from gouge_cli.config import ConfigError, load_config
+from gouge_cli.guards import guarded_run
+from gouge_cli.kernels import fluid as FK
+from gouge_cli.simulation import PhysicsError, Simulation
+
+STRESS = Path(__file__).resolve().parents[2] / "configs" / "stress"
+
+
+def run_scene(name: str, duration: float | None):
+    """Compact and load configs/stress/<name>.yaml with all guards; returns (sim, series)."""
+    config = load_config(STRESS / f"{name}.yaml")
+    sim = Simulation(config)
+    rows = guarded_run(sim, config.run.duration if duration is None else duration)
+    series = {k: np.array([r[k] for r in rows]) for k in rows[0]}
+    assert all(np.isfinite(v).all() for v in series.values()), "a NaN slipped through the guards"
+    assert series["nonfinite"].max() == 0
+    return sim, series
+
+
+def sane(series, overlap=0.1, kinetic=1e-3, tau=(-0.2, 0.6)):
+    assert series["max_overlap"].max() < overlap
+    assert series["kinetic_energy"].max() < kinetic
+    assert tau[0] < series["tau_over_sigma"].min() and series["tau_over_sigma"].max() < tau[1]
+
+
+def second_half(series, name):
+    values = series[name]
+    return values[values.size // 2:]
+
+
+def check_stiff_grains(sim, s):
+    sane(s, overlap=0.02, kinetic=1e-5, tau=(-0.1, 0.5))
+    assert s["time"][0] < sim.config.compaction.max_time        # compaction settled, did not give up
+
+
+def check_soft_grains_stable(sim, s):
+    sane(s, overlap=0.35)
+    assert s["max_overlap"].max() > 0.1                           # large overlaps: the scene is what it says
+    assert s["porosity"][-1] < 0.15
+
+
+def check_high_permeability(sim, s):
+    sane(s)
+    sigma = sim.config.loading.normal_stress
+    assert max(-s["pressure_min"].min(), s["pressure_max"].max()) < 1e-3 * sigma
+    assert s["deborah"].max() < 1e-3
+
+
+def check_high_permeability_explicit(sim, s):
+    check_high_permeability(sim, s)
+    assert 100 < sim.fluid.state[FK.S_SUBSTEPS] < 10_000
+
+
+def check_low_permeability(sim, s):
+    sane(s)
+    sigma, beta = sim.config.loading.normal_stress, sim.config.fluid.compressibility
+    peak = max(-s["pressure_min"].min(), s["pressure_max"].max())
+    assert peak < 10 * sigma and 1.0 + beta * s["pressure_min"].min() > 0.0
+    assert peak > 0.1 * sigma                                     # undrained: pressures matter
+    assert s["deborah"].max() > 10.0
+
+
+def check_high_velocity(sim, s):
+    v_load = sim.config.loading.velocity
+    quarter = s["wall_vx"].size // 4
+    assert s["wall_vx"][quarter:].min() > 0.25 * v_load           # never sticks: steady sliding
+    tau = second_half(s, "tau_over_sigma")
+    assert 0.1 < tau.min() and tau.max() < 0.8
+    assert s["max_overlap"].max() < 0.15
+
+
+def check_slow_loading(sim, s):
+    sane(s, kinetic=1e-5)
+    assert abs(s["wall_x"]).max() < 0.1
+
+
+def check_zero_friction(sim, s):
+    sane(s)
+    assert s["porosity"][0] < 0.17
+    assert second_half(s, "tau_over_sigma").mean() < 0.15
+
+
+def check_high_friction(sim, s):
+    sane(s)
+    assert s["porosity"][0] > 0.19
+
+
+def check_critical_damping(sim, s):
+    sane(s, kinetic=1e-4)
+
+
+def check_dt_at_bound(sim, s):
+    assert sim.config.numerics.dt_safety == 1.0
+    sane(s, kinetic=1e-4)
+
+
+def check_packing(sim, s):
+    sane(s)
+    assert 0.17 < s["porosity"][0] < 0.21
+
+
+def check_loose_packing(sim, s):
+    check_packing(sim, s)
+    assert s["time"][0] > 8000.0                                  # the long fall of a loose start
+
+
+STABLE = {  # scene -> (check, loading time of the default-suite run [t0]; None: the whole scene)
+    "stiff_grains": (check_stiff_grains, 1000.0),
+    "soft_grains_stable": (check_soft_grains_stable, None),
+    "high_permeability": (check_high_permeability, None),
+    "high_permeability_explicit": (check_high_permeability_explicit, None),
+    "low_permeability": (check_low_permeability, 3000.0),
+    "high_velocity": (check_high_velocity, None),
+    "slow_loading": (check_slow_loading, 5000.0),
+    "zero_friction": (check_zero_friction, None),
+    "high_friction": (check_high_friction, None),
+    "critical_damping": (check_critical_damping, None),
+    "dt_at_bound": (check_dt_at_bound, None),
+    "dense_packing": (check_packing, None),
+    "loose_packing": (check_loose_packing, None),
+}
+SHORTENED = sorted(name for name, (_, short) in STABLE.items() if short is not None)
+
+
+def test_every_scene_file_is_covered():
+    covered = set(STABLE) | {"soft_grains", "dt_beyond_bound", "low_permeability_fine_grid"}
+    assert {p.stem for p in STRESS.glob("*.yaml")} == covered
+    for path in STRESS.glob("*.yaml"):
+        assert "EXPECTED:" in path.read_text(), path
+
+
+@pytest.mark.parametrize("name", sorted(STABLE))
+def test_stable_scene(name):
+    check, short = STABLE[name]
+    sim, series = run_scene(name, short)
+    check(sim, series)
+
+
+@pytest.mark.validation
+@pytest.mark.parametrize("name", SHORTENED)
+def test_stable_scene_full(name):
+    check, _ = STABLE[name]
+    sim, series = run_scene(name, None)
+    check(sim, series)
+
+
+def test_soft_grains_stop_with_runaway_overlap():
+    with pytest.raises(PhysicsError, match="runaway overlap") as info:
+        run_scene("soft_grains", None)
+    assert "loading.normal_stress" in str(info.value)
+    assert info.value.time < 5000.0                               # early, during compaction
+
+
+def test_dt_beyond_bound_is_refused():
+    with pytest.raises(ConfigError, match=r"numerics.dt = 1.2 is above the stability bound 0.904\d* t0"):
+        run_scene("dt_beyond_bound", None)
+
+
+def test_undrained_fine_grid_stops_with_energy_blow_up():
+    with pytest.raises(PhysicsError, match="kinetic-energy blow-up") as info:
+        run_scene("low_permeability_fine_grid", None)
+    message = str(info.value)
+    assert "fluid.cell_size (now 2.5 d" in message and "numerics.dt_safety" in message
+
+
+@pytest.mark.parametrize("name, code, words", [
+    ("dt_beyond_bound", EXIT_BAD_INPUT, ("stability bound 0.904", "numerics.dt")),
+    ("soft_grains", EXIT_PHYSICS, ("runaway overlap", "loading.normal_stress")),
+])
+def test_cli_stops_with_a_message_not_a_traceback(name, code, words, tmp_path):
+    result = CliRunner().invoke(app, ["run", str(STRESS / f"{name}.yaml"), "--out", str(tmp_path / name), "--quiet"])
+    assert result.exit_code == code, result.output
+    assert "Traceback" not in result.output and not isinstance(result.exception, (AssertionError, TypeError))
+    for word in words:
+        assert word in result.output
+    if name == "dt_beyond_bound":
+        shown = CliRunner().invoke(app, ["config", str(STRESS / f"{name}.yaml")])
+        assert shown.exit_code == EXIT_BAD_INPUT and "stability bound" in shown.output
