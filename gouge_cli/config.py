@@ -177,7 +177,7 @@ class FluidConfig(_Section):
     cell_size: float = Field(2.5, ge=0.5, le=20, description="target grid cell size [d]")
     solver: Literal["implicit", "explicit"] = Field("implicit", description="pressure time stepping")
     step: Time = Field(
-        0.5, gt=0, le=1000,
+        0.25, gt=0, le=1000,
         description="fluid update period dt_f, rounded to whole DEM steps [t0]; the drag is lagged by up to "
                     "dt_f, and dt_f above ~1-2 t0 destabilises undrained (kappa_c <~ 1e-4) coupling")
     explicit_safety: float = Field(0.5, gt=0, le=1.0, description="fraction of the FTCS bound per sub-step [-]")

@@ -156,6 +156,7 @@ class Simulation:
 
     def _rebuild(self):
         s = self.state
+        self.params[K.THREADS] = numba.get_num_threads()
         while not K.rebuild(s.grains(), s.lists(), self.params, s.counters):
             s.grow_pairs(int(s.counters[K.K_NEEDED_CAPACITY]))
 
@@ -165,6 +166,7 @@ class Simulation:
         left = int(nsteps)
         previous = numba.get_num_threads()
         numba.set_num_threads(self.threads)
+        self.params[K.THREADS] = self.threads
         try:
             self._advance(left)
         finally:

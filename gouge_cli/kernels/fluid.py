@@ -94,7 +94,7 @@ finite; drag is then set to zero). A status other than 0 should stop the run.
 import math
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 P_KAPPA_C = 0        # Carman-Kozeny prefactor kappa_c [d^2]
 P_BETA = 1           # fluid compressibility beta [1/E]
@@ -221,6 +221,18 @@ def cell_weights(x, z, inv_dx, inv_dz, z_bot, nx, nz):
     return i0, i1, 0, fx, 0.0, 0.0
 
 
+@njit(cache=True, inline="always")
+def corner_shares(area, i0, i1, j0, fx, fz, nz):
+    """Flat indices of the four cells around a point and the area each receives (same weights
+    for the deposit and the drag): (c00, c10, c01, c11, a00, a10, a01, a11)."""
+    c00 = np.uint64(i0 * nz + j0)
+    c10 = np.uint64(i1 * nz + j0)
+    a0 = area * (1.0 - fz)
+    a1 = area * fz
+    return (c00, c10, c00 + np.uint64(1), c10 + np.uint64(1),
+            a0 * (1.0 - fx), a0 * fx, a1 * (1.0 - fx), a1 * fx)
+
+
 @njit(cache=True)
 def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z):
     """Solid fraction, its kernel-consistent gradient and the grid-relative solid velocity.
@@ -257,16 +269,9 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
         if area <= 0.0:
             continue
         i0, i1, j0, fx, fz, dfz = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
-        c00 = np.uint64(i0 * nz + j0)
-        c10 = np.uint64(i1 * nz + j0)
-        c01 = c00 + np.uint64(1)
-        c11 = c10 + np.uint64(1)
+        c00, c10, c01, c11, a00, a10, a01, a11 = corner_shares(area, i0, i1, j0, fx, fz, nz)
         a0 = area * (1.0 - fz)
         a1 = area * fz
-        a00 = a0 * (1.0 - fx)
-        a10 = a0 * fx
-        a01 = a1 * (1.0 - fx)
-        a11 = a1 * fx
         vxk = vx[k]
         vzk = vz[k] - (w_bot + (z[k] - z_bot) * grid_strain_rate)
         solid[c00] += a00
@@ -567,7 +572,7 @@ def drag_density(gx, gz, s, fx, fz):
                 fz[i, j] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, parallel=True)
 def grain_drag(x, z, radius, n, Lx, z_bot, z_top, fx, fz, drag_x, drag_z):
     """Fluid force on each grain, F_k = a_k sum_c W_kc f_c (thesis Eq. 12).
 
@@ -581,23 +586,14 @@ def grain_drag(x, z, radius, n, Lx, z_bot, z_top, fx, fz, drag_x, drag_z):
     inv_dz = nz / (z_top - z_bot)
     flat_x = fx.reshape(nx * nz)
     flat_z = fz.reshape(nx * nz)
-    for k in range(n):
+    for k in prange(n):
         area = grain_area(z[k], radius[k], z_bot, z_top)
         if area <= 0.0:
             drag_x[k] = 0.0
             drag_z[k] = 0.0
             continue
         i0, i1, j0, wx, wz, _ = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
-        c00 = np.uint64(i0 * nz + j0)
-        c10 = np.uint64(i1 * nz + j0)
-        c01 = c00 + np.uint64(1)
-        c11 = c10 + np.uint64(1)
-        a0 = area * (1.0 - wz)
-        a1 = area * wz
-        a00 = a0 * (1.0 - wx)
-        a10 = a0 * wx
-        a01 = a1 * (1.0 - wx)
-        a11 = a1 * wx
+        c00, c10, c01, c11, a00, a10, a01, a11 = corner_shares(area, i0, i1, j0, wx, wz, nz)
         drag_x[k] = a00 * flat_x[c00] + a10 * flat_x[c10] + a01 * flat_x[c01] + a11 * flat_x[c11]
         drag_z[k] = a00 * flat_z[c00] + a10 * flat_z[c10] + a01 * flat_z[c01] + a11 * flat_z[c11]
 

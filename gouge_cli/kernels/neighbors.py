@@ -25,9 +25,9 @@ def minimum_image(dx, width):
 
 
 @njit(cache=NUMBA_CACHE)
-def _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, ncz, out, at, write):
+def _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, ncz, out, at, write, limit):
     """Neighbours j > i of grain i within R_i + R_j + skin, in cell scan order; written to
-    out[at:] when `write`. Returns how many."""
+    out[at:limit] when `write`. Returns how many (also those beyond limit)."""
     c = cell_of[i]
     cz0 = c // ncx
     cx0 = c - cz0 * ncx
@@ -48,7 +48,7 @@ def _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, nc
                 dz = z[j] - zi
                 cut = ri + radius[j] + skin
                 if dx * dx + dz * dz < cut * cut:
-                    if write:
+                    if write and at + found < limit:
                         out[at + found] = j
                     found += 1
     return found
@@ -57,8 +57,8 @@ def _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, nc
 @njit(parallel=True, cache=NUMBA_CACHE)
 def build_neighbors(x, z, radius, body, width, skin,
                     start, index, shear, new_start, new_index, new_shear,
-                    tr_start, tr_pair, x_build, z_build):
-    """Rebuild the half list for pairs closer than R_i + R_j + skin.
+                    tr_start, tr_pair, x_build, z_build, serial):
+    """Rebuild the half list for pairs closer than R_i + R_j + skin (`serial`: one thread runs it).
 
     x, z, radius: (N,) [d]; body: (N,) int8, grains of the same wall (body > 0) never pair.
     All list arrays are preallocated; returns the number of pairs, or -(needed capacity)
@@ -96,20 +96,31 @@ def build_neighbors(x, z, radius, body, width, skin,
         order[fill[c]] = i
         fill[c] += 1
 
-    # pass 1 (parallel): neighbours per grain; pass 2 (parallel): write them. The order within
-    # a row is the cell scan order, identical for any thread count.
+    # One thread: one pass. Several: count per grain, prefix sum, then write in parallel. The
+    # order within a row is the cell scan order either way, so the list is the same.
+    if serial:
+        npairs = 0
+        for i in range(n):
+            new_start[i] = npairs
+            npairs += _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, ncz,
+                                new_index, npairs, True, capacity)
+        new_start[n] = npairs
+        if npairs > capacity:
+            return -npairs
+    else:
+        for i in prange(n):
+            new_start[i + 1] = _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, ncz,
+                                         new_index, 0, False, 0)
+        new_start[0] = 0
+        for i in range(n):
+            new_start[i + 1] += new_start[i]
+        npairs = new_start[n]
+        if npairs > capacity:
+            return -npairs
+        for i in prange(n):
+            _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, ncz,
+                      new_index, new_start[i], True, capacity)
     for i in prange(n):
-        new_start[i + 1] = _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, ncz,
-                                     new_index, 0, False)
-    new_start[0] = 0
-    for i in range(n):
-        new_start[i + 1] += new_start[i]
-    npairs = new_start[n]
-    if npairs > capacity:
-        return -npairs
-    for i in prange(n):
-        _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, ncz,
-                  new_index, new_start[i], True)
         old_lo = start[i]
         old_hi = start[i + 1]
         for k in range(new_start[i], new_start[i + 1]):

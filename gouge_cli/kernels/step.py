@@ -22,8 +22,8 @@ from .neighbors import build_neighbors, minimum_image
 
 # params: float64 array
 DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \
-    WALL_MASS, BG_DAMPING, DRIVE = range(13)
-N_PARAMS = 13
+    WALL_MASS, BG_DAMPING, DRIVE, THREADS = range(14)
+N_PARAMS = 14
 # wall: float64 array, the top body
 W_X, W_Z, W_VX, W_VZ, W_FX, W_FZ = range(6)
 N_WALL = 6
@@ -206,7 +206,8 @@ def rebuild(grains, lists, params, counters):
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top = grains
     start, index, shear, tr_start, tr_pair, x_build, z_build, new_start, new_index, new_shear = lists
     npairs = build_neighbors(x, z, radius, body, params[WIDTH], params[SKIN], start, index, shear,
-                             new_start, new_index, new_shear, tr_start, tr_pair, x_build, z_build)
+                             new_start, new_index, new_shear, tr_start, tr_pair, x_build, z_build,
+                             params[THREADS] <= 1.0)
     if npairs < 0:
         counters[K_NEEDED_CAPACITY] = -npairs
         return False

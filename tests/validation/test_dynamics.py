@@ -16,6 +16,7 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 from scipy.special import beta
 
+from gouge_cli.accuracy import closed_box
 from gouge_cli.config import build_config
 from gouge_cli.kernels.step import K_REBUILDS, K_STEP, W_VX
 from gouge_cli.timestep import contact_constants
@@ -140,25 +141,12 @@ def test_restitution_at_physics_md_speed():
 
 # ---- energy: many grains, gamma = 0, mu = 0 ------------------------------------------------
 
-def _closed_box(seed=3, width=10.0, nx=8, nz=12, spacing=1.25, v_rms=1e-2):
-    """Free grains (d in [0.8, 1.2]) on a jittered lattice, periodic in x, closed in z by two
-    rows of FIXED grains (body 1 both, so they never pair with each other, never move and
-    do no work): a closed conservative system. Random velocities and spins."""
-    rng = np.random.default_rng(seed)
-    xs = (np.arange(nx) + 0.5) * width / nx
-    gx, gz = np.meshgrid(xs, 1.25 + np.arange(nz) * spacing)
-    x_free = gx.ravel() + rng.uniform(-0.02, 0.02, gx.size)
-    z_free = gz.ravel()
-    r_free = rng.uniform(0.4, 0.6, x_free.size)
-    n_wall = int(width)
-    x_wall = (np.arange(n_wall) + 0.5) * width / n_wall
-    x = np.concatenate([x_wall, x_free, x_wall])
-    z = np.concatenate([np.zeros(n_wall), z_free, np.full(n_wall, z_free.max() + 1.25)])
-    radius = np.concatenate([np.full(n_wall, 0.5), r_free, np.full(n_wall, 0.5)])
-    body = np.concatenate([np.ones(n_wall), np.zeros(x_free.size), np.ones(n_wall)])
-    free = body == 0
-    vx, vz, spin = (np.where(free, rng.normal(0.0, v_rms, x.size), 0.0) for _ in range(3))
-    return dict(x=x, z=z, radius=radius, body=body, vx=vx, vz=vz, spin=spin, width=width)
+def _closed_box():
+    """gouge_cli.accuracy.closed_box (free grains closed in z by two rows of fixed grains, body 1
+    both: they never pair, never move, do no work) with its velocities as keyword arrays."""
+    box = closed_box()
+    box.update(box.pop("velocities"))
+    return box
 
 
 def total_energy(st, width):
