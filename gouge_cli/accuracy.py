@@ -623,7 +623,7 @@ def plot_work_precision(path: Path, scene: dict | None, analytic: dict | None):
         group = [r for r in scene["results"] if r.level.ladder == ladder and r.errors]
         for name in SCENE_ERRORS:
             pts = [(r.wall_seconds, r.errors[name], r.level.setting) for r in group
-                   if r.errors.get(name, 0) > 0 and math.isfinite(r.errors[name])]
+                   if r.errors.get(name, 0) > 0 and math.isfinite(r.errors[name]) and r.wall_seconds > 0]
             if pts:
                 ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=name)
                 for p in pts:
@@ -633,13 +633,16 @@ def plot_work_precision(path: Path, scene: dict | None, analytic: dict | None):
         group = [r for r in analytic["rows"] if r.case == case]
         for name in group[0].errors:
             pts = [(r.wall_seconds, r.errors[name], r.value) for r in group
-                   if r.errors[name] > 0 and math.isfinite(r.errors[name])]
+                   if r.errors[name] > 0 and math.isfinite(r.errors[name]) and r.wall_seconds > 0]
             if pts:
                 ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=name)
                 for p in pts:
                     ax.annotate(f"{p[2]:.3g}", (p[0], p[1]), fontsize=7, alpha=0.7)
         ax.set_title(f"analytic: {case} ({group[0].parameter})")
     for ax in flat[:total]:
+        if not ax.lines:                          # every error exactly 0 (or no timing): nothing to draw
+            ax.text(0.5, 0.5, "errors all zero", ha="center", va="center", transform=ax.transAxes)
+            continue
         lo, hi = ax.get_xlim()
         if hi < 3.0 * lo:                        # at least one 1, 2 or 5 x 10^k inside: a labelled tick
             centre = math.sqrt(lo * hi)
