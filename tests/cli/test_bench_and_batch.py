@@ -1,0 +1,51 @@
+"""The benchmark runs and reports what it measured; the example batch script forks every slip."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+
+from gouge_cli.bench import run_benchmark
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+def test_benchmark_runs_on_a_tiny_scene():
+    results = run_benchmark(sizes=(600,), threads=[1, 2], steps=60, repeats=1, lammps=False, permeability=1e-5)
+    rows = results["rows"]
+    assert [r["threads"] for r in rows] == [1, 2]
+    for r in rows:
+        assert r["code"] == "gouge" and r["n_grains"] == 600 and r["steps"] == 60
+        assert r["rate_min"] > 0 and r["bytes_per_grain"] > 100
+        assert r["identical_to_1_thread"] is True
+    shares = results["fluid"]
+    assert len(shares) == 2 and all(0.0 < s["rate_undrained"] for s in shares)
+
+
+def test_batch_script_forks_every_slip(tmp_path):
+    scene = {"name": "batch", "packing": {"n_grains": 300, "width": 15},
+             "loading": {"spring_constant": 2e-4, "velocity": 4e-5}, "numerics": {"dt_safety": 0.3},
+             "run": {"duration": 80000}, "output": {"series_interval": 10, "snapshot_interval": 40000}}
+    cfg = tmp_path / "batch.yaml"
+    cfg.write_text(yaml.safe_dump(scene))
+    run = tmp_path / "batch"
+    bin_dir = Path(sys.executable).parent
+    env = dict(os.environ, GOUGE=str(bin_dir / "gouge"), PYTHON=sys.executable)
+    subprocess.run([str(bin_dir / "gouge"), "run", str(cfg), "--out", str(run), "--quiet"], check=True, env=env)
+    catalog = json.loads(subprocess.run([str(bin_dir / "gouge"), "slips", str(run), "--json"], check=True,
+                                        capture_output=True, text=True, env=env).stdout)
+    kept = [e["number"] for e in catalog if e["checkpoint"]]
+    assert kept
+    script = REPO / "examples" / "fork_all_slips.sh"
+    done = subprocess.run(["bash", str(script), str(run), "1e-3"], capture_output=True, text=True, env=env)
+    assert done.returncode == 0, done.stderr
+    lines = (run / "forks" / "summary.jsonl").read_text().splitlines()
+    assert [json.loads(line)["slip"] for line in lines] == kept
+    assert all(set(json.loads(line)["branches"]) == {"drained", "perm_0.001"} for line in lines)
+    again = subprocess.run(["bash", str(script), str(run), "1e-3"], capture_output=True, text=True, env=env)
+    assert again.returncode == 0 and "already forked" in again.stdout
