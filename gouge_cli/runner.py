@@ -4,6 +4,7 @@ outputs, slip checkpoints, periodic checkpoints and clean stops."""
 from __future__ import annotations
 
 import shutil
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -134,6 +135,11 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
             if progress:
                 progress.close()
         sim.start_fluid()
+        writer.set_attr("compaction_settled", bool(sim.compaction_settled))
+        if not sim.compaction_settled:
+            print(f"warning: compaction did not settle within compaction.max_time = {config.compaction.max_time:g} t0 "
+                  "(top wall or grains still moving); loading starts anyway. Raise compaction.max_time, or "
+                  "compaction.damping, for a settled start.", file=sys.stderr, flush=True)
         writer.set_attr("load_start_time", sim.state.time)
         writer.set_attr("end_time", sim.state.time + config.run.duration)
         writer.append(sim.observe())

@@ -85,6 +85,7 @@ class Simulation:
         p = build_params(config, self.dt, s.width, self.wall_mass_per_length * s.width)
         self.params = p
         self.threads = self._choose_threads(config.numerics.threads, s.n)
+        self.compaction_settled: bool | None = None
         self.fluid = None
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(M.N_OBSERVABLES)
@@ -296,8 +297,10 @@ class Simulation:
             n_free = max(1, int((self.state.body == 0).sum()))
             rms = math.sqrt(2.0 * row["kinetic_energy"] / (n_free * float(self.state.mass.mean())))
             if elapsed >= cfg.min_time and abs(row["wall_vz"]) < v_tol and rms < v_tol:
+                self.compaction_settled = True
                 break
             if elapsed >= cfg.max_time:
+                self.compaction_settled = False
                 break
         self.start_loading()
         return row
