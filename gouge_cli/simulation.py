@@ -262,22 +262,14 @@ class Simulation:
             row.update(self.fluid.observe())
         return row
 
-    def check(self, row: dict | None = None):
-        """Stop with a PhysicsError on NaN/inf or a runaway overlap (keeps last checkpoint)."""
-        row = row or self.observe()
-        t = row["time"]
-        if row["nonfinite"] > 0 or not math.isfinite(row["wall_z"]) or not math.isfinite(row["wall_x"]):
-            raise PhysicsError(
-                f"non-finite grain state ({int(row['nonfinite'])} grains)",
-                f"the time step {self.dt:.4g} t0 is probably too large: lower numerics.dt_safety "
-                f"(now {self.config.numerics.dt_safety:g}) or numerics.dt", t)
-        if row["max_overlap"] > 0.5:
-            fluid_hint = (f"; with pore fluid, also lower fluid.step (now {self.config.fluid.step:g} t0, the lag "
-                          "of the drag)") if self.fluid is not None else ""
-            raise PhysicsError(
-                f"runaway overlap: {row['max_overlap']:.3g} of a grain radius",
-                "grains are too soft for the load or the step too large: lower loading.normal_stress, "
-                f"numerics.dt_safety or loading.velocity{fluid_hint}", t)
+    def check(self):
+        """Stop with a PhysicsError on NaN/inf or a runaway overlap (the non-finite and overlap
+        guards of gouge_cli.guards, run once; used while compacting and by the benchmark)."""
+        from .guards import NonFiniteGuard, OverlapGuard, Scan
+
+        scan = Scan.of(self)
+        NonFiniteGuard()(self, scan)
+        OverlapGuard()(self, scan)
 
     # ---- compaction --------------------------------------------------------------------
     def compact(self, on_chunk: Callable = None) -> dict:
@@ -289,8 +281,8 @@ class Simulation:
         row = self.observe()
         while True:
             self.advance(chunk)
+            self.check()
             row = self.observe()
-            self.check(row)
             elapsed = self.state.time - t0
             if on_chunk is not None:
                 on_chunk(self, elapsed)
