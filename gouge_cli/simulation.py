@@ -163,7 +163,6 @@ class Simulation:
 
     def advance(self, nsteps: int):
         """Advance exactly nsteps steps (numba); grows the pair arrays if a rebuild overflows."""
-        s = self.state
         left = int(nsteps)
         previous = numba.get_num_threads()
         numba.set_num_threads(self.threads)

@@ -18,7 +18,7 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     it leaves in drag_x/drag_z acts on the grains until the next update. fluid: the tuple
     FluidGrid.kernel_args() without drag. Returns (FLUID_FAILED, steps) with fluid_status[0]
     set if the fluid update fails."""
-    x, z, vx, vz, spin, radius = grains[0], grains[1], grains[2], grains[3], grains[4], grains[5]
+    x, z, vx, vz, radius = grains[0], grains[1], grains[2], grains[3], grains[5]
     fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work = fluid
     n = x.shape[0]
     dt_f = interval * params[DT]

@@ -13,7 +13,6 @@ Arrays named in ``GRAIN``/``LIST`` order are passed as tuples from :mod:`gouge_c
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit, prange
 
 from .. import NUMBA_CACHE
