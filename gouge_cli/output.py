@@ -23,6 +23,7 @@ import numpy as np
 from . import __version__
 from .config import Config, dump_config
 from .kernels import measure as M
+from .kernels import step as K
 
 # name -> (unit, description); units are the dimensionless scales of physics.md section 1
 SERIES = {
@@ -127,10 +128,12 @@ class RunFile:
         cj = np.empty(npairs, np.int32)
         cfx = np.empty(npairs)
         cfz = np.empty(npairs)
-        m = M.contact_list(s.x, s.z, s.radius, s.start, s.index, s.pair_fx, s.pair_fz, s.width, ci, cj, cfx, cfz)
+        p = sim.params
+        m = M.contact_list(s.x, s.z, s.radius, s.start, s.index, s.shear, s.width, p[K.C_NORMAL],
+                           p[K.C_TANGENTIAL], p[K.FRICTION], ci, cj, cfx, cfz)
         for name, arr in (("contact_i", ci), ("contact_j", cj), ("contact_fx", cfx), ("contact_fz", cfz)):
             grp.create_dataset(name, data=arr[:m], compression="gzip", compression_opts=1)
-        grp["contact_fx"].attrs["description"] = "contact force on grain j by grain i [E d^2]"
+        grp["contact_fx"].attrs["description"] = "elastic contact force on grain j by grain i [E d^2] (no dashpot part)"
         if sim.fluid is not None:
             for name, arr in sim.fluid.snapshot_fields().items():
                 grp.create_dataset(name, data=arr)

@@ -19,11 +19,11 @@ FREE, BOTTOM, TOP = 0, 1, 2
 GRAIN_FIELDS = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inertia", "body",
                 "force_x", "force_z", "torque", "top")
 LIST_FIELDS = ("start", "index", "shear", "tr_start", "tr_pair", "x_build", "z_build",
-               "new_start", "new_index", "new_shear")
+               "new_start", "new_index", "new_shear", "blocks", "cell_of", "order", "cell_count")
 PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj")
+# (the transposed list, block bounds and cell arrays are derived or scratch, rebuilt on demand)
 EVOLVING = ("x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
-            "start", "index", "shear", "tr_start", "tr_pair", "x_build", "z_build",
-            "wall", "clock", "counters")
+            "start", "index", "shear", "x_build", "z_build", "wall", "clock", "counters")
 
 
 def sphere_mass(radius: np.ndarray, density: float) -> np.ndarray:
@@ -64,7 +64,12 @@ class State:
         self.bottom = np.flatnonzero(self.body == BOTTOM).astype(np.int64)
         self.start = np.zeros(n + 1, np.int64)
         self.tr_start = np.zeros(n + 1, np.int64)
+        self.tr_start[n] = -1
         self.new_start = np.zeros(n + 1, np.int64)
+        self.blocks = np.zeros(K.MAX_BLOCKS + 1, np.int64)
+        self.cell_of = np.zeros(n, np.int64)
+        self.order = np.zeros(n, np.int64)
+        self.cell_count = np.zeros(2 * n + 64, np.int64)
         self.x_build = self.x.copy()
         self.z_build = self.z.copy()
         self._allocate_pairs(8 * n + 64)
@@ -77,10 +82,11 @@ class State:
         return self.x.shape[0]
 
     def _allocate_pairs(self, capacity: int, keep: int = 0):
-        old = {name: getattr(self, name, None) for name in ("index", "shear", "tr_pair")}
+        old = {name: getattr(self, name, None) for name in ("index", "shear")}
         self.index = np.zeros(capacity, np.int32)
         self.shear = np.zeros(capacity)
         self.tr_pair = np.zeros(capacity, np.int32)
+        self.tr_start[self.n] = -1      # derived from the list: rebuilt when next needed
         for name, arr in old.items():
             if arr is not None and keep:
                 getattr(self, name)[:keep] = arr[:keep]
@@ -118,7 +124,7 @@ class State:
         out = {}
         for name in EVOLVING:
             arr = getattr(self, name)
-            out[name] = arr[:npairs].copy() if name in ("index", "shear", "tr_pair") else arr.copy()
+            out[name] = arr[:npairs].copy() if name in ("index", "shear") else arr.copy()
         return out
 
     def restore(self, arrays: dict):
@@ -129,9 +135,10 @@ class State:
         for name in EVOLVING:
             target = getattr(self, name)
             source = np.asarray(arrays[name])
-            if name in ("index", "shear", "tr_pair"):
+            if name in ("index", "shear"):
                 target[:npairs] = source
             else:
                 if target.shape != source.shape:
                     raise ValueError(f"checkpoint array {name!r} has shape {source.shape}, scene has {target.shape}")
                 target[...] = source
+        self.tr_start[self.n] = -1

@@ -92,18 +92,28 @@ def observe(x, z, vx, vz, spin, radius, mass, body, force_x, force_z, start, ind
 
 
 @njit(cache=NUMBA_CACHE)
-def contact_list(x, z, radius, start, index, pair_fx, pair_fz, width, out_i, out_j, out_fx, out_fz):
-    """Touching pairs with their force on j, for snapshots. Returns the count written."""
+def contact_list(x, z, radius, start, index, shear, width, c_normal, c_tangential, friction,
+                 out_i, out_j, out_fx, out_fz):
+    """Touching pairs and the elastic part of their force on j [E d^2], for snapshots: normal
+    c_n sqrt(R_ij) xi^1.5 (no dashpot) and tangential -k_s ds clipped at mu F_n, from the
+    stored overlap and history (the step loop keeps no per-pair forces). Returns the count."""
     m = 0
     for i in range(x.shape[0]):
         for k in range(start[i], start[i + 1]):
             j = index[k]
             dx = minimum_image(x[j] - x[i], width)
             dz = z[j] - z[i]
-            if dx * dx + dz * dz < (radius[i] + radius[j]) ** 2:
+            rsum = radius[i] + radius[j]
+            r2 = dx * dx + dz * dz
+            if r2 < rsum * rsum:
+                r = math.sqrt(r2)
+                overlap = rsum - r
+                root = math.sqrt(2.0 * radius[i] * radius[j] / rsum * overlap)
+                f_n = c_normal * root * overlap
+                f_s = min(max(-c_tangential * root * shear[k], -friction * f_n), friction * f_n)
                 out_i[m] = i
                 out_j[m] = j
-                out_fx[m] = pair_fx[k]
-                out_fz[m] = pair_fz[k]
+                out_fx[m] = (f_n * dx - f_s * dz) / r
+                out_fz[m] = (f_n * dz + f_s * dx) / r
                 m += 1
     return m

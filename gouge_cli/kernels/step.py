@@ -17,7 +17,7 @@ from numba import njit, prange
 
 from .. import NUMBA_CACHE
 from .contact import hertz_mindlin
-from .neighbors import build_neighbors, minimum_image
+from .neighbors import build_neighbors, minimum_image, transpose
 
 # params: float64 array
 DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \
@@ -38,10 +38,62 @@ COMPACTION, LOADING = 0, 1
 OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
 
 
+MAX_BLOCKS = 256
+
+
+@njit(cache=NUMBA_CACHE)
+def partition_rows(start, n, blocks, nb):
+    """Split grain rows 0..n into nb contiguous blocks of about equal pair counts:
+    block b is rows blocks[b]:blocks[b+1]. blocks: (MAX_BLOCKS + 1,) int64."""
+    npairs = start[n]
+    blocks[0] = 0
+    for b in range(1, nb):
+        target = (b * npairs) // nb
+        lo = blocks[b - 1]
+        hi = n
+        while lo < hi:                      # first row i with start[i] >= target
+            mid = (lo + hi) // 2
+            if start[mid] < target:
+                lo = mid + 1
+            else:
+                hi = mid
+        blocks[b] = lo
+    blocks[nb] = n
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def _pair(i, j, k, x, z, vx, vz, spin, radius, mass, shear, width, dt, c_n, c_t, damping, friction):
+    """hertz_mindlin for listed pair slot k = (i, j), updating shear[k]; touching flag first."""
+    dx = minimum_image(x[j] - x[i], width)
+    dz = z[j] - z[i]
+    rsum = radius[i] + radius[j]
+    if dx * dx + dz * dz >= rsum * rsum:
+        if shear[k] != 0.0:
+            shear[k] = 0.0
+        return False, 0.0, 0.0, 0.0, 0.0
+    mi = mass[i]
+    mj = mass[j]
+    fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
+        dx, dz, vx[j] - vx[i], vz[j] - vz[i], spin[i], spin[j], radius[i], radius[j],
+        mi * mj / (mi + mj), shear[k], dt, c_n, c_t, damping, friction)
+    shear[k] = ds
+    return True, fx, fz, ti, tj
+
+
 @njit(parallel=True, cache=NUMBA_CACHE)
-def pair_forces(x, z, vx, vz, spin, radius, mass, start, index, shear,
-                pair_fx, pair_fz, pair_ti, pair_tj, params):
-    """Per-pair force on j and torques on i and j into pair_*; updates shear history in place."""
+def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, tr_start, tr_pair,
+                   pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque, drag_x, drag_z,
+                   blocks, params):
+    """force, torque (N,) = contact forces of all listed pairs (+ drag), in one fused pass.
+
+    Summation order, the same for any thread count: grain g first receives the pairs where it
+    is second (j), in increasing i, then subtracts its own row in list order, then adds drag.
+    One thread walks the rows in order and scatters to j. With nb blocks of rows, the pairs
+    whose j lies in a later block (few: grains are numbered by height) are computed first
+    into pair_* [force on j, torques]; each block then starts its grains from those (via the
+    transposed list) and runs the serial walk, reading the stored values for its own
+    block-crossing pairs. Shear history is updated in place (thesis Eqs. 8-11).
+    """
     n = x.shape[0]
     dt = params[DT]
     width = params[WIDTH]
@@ -49,53 +101,70 @@ def pair_forces(x, z, vx, vz, spin, radius, mass, start, index, shear,
     c_t = params[C_TANGENTIAL]
     damping = params[DAMPING]
     friction = params[FRICTION]
-    for i in prange(n):
-        xi = x[i]
-        zi = z[i]
-        vxi = vx[i]
-        vzi = vz[i]
-        ri = radius[i]
-        wi = spin[i]
-        mi = mass[i]
-        for k in range(start[i], start[i + 1]):
-            j = index[k]
-            dx = minimum_image(x[j] - xi, width)
-            mj = mass[j]
-            fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
-                dx, z[j] - zi, vx[j] - vxi, vz[j] - vzi, wi, spin[j], ri, radius[j],
-                mi * mj / (mi + mj), shear[k], dt, c_n, c_t, damping, friction)
-            pair_fx[k] = fx
-            pair_fz[k] = fz
-            pair_ti[k] = ti
-            pair_tj[k] = tj
-            shear[k] = ds
-
-
-@njit(parallel=True, cache=NUMBA_CACHE)
-def sum_pair_forces(radius, start, tr_start, tr_pair, pair_fx, pair_fz, pair_ti, pair_tj,
-                    force_x, force_z, torque, drag_x, drag_z):
-    """force = sum over pairs (as i: minus, as j: plus) + drag; fixed order per grain."""
-    n = radius.shape[0]
     has_drag = drag_x.shape[0] == n
-    for i in prange(n):
-        fx = 0.0
-        fz = 0.0
-        ts = 0.0
-        for k in range(start[i], start[i + 1]):
-            fx -= pair_fx[k]
-            fz -= pair_fz[k]
-            ts += pair_ti[k]
-        for m in range(tr_start[i], tr_start[i + 1]):
-            k = tr_pair[m]
-            fx += pair_fx[k]
-            fz += pair_fz[k]
-            ts += pair_tj[k]
+    nb = min(max(int(params[THREADS]), 1), MAX_BLOCKS, max(n, 1))
+    partition_rows(start, n, blocks, nb)
+    if nb > 1:
+        if tr_start[n] != start[n]:
+            transpose(start, index, tr_start, tr_pair, n)
+        for b in prange(nb):
+            hi = blocks[b + 1]
+            for i in range(blocks[b], hi):
+                for k in range(start[i], start[i + 1]):
+                    j = index[k]
+                    if j >= hi:
+                        touching, fx, fz, ti, tj = _pair(i, j, k, x, z, vx, vz, spin, radius, mass, shear,
+                                                         width, dt, c_n, c_t, damping, friction)
+                        pair_fx[k] = fx
+                        pair_fz[k] = fz
+                        pair_ti[k] = ti
+                        pair_tj[k] = tj
+    for b in prange(nb):
+        lo = blocks[b]
+        hi = blocks[b + 1]
+        first = start[lo]
+        for g in range(lo, hi):
+            fx = 0.0
+            fz = 0.0
+            ts = 0.0
+            if b > 0:
+                for m in range(tr_start[g], tr_start[g + 1]):
+                    k = tr_pair[m]
+                    if k >= first:
+                        break
+                    fx += pair_fx[k]
+                    fz += pair_fz[k]
+                    ts += pair_tj[k]
+            force_x[g] = fx
+            force_z[g] = fz
+            torque[g] = ts
+        for i in range(lo, hi):
+            fxi = force_x[i]
+            fzi = force_z[i]
+            tsi = torque[i]
+            for k in range(start[i], start[i + 1]):
+                j = index[k]
+                if j >= hi:
+                    fxi -= pair_fx[k]
+                    fzi -= pair_fz[k]
+                    tsi += pair_ti[k]
+                    continue
+                touching, fx, fz, ti, tj = _pair(i, j, k, x, z, vx, vz, spin, radius, mass, shear,
+                                                 width, dt, c_n, c_t, damping, friction)
+                if touching:
+                    force_x[j] += fx
+                    force_z[j] += fz
+                    torque[j] += tj
+                    fxi -= fx
+                    fzi -= fz
+                    tsi += ti
+            force_x[i] = fxi
+            force_z[i] = fzi
+            torque[i] = tsi
         if has_drag:
-            fx += drag_x[i]
-            fz += drag_z[i]
-        force_x[i] = fx
-        force_z[i] = fz
-        torque[i] = ts
+            for g in range(lo, hi):
+                force_x[g] += drag_x[g]
+                force_z[g] += drag_z[g]
 
 
 @njit(cache=NUMBA_CACHE)
@@ -190,12 +259,11 @@ def _kick_check(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_iner
 def compute_forces(grains, lists, pair, wall, params, drag_x, drag_z):
     """Contact (+ drag) forces on every grain and on the top wall at the current state."""
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top = grains
-    start, index, shear, tr_start, tr_pair, x_build, z_build, new_start, new_index, new_shear = lists
+    (start, index, shear, tr_start, tr_pair, x_build, z_build, new_start, new_index, new_shear, blocks,
+     cell_of, order, cell_count) = lists
     pair_fx, pair_fz, pair_ti, pair_tj = pair
-    pair_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, pair_fx, pair_fz, pair_ti, pair_tj,
-                params)
-    sum_pair_forces(radius, start, tr_start, tr_pair, pair_fx, pair_fz, pair_ti, pair_tj,
-                    force_x, force_z, torque, drag_x, drag_z)
+    contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, tr_start, tr_pair,
+                   pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque, drag_x, drag_z, blocks, params)
     wall_force(force_x, force_z, top, wall)
 
 
@@ -203,13 +271,15 @@ def compute_forces(grains, lists, pair, wall, params, drag_x, drag_z):
 def rebuild(grains, lists, params, counters):
     """Rebuild the neighbour list; False (and K_NEEDED_CAPACITY set) if it does not fit."""
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top = grains
-    start, index, shear, tr_start, tr_pair, x_build, z_build, new_start, new_index, new_shear = lists
+    (start, index, shear, tr_start, tr_pair, x_build, z_build, new_start, new_index, new_shear, blocks,
+     cell_of, order, cell_count) = lists
     npairs = build_neighbors(x, z, radius, body, params[WIDTH], params[SKIN], start, index, shear,
-                             new_start, new_index, new_shear, tr_start, tr_pair, x_build, z_build,
+                             new_start, new_index, new_shear, x_build, z_build, cell_of, order, cell_count,
                              params[THREADS] <= 1.0)
     if npairs < 0:
         counters[K_NEEDED_CAPACITY] = -npairs
         return False
+    tr_start[x.shape[0]] = -1       # transposed list stale; contact_forces rebuilds it if it needs it
     counters[K_PAIRS] = npairs
     counters[K_REBUILDS] += 1
     counters[K_NEED_REBUILD] = 0
