@@ -18,10 +18,10 @@ FREE, BOTTOM, TOP = 0, 1, 2
 
 GRAIN_FIELDS = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inertia", "body",
                 "force_x", "force_z", "torque", "top")
-LIST_FIELDS = ("start", "index", "shear", "tr_start", "tr_pair", "x_build", "z_build",
-               "new_start", "new_index", "new_shear", "blocks", "cell_of", "order", "cell_count")
+LIST_FIELDS = ("start", "index", "shear", "cross_i", "cross_k", "cross_in", "x_build", "z_build",
+               "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count")
 PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj")
-# (the transposed list, block bounds and cell arrays are derived or scratch, rebuilt on demand)
+# (block layout, crossing pairs and cell arrays are derived or scratch, rebuilt on demand)
 EVOLVING = ("x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
             "start", "index", "shear", "x_build", "z_build", "wall", "clock", "counters")
 
@@ -63,10 +63,9 @@ class State:
         self.top = np.flatnonzero(self.body == TOP).astype(np.int64)
         self.bottom = np.flatnonzero(self.body == BOTTOM).astype(np.int64)
         self.start = np.zeros(n + 1, np.int64)
-        self.tr_start = np.zeros(n + 1, np.int64)
-        self.tr_start[n] = -1
         self.new_start = np.zeros(n + 1, np.int64)
-        self.blocks = np.zeros(K.MAX_BLOCKS + 1, np.int64)
+        self.layout = np.zeros(K.N_LAYOUT, np.int64)
+        self.layout[K.L_BUILT] = -1
         self.cell_of = np.zeros(n, np.int64)
         self.order = np.zeros(n, np.int64)
         self.cell_count = np.zeros(2 * n + 64, np.int64)
@@ -85,8 +84,10 @@ class State:
         old = {name: getattr(self, name, None) for name in ("index", "shear")}
         self.index = np.zeros(capacity, np.int32)
         self.shear = np.zeros(capacity)
-        self.tr_pair = np.zeros(capacity, np.int32)
-        self.tr_start[self.n] = -1      # derived from the list: rebuilt when next needed
+        self.cross_i = np.zeros(capacity, np.int32)
+        self.cross_k = np.zeros(capacity, np.int32)
+        self.cross_in = np.zeros(capacity, np.int32)
+        self.layout[K.L_BUILT] = -1      # derived from the list: rebuilt when next needed
         for name, arr in old.items():
             if arr is not None and keep:
                 getattr(self, name)[:keep] = arr[:keep]
@@ -141,4 +142,4 @@ class State:
                 if target.shape != source.shape:
                     raise ValueError(f"checkpoint array {name!r} has shape {source.shape}, scene has {target.shape}")
                 target[...] = source
-        self.tr_start[self.n] = -1
+        self.layout[K.L_BUILT] = -1

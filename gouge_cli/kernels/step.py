@@ -17,7 +17,7 @@ from numba import njit, prange
 
 from .. import NUMBA_CACHE
 from .contact import hertz_mindlin
-from .neighbors import build_neighbors, minimum_image, transpose
+from .neighbors import build_neighbors, minimum_image
 
 # params: float64 array
 DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \
@@ -38,18 +38,24 @@ COMPACTION, LOADING = 0, 1
 OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
 
 
-MAX_BLOCKS = 256
+MAX_BLOCKS = 256    # most row blocks of the force pass
+# layout: int64 (3 * MAX_BLOCKS + 4,): row bounds of the blocks, offsets of each block's outgoing
+# and incoming crossing pairs, and the block count it was built for (-1: stale, rebuild it)
+L_ROWS, L_OUT, L_IN, L_BUILT = 0, MAX_BLOCKS + 1, 2 * MAX_BLOCKS + 2, 3 * MAX_BLOCKS + 3
+N_LAYOUT = 3 * MAX_BLOCKS + 4
 
 
 @njit(cache=NUMBA_CACHE)
-def partition_rows(start, n, blocks, nb):
-    """Split grain rows 0..n into nb contiguous blocks of about equal pair counts:
-    block b is rows blocks[b]:blocks[b+1]. blocks: (MAX_BLOCKS + 1,) int64."""
+def block_layout(start, index, n, nb, layout, cross_i, cross_k, cross_in, scratch):
+    """Split grain rows into nb contiguous blocks of about equal pair counts and list the pairs
+    (i, j) whose j lies in a later block: cross_i/cross_k (row, slot) block by block in slot
+    order, and cross_in the same slots ordered by (j, slot). scratch: (N + 1,) int64."""
     npairs = start[n]
-    blocks[0] = 0
+    rows = layout[L_ROWS:L_ROWS + nb + 1]
+    rows[0] = 0
     for b in range(1, nb):
         target = (b * npairs) // nb
-        lo = blocks[b - 1]
+        lo = rows[b - 1]
         hi = n
         while lo < hi:                      # first row i with start[i] >= target
             mid = (lo + hi) // 2
@@ -57,8 +63,31 @@ def partition_rows(start, n, blocks, nb):
                 lo = mid + 1
             else:
                 hi = mid
-        blocks[b] = lo
-    blocks[nb] = n
+        rows[b] = lo
+    rows[nb] = n
+    for g in range(n + 1):
+        scratch[g] = 0
+    m = 0
+    for b in range(nb):
+        layout[L_OUT + b] = m
+        hi = rows[b + 1]
+        for i in range(rows[b], hi):
+            for k in range(start[i], start[i + 1]):
+                if index[k] >= hi:
+                    cross_i[m] = i
+                    cross_k[m] = k
+                    scratch[index[k] + 1] += 1
+                    m += 1
+    layout[L_OUT + nb] = m
+    for g in range(n):
+        scratch[g + 1] += scratch[g]
+    for b in range(nb + 1):
+        layout[L_IN + b] = scratch[rows[b]]
+    for q in range(m):                       # counting sort by j, stable in slot order
+        k = cross_k[q]
+        cross_in[scratch[index[k]]] = k
+        scratch[index[k]] += 1
+    layout[L_BUILT] = nb
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
@@ -81,18 +110,18 @@ def _pair(i, j, k, x, z, vx, vz, spin, radius, mass, shear, width, dt, c_n, c_t,
 
 
 @njit(parallel=True, cache=NUMBA_CACHE)
-def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, tr_start, tr_pair,
+def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_i, cross_k, cross_in,
                    pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque, drag_x, drag_z,
-                   blocks, params):
+                   layout, scratch, params):
     """force, torque (N,) = contact forces of all listed pairs (+ drag), in one fused pass.
 
     Summation order, the same for any thread count: grain g first receives the pairs where it
     is second (j), in increasing i, then subtracts its own row in list order, then adds drag.
-    One thread walks the rows in order and scatters to j. With nb blocks of rows, the pairs
-    whose j lies in a later block (few: grains are numbered by height) are computed first
-    into pair_* [force on j, torques]; each block then starts its grains from those (via the
-    transposed list) and runs the serial walk, reading the stored values for its own
-    block-crossing pairs. Shear history is updated in place (thesis Eqs. 8-11).
+    One thread walks the rows in order and scatters to j. With nb = params[THREADS] blocks of
+    rows (:func:`block_layout`), the few pairs whose j lies in a later block (neighbours have
+    nearby numbers) are computed first into pair_* [force on j, torques]; each block then
+    starts its grains from those and runs the serial walk, reading the stored values for its
+    own crossing pairs. Shear history is updated in place (thesis Eqs. 8-11).
     """
     n = x.shape[0]
     dt = params[DT]
@@ -103,41 +132,31 @@ def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, tr_sta
     friction = params[FRICTION]
     has_drag = drag_x.shape[0] == n
     nb = min(max(int(params[THREADS]), 1), MAX_BLOCKS, max(n, 1))
-    partition_rows(start, n, blocks, nb)
+    if layout[L_BUILT] != nb:
+        block_layout(start, index, n, nb, layout, cross_i, cross_k, cross_in, scratch)
     if nb > 1:
-        if tr_start[n] != start[n]:
-            transpose(start, index, tr_start, tr_pair, n)
         for b in prange(nb):
-            hi = blocks[b + 1]
-            for i in range(blocks[b], hi):
-                for k in range(start[i], start[i + 1]):
-                    j = index[k]
-                    if j >= hi:
-                        touching, fx, fz, ti, tj = _pair(i, j, k, x, z, vx, vz, spin, radius, mass, shear,
-                                                         width, dt, c_n, c_t, damping, friction)
-                        pair_fx[k] = fx
-                        pair_fz[k] = fz
-                        pair_ti[k] = ti
-                        pair_tj[k] = tj
+            for q in range(layout[L_OUT + b], layout[L_OUT + b + 1]):
+                k = cross_k[q]
+                touching, fx, fz, ti, tj = _pair(cross_i[q], index[k], k, x, z, vx, vz, spin, radius, mass,
+                                                 shear, width, dt, c_n, c_t, damping, friction)
+                pair_fx[k] = fx
+                pair_fz[k] = fz
+                pair_ti[k] = ti
+                pair_tj[k] = tj
     for b in prange(nb):
-        lo = blocks[b]
-        hi = blocks[b + 1]
-        first = start[lo]
+        lo = layout[L_ROWS + b]
+        hi = layout[L_ROWS + b + 1]
         for g in range(lo, hi):
-            fx = 0.0
-            fz = 0.0
-            ts = 0.0
-            if b > 0:
-                for m in range(tr_start[g], tr_start[g + 1]):
-                    k = tr_pair[m]
-                    if k >= first:
-                        break
-                    fx += pair_fx[k]
-                    fz += pair_fz[k]
-                    ts += pair_tj[k]
-            force_x[g] = fx
-            force_z[g] = fz
-            torque[g] = ts
+            force_x[g] = 0.0
+            force_z[g] = 0.0
+            torque[g] = 0.0
+        for q in range(layout[L_IN + b], layout[L_IN + b + 1]):
+            k = cross_in[q]
+            g = index[k]
+            force_x[g] += pair_fx[k]
+            force_z[g] += pair_fz[k]
+            torque[g] += pair_tj[k]
         for i in range(lo, hi):
             fxi = force_x[i]
             fzi = force_z[i]
@@ -259,11 +278,12 @@ def _kick_check(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_iner
 def compute_forces(grains, lists, pair, wall, params, drag_x, drag_z):
     """Contact (+ drag) forces on every grain and on the top wall at the current state."""
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top = grains
-    (start, index, shear, tr_start, tr_pair, x_build, z_build, new_start, new_index, new_shear, blocks,
+    (start, index, shear, cross_i, cross_k, cross_in, x_build, z_build, new_start, new_index, new_shear, layout,
      cell_of, order, cell_count) = lists
     pair_fx, pair_fz, pair_ti, pair_tj = pair
-    contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, tr_start, tr_pair,
-                   pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque, drag_x, drag_z, blocks, params)
+    contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_i, cross_k, cross_in,
+                   pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque, drag_x, drag_z, layout,
+                   new_start, params)
     wall_force(force_x, force_z, top, wall)
 
 
@@ -271,15 +291,15 @@ def compute_forces(grains, lists, pair, wall, params, drag_x, drag_z):
 def rebuild(grains, lists, params, counters):
     """Rebuild the neighbour list; False (and K_NEEDED_CAPACITY set) if it does not fit."""
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top = grains
-    (start, index, shear, tr_start, tr_pair, x_build, z_build, new_start, new_index, new_shear, blocks,
+    (start, index, shear, cross_i, cross_k, cross_in, x_build, z_build, new_start, new_index, new_shear, layout,
      cell_of, order, cell_count) = lists
     npairs = build_neighbors(x, z, radius, body, params[WIDTH], params[SKIN], start, index, shear,
                              new_start, new_index, new_shear, x_build, z_build, cell_of, order, cell_count,
-                             params[THREADS] <= 1.0)
+                             layout, params[THREADS] <= 1.0)
     if npairs < 0:
         counters[K_NEEDED_CAPACITY] = -npairs
         return False
-    tr_start[x.shape[0]] = -1       # transposed list stale; contact_forces rebuilds it if it needs it
+    layout[L_BUILT] = -1            # block layout stale; contact_forces rebuilds it
     counters[K_PAIRS] = npairs
     counters[K_REBUILDS] += 1
     counters[K_NEED_REBUILD] = 0
