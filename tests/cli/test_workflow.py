@@ -22,7 +22,7 @@ from gouge_cli.simulation import Simulation
 
 SCENE = {
     "name": "tiny",
-    "seed": 2,
+    "seed": 4,
     "packing": {"n_grains": 300, "width": 15},
     "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
     "numerics": {"dt_safety": 0.3},
