@@ -5,7 +5,13 @@ grains at each side, diameters uniform in [0.8, 1.2], E = 1, nu = 0.2, mu = 0.5,
 sigma = 3e-4 E, top wall dragged at 1e-3 v0 by a stiff spring, dt and skin as given):
 compaction, ~0.3 strain of pre-shear, then only the steady sheared phase is timed.
 Every thread count starts from the same pre-sheared state; their final states are
-compared bit for bit.
+compared bit for bit. Prepared states are cached (runs/bench/cache) per size, dt, skin and
+kernel version, since pre-shearing 160,000 grains takes minutes.
+
+Also measured: the cost of each part of a step (profile), numba runtime allocations per
+step (NRT statistics: two advances of different length from the same state), the fluid
+share of an undrained step, and the projected wall time of one loading cycle and of one
+slip of the thesis Run 24 scene (physics.md section 6) at the rates measured here.
 """
 
 from __future__ import annotations
@@ -20,11 +26,23 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import math
+
 import numba
 import numpy as np
 
-from .config import build_config
+import hashlib
+
+from . import __version__
+from .config import build_config, find_config, load_config
+from .kernels import step as K
 from .simulation import Simulation
+from .timestep import choose_dt
+
+CACHE = Path("runs/bench/cache")
+DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "packing.py", "simulation.py",
+               "state.py", "config.py", "timestep.py")     # (and bench_config below)
+RUN24_CYCLE = 1.6e7     # [t0] one loading cycle of thesis Run 24 (physics.md section 6)
 
 
 @dataclass
@@ -57,13 +75,36 @@ def state_bytes(sim: Simulation) -> int:
     return sum(v.nbytes for v in vars(s).values() if isinstance(v, np.ndarray))
 
 
-def prepare(n_grains: int, dt: float, skin: float) -> tuple[Simulation, dict]:
-    """Compacted and pre-sheared scene, and its state arrays for identical restarts."""
+def dry_digest() -> str:
+    """Hash of the sources a pre-sheared dry state depends on (the cache key)."""
+    h = hashlib.sha256(__version__.encode())
+    for name in DRY_SOURCES:
+        h.update((Path(__file__).parent / name).read_bytes())
+    return h.hexdigest()[:16]
+
+
+def prepare(n_grains: int, dt: float, skin: float, cache: Path | None = None) -> tuple[Simulation, dict]:
+    """Compacted and pre-sheared scene, and its state arrays for identical restarts; read from
+    / written to `cache` (a folder) when given."""
+    path = None
+    if cache is not None:
+        path = Path(cache) / f"prep_{n_grains}_{dt:g}_{skin:g}_{dry_digest()}.npz"
+        if path.is_file():
+            with np.load(path) as saved:
+                arrays = {k: saved[k] for k in saved.files}
+            sim = Simulation(bench_config(n_grains, dt, skin), arrays=arrays)
+            return sim, sim.state.arrays()
     sim = Simulation(bench_config(n_grains, dt, skin))
     sim.compact()
     sim.advance(int(80 * sim.state.width))
     sim.check()
-    return sim, sim.state.arrays()
+    start = sim.state.arrays()
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp.npz")
+        np.savez(tmp, **start)
+        os.replace(tmp, path)
+    return sim, start
 
 
 def time_gouge(sim: Simulation, start: dict, threads: int, steps: int, repeats: int) -> tuple[list[float], dict]:
@@ -123,44 +164,153 @@ def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability
             sim.advance(steps)
             rates[name].append(steps * sim.state.n / (time.perf_counter() - t0))
     dry_rate, wet_rate = float(np.median(rates["dry"])), float(np.median(rates["undrained"]))
-    return {"n_grains": n_grains, "threads": threads, "permeability": permeability,
+    return {"n_grains": n_grains, "threads": threads, "permeability": permeability, "dt": dt,
             "fluid_interval_steps": wet.fluid_interval, "grid": list(wet.fluid.pressure.shape),
             "rate_dry": dry_rate, "rate_undrained": wet_rate, "fluid_share": 1.0 - wet_rate / dry_rate}
 
 
+def allocations_per_step(sim: Simulation, start: dict, threads: int, steps: int = 400) -> float | None:
+    """numba runtime allocations per step: advance(steps) and advance(4 steps) from the same
+    state allocate the same fixed count per call (array arguments), so the difference / 3
+    steps is what the step loop allocates. None if NRT statistics are unavailable."""
+    try:
+        from numba.core.runtime import nrt
+        nrt._nrt.memsys_enable_stats()
+    except Exception:   # noqa: BLE001 - internal numba API; report unavailable instead
+        return None
+    sim.threads = threads
+    counts = []
+    for n in (steps, 4 * steps):
+        sim.state.restore(start)
+        before = nrt.rtsys.get_allocation_stats().alloc
+        sim.advance(n)
+        counts.append(nrt.rtsys.get_allocation_stats().alloc - before)
+    return (counts[1] - counts[0]) / (3 * steps)
+
+
+def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) -> dict:
+    """Microseconds per step in each part: fused contact pass, the two kicks, and the
+    neighbour rebuild (per rebuild, and amortised over the measured steps between rebuilds)."""
+    sim.threads = threads
+    s, p = sim.state, sim.params.copy()
+    p[K.THREADS] = threads
+    numba.set_num_threads(threads)
+    s.restore(start)
+    r0, k0 = int(s.counters[K.K_REBUILDS]), s.step
+    sim.advance(2000)
+    per_rebuild_steps = (s.step - k0) / max(1, int(s.counters[K.K_REBUILDS]) - r0)
+    g, lists, pairs = s.grains(), s.lists(), s.pairs()
+    (x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, fx, fz, tq, top) = g
+    xb, zb, flags = lists[K.L_X_BUILD], lists[K.L_Z_BUILD], lists[K.L_CELL_OF]
+    shear0 = s.shear.copy()
+    v0 = (s.vx.copy(), s.vz.copy(), s.spin.copy(), s.x.copy(), s.z.copy())
+
+    def timed(fn, n=repeats, reset=None):
+        best = math.inf
+        for _ in range(3):
+            total = 0.0
+            for _ in range(n):
+                if reset:
+                    reset()
+                t0 = time.perf_counter()
+                fn()
+                total += time.perf_counter() - t0
+            best = min(best, total / n)
+        return best * 1e6
+
+    def reset():
+        s.shear[:] = shear0
+        s.vx[:], s.vz[:], s.spin[:], s.x[:], s.z[:] = v0
+
+    out = {
+        "contact_forces": timed(lambda: K.compute_forces(g, lists, pairs, s.wall, p, *sim.drag), reset=reset),
+        "kick_drift": timed(lambda: K._kick_drift(x, z, vx, vz, spin, fx, fz, tq, inv_mass, inv_inertia, body, p),
+                            reset=reset),
+        "kick_check": timed(lambda: K._kick_check(x, z, vx, vz, spin, fx, fz, tq, inv_mass, inv_inertia, body, xb, zb,
+                                                  p, flags), reset=reset),
+        "rebuild_each": timed(lambda: K.rebuild(g, lists, p, s.counters), n=max(3, repeats // 10), reset=reset),
+        "steps_per_rebuild": per_rebuild_steps,
+    }
+    out["rebuild_per_step"] = out["rebuild_each"] / per_rebuild_steps
+    sim.threads = threads
+    s.restore(start)
+    t0 = time.perf_counter()
+    sim.advance(500)
+    out["whole_step"] = (time.perf_counter() - t0) / 500 * 1e6
+    s.restore(start)
+    return out
+
+
+def run24_projection(rates: dict) -> dict:
+    """Projected wall time of one Run 24 loading cycle (RUN24_CYCLE) and one slip
+    (pi sqrt(m_b / k)), from grain-steps/s measured at that scene's size and time step."""
+    config = load_config(find_config("thesis_run24_dry"))
+    sim = Simulation(config)
+    dt = choose_dt(config)
+    slip = math.pi * math.sqrt(sim.wall_mass_per_length / config.loading.spring_constant)
+    n = sim.state.n
+    out = {"n_grains": n, "dt": dt, "cycle_t0": RUN24_CYCLE, "slip_t0": slip, "by_threads": {}}
+    for threads, rate in rates.items():
+        out["by_threads"][threads] = {"rate": rate, "cycle_hours": RUN24_CYCLE / dt * n / rate / 3600,
+                                      "slip_minutes": slip / dt * n / rate / 60}
+    return out
+
+
 def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int = 3, dt: float = 0.89,
                   skin: float = 0.2, lammps: bool = True, lammps_styles=("granular", "hh"),
-                  permeability: float | None = 1e-5) -> dict:
+                  permeability: float | None = 1e-5, lammps_max: int = 40000, cache: Path | None = None,
+                  profile: bool = True, projection: bool = True) -> dict:
     all_threads = numba.config.NUMBA_NUM_THREADS
     threads = threads or sorted({1, all_threads})
     rows: list[BenchRow] = []
     fluid = []
+    profiles = []
+    allocations = []
+    run24 = None
     for n in sizes:
-        sim, start = prepare(n, dt, skin)
-        if permeability:
-            for t in threads:
-                fluid.append(fluid_share(n, start, dt, skin, permeability, t, steps, repeats))
+        sim, start = prepare(n, dt, skin, cache)
+        n_steps = max(min(steps, 500), steps * 10000 // max(n, 10000))      # about the same time per repeat
+        if permeability and n == 10000 or (permeability and len(sizes) == 1):
+            run24_dt = choose_dt(load_config(find_config("thesis_run24_dry")))
+            for step in (dt, run24_dt):
+                for t in threads:
+                    fluid.append(fluid_share(n, start, step, skin, permeability, t, steps, repeats))
         per_grain = state_bytes(sim) / sim.state.n
         reference = None
         for t in threads:
-            rates, final = time_gouge(sim, start, t, steps, repeats)
+            rates, final = time_gouge(sim, start, t, n_steps, repeats)
             if reference is None:
                 reference = final
             identical = all(np.array_equal(reference[k], final[k]) for k in reference)
-            rows.append(BenchRow("gouge", sim.state.n, t, steps, min(rates), float(np.median(rates)), max(rates),
+            rows.append(BenchRow("gouge", sim.state.n, t, n_steps, min(rates), float(np.median(rates)), max(rates),
                                  per_grain, identical))
-        if lammps:
+            allocations.append({"n_grains": n, "threads": t,
+                                "per_step": allocations_per_step(sim, start, t)})
+            if profile:
+                profiles.append({"n_grains": n, "threads": t, **profile_step(sim, start, t)})
+        if projection and n == 10000:
+            run24 = {}
+            for t in threads:
+                at_dt = Simulation(bench_config(n, choose_dt(load_config(find_config("thesis_run24_dry"))), skin),
+                                   arrays=start)
+                rates, _ = time_gouge(at_dt, start, t, steps, repeats)
+                run24[t] = float(np.median(rates))
+            run24 = run24_projection(run24)
+        if lammps and n <= lammps_max:
             for style in lammps_styles:
                 for t in threads:
-                    rate = time_lammps(n, t, steps, dt, skin, style)
+                    rate = time_lammps(n, t, n_steps, dt, skin, style)
                     if rate is not None:
-                        rows.append(BenchRow(f"lammps-{style}", n, t, steps, rate, rate, rate))
+                        rows.append(BenchRow(f"lammps-{style}", n, t, n_steps, rate, rate, rate))
     return {
         "machine": {"cpus": os.cpu_count(), "numba_threads": all_threads},
         "dt": dt, "skin": skin,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "rows": [asdict(r) for r in rows],
         "fluid": fluid,
+        "profile_us": profiles,
+        "allocations": allocations,
+        "run24": run24,
     }
 
 

@@ -68,6 +68,7 @@ class FluidGrid:
         self.state[kernels.S_Z_BOT] = z_bot
         self.state[kernels.S_Z_TOP] = z_top
         self._allocate_grid(self.nx, self.nz)
+        self.corners = np.zeros((6, self.n_grains))
         self.drag_x = np.zeros(self.n_grains)
         self.drag_z = np.zeros(self.n_grains)
 
@@ -82,6 +83,7 @@ class FluidGrid:
         self.permeability = np.zeros(shape)
         self.div_u = np.zeros(shape)
         self.work = np.zeros((kernels.N_WORK, nx, nz))
+        self.partial = np.zeros((kernels.DEPOSIT_GROUPS, 5, nx * nz))
 
     @classmethod
     def from_config(cls, fluid_config, Lx: float, z_bot: float, z_top: float, n_grains: int) -> "FluidGrid":
@@ -96,10 +98,10 @@ class FluidGrid:
                    explicit_safety=fluid_config.explicit_safety)
 
     def kernel_args(self) -> tuple:
-        """(params, state, P, s, s_old, ux, uz, permeability, div_u, work, drag_x, drag_z)."""
+        """(params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z)."""
         return (self.params, self.state, self.pressure, self.solid_fraction, self.previous_solid_fraction,
                 self.solid_velocity_x, self.solid_velocity_z, self.permeability, self.div_u, self.work,
-                self.drag_x, self.drag_z)
+                self.corners, self.partial, self.drag_x, self.drag_z)
 
     def arrays(self) -> dict:
         """Copies of the evolving arrays (EVOLVING) for a checkpoint."""

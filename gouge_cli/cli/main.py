@@ -174,43 +174,76 @@ def show_config(
 
 @app.command()
 def bench(
-    sizes: str = typer.Option("10000", help="comma-separated grain counts"),
+    sizes: str = typer.Option("2500,10000,40000,160000", help="comma-separated grain counts"),
     threads: str = typer.Option("", help="comma-separated thread counts (default: 1 and all cores)"),
-    steps: int = typer.Option(5000, help="timed steps per repeat"),
+    steps: int = typer.Option(5000, help="timed steps per repeat at <= 10,000 grains (fewer above, "
+                              "for about the same time per repeat)"),
     repeats: int = typer.Option(3, help="repeats (min/median/max reported)"),
     dt: float = typer.Option(0.89, help="time step [t0] (LAMMPS deck default)"),
     skin: float = typer.Option(0.2, help="Verlet skin [d]"),
     lammps: bool = typer.Option(True, help="also time LAMMPS (shared/bench deck) where lmp is installed"),
-    perm: float = typer.Option(1e-5, "--perm", help="also time the undrained scene (implicit fluid, this "
-                               "kappa_c) and report the fluid share of a step; 0 to skip"),
+    lammps_max: int = typer.Option(40000, help="largest N timed in LAMMPS (its set-up of 160,000 grains "
+                                   "takes about 20 minutes)"),
+    perm: float = typer.Option(1e-5, "--perm", help="also time the undrained 10,000-grain scene (implicit "
+                               "fluid, this kappa_c) and report the fluid share of a step; 0 to skip"),
+    profile: bool = typer.Option(True, help="time each part of a step"),
+    cache: Path = typer.Option(Path("runs/bench/cache"), help="folder for pre-sheared states ('' for none)"),
     json_out: Path = typer.Option(Path("runs/bench/bench.json"), "--json", help="where to write the JSON results"),
 ):
-    """Grain-steps per second on the sheared layer (steady shear only), 1 and all cores, vs LAMMPS."""
+    """Grain-steps per second on the sheared layer (steady shear only), 1 and all cores, vs LAMMPS;
+    per-part profile, allocations per step, fluid share, projected thesis Run 24 wall times."""
     from rich.table import Table
 
     from ..bench import run_benchmark, write_results
 
     size_list = [int(v) for v in sizes.split(",") if v]
     thread_list = [int(v) for v in threads.split(",") if v] or None
-    results = run_benchmark(size_list, thread_list, steps, repeats, dt, skin, lammps, permeability=perm or None)
+    results = run_benchmark(size_list, thread_list, steps, repeats, dt, skin, lammps, permeability=perm or None,
+                            lammps_max=lammps_max, cache=cache if str(cache) else None, profile=profile)
     write_results(results, json_out)
     table = Table(title=f"grain-steps per second (dt {dt}, skin {skin}; steady shear)")
-    for col in ("code", "N", "threads", "min", "median", "max", "bytes/grain", "bitwise = 1 thread", "gouge / this"):
+    for col in ("code", "N", "threads", "steps", "min", "median", "max", "bytes/grain", "bitwise = 1 thread",
+                "gouge / this"):
         table.add_column(col, justify="right")
     ours = {(r["n_grains"], r["threads"]): r["rate_median"] for r in results["rows"] if r["code"] == "gouge"}
     for r in results["rows"]:
         mine = ours.get((r["n_grains"], r["threads"]))
         ratio = f"{mine / r['rate_median']:.2f}" if mine and r["code"] != "gouge" else ""
-        table.add_row(r["code"], str(r["n_grains"]), str(r["threads"]), f"{r['rate_min']:.3g}",
+        table.add_row(r["code"], str(r["n_grains"]), str(r["threads"]), str(r["steps"]), f"{r['rate_min']:.3g}",
                       f"{r['rate_median']:.3g}", f"{r['rate_max']:.3g}",
                       f"{r['bytes_per_grain']:.0f}" if r["bytes_per_grain"] else "",
                       {None: "", True: "yes", False: "NO"}[r["identical_to_1_thread"]], ratio)
     out.print(table)
+    for t in sorted({r["threads"] for r in results["rows"] if r["code"] == "gouge"}):
+        rates = [r["rate_median"] for r in results["rows"] if r["code"] == "gouge" and r["threads"] == t]
+        if len(rates) > 1:
+            out.print(f"{t} thread(s): fastest / slowest size {max(rates) / min(rates):.2f}", highlight=False)
+    if results["profile_us"]:
+        prof = Table(title="microseconds per step, by part (best of 3 x 50 calls)")
+        for col in ("N", "threads", "contact pass", "kick+drift", "kick+check", "rebuild (each)", "steps/rebuild",
+                    "rebuild/step", "whole step"):
+            prof.add_column(col, justify="right")
+        for r in results["profile_us"]:
+            prof.add_row(str(r["n_grains"]), str(r["threads"]), f"{r['contact_forces']:.0f}", f"{r['kick_drift']:.0f}",
+                         f"{r['kick_check']:.0f}", f"{r['rebuild_each']:.0f}", f"{r['steps_per_rebuild']:.0f}",
+                         f"{r['rebuild_per_step']:.0f}", f"{r['whole_step']:.0f}")
+        out.print(prof)
+    for a in results["allocations"]:
+        per = "unavailable" if a["per_step"] is None else f"{a['per_step']:g}"
+        out.print(f"numba runtime allocations per step, N {a['n_grains']}, {a['threads']} thread(s): {per}",
+                  highlight=False)
     for f in results["fluid"]:
-        out.print(f"undrained (kappa_c {f['permeability']:g}, grid {f['grid'][0]}x{f['grid'][1]}, fluid update every "
-                  f"{f['fluid_interval_steps']} steps), N {f['n_grains']}, {f['threads']} thread(s): "
-                  f"{f['rate_undrained']:.3g} vs dry {f['rate_dry']:.3g} grain-steps/s, fluid share of a step "
-                  f"{100 * f['fluid_share']:.1f} %", highlight=False)
+        out.print(f"undrained (kappa_c {f['permeability']:g}, grid {f['grid'][0]}x{f['grid'][1]}, dt {f['dt']:.3g}, "
+                  f"fluid update every {f['fluid_interval_steps']} steps), N {f['n_grains']}, {f['threads']} "
+                  f"thread(s): {f['rate_undrained']:.3g} vs dry {f['rate_dry']:.3g} grain-steps/s, fluid share of a "
+                  f"step {100 * f['fluid_share']:.1f} %", highlight=False)
+    r24 = results["run24"]
+    if r24:
+        for t, v in r24["by_threads"].items():
+            out.print(f"thesis Run 24 ({r24['n_grains']} grains, dt {r24['dt']:.3g} t0), {t} thread(s) at "
+                      f"{v['rate']:.3g} grain-steps/s: one loading cycle ({r24['cycle_t0']:.2g} t0) "
+                      f"{v['cycle_hours']:.1f} h, one slip ({r24['slip_t0']:.3g} t0) {v['slip_minutes']:.1f} min",
+                      highlight=False)
     out.print(f"peak RSS {results['peak_rss_mb']:.0f} MB; results in {json_out}")
 
 

@@ -19,7 +19,7 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     FluidGrid.kernel_args() without drag. Returns (FLUID_FAILED, steps) with fluid_status[0]
     set if the fluid update fails."""
     x, z, vx, vz, radius = grains[0], grains[1], grains[2], grains[3], grains[5]
-    fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work = fluid
+    fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work, corners, partial = fluid
     n = x.shape[0]
     dt_f = interval * params[DT]
     for st in range(nsteps):
@@ -29,7 +29,8 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
         _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z)
         if counters[K_STEP] % interval == 0:
             status = fluid_update(x, z, vx, vz, radius, n, params[WIDTH], z_bottom, wall[W_Z], dt_f,
-                                  fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work, drag_x, drag_z)
+                                  fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work, corners, partial,
+                                  drag_x, drag_z)
             if status != 0:
                 fluid_status[0] = status
                 return FLUID_FAILED, st + 1

@@ -83,6 +83,8 @@ state  : float64[N_STATE]   indices S_* below; S_Z_BOT/S_Z_TOP are the planes at
                             the last update and must be checkpointed with P and s
 P, s, s_old, ux, uz, permeability, div_u : float64[nx, nz]
 work   : float64[N_WORK, nx, nz]   scratch, indices W_* below
+corners : float64[6, N]            per-grain deposit cells and areas (see deposit), reused for the drag
+partial : float64[DEPOSIT_GROUPS, 5, nx * nz]   per-group deposit sums (see deposit)
 drag_x, drag_z : float64[N]        force on each grain [E d^2]
 
 Status: STATUS_OK 0; STATUS_SOLVER 1 (CG not converged in max_iter: P is the
@@ -233,8 +235,12 @@ def corner_shares(area, i0, i1, j0, fx, fz, nz):
             a0 * (1.0 - fx), a0 * fx, a1 * (1.0 - fx), a1 * fx)
 
 
-@njit(cache=True)
-def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z):
+DEPOSIT_GROUPS = 4     # grains deposit in this many fixed groups, summed in group order
+
+
+@njit(cache=True, parallel=True)
+def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
+            corners=None, partial=None):
     """Solid fraction, its kernel-consistent gradient and the grid-relative solid velocity.
 
     x, z, vx, vz, radius : float64[>= n] grain centres [d], velocities [v0], radii [d]
@@ -246,30 +252,80 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  [1/d]: the derivative of s_c with respect to the cell position,
                  so that moving every grain by delta changes s by -delta . grad_s
                  to first order (a rigid translation generates no source).
+    corners : float64[6, >= n] out (optional), per grain: flat indices c00, c10 of its
+                 corner cells and the areas a00, a10, a01, a11 they receive (c00 = -1 for
+                 a grain outside the layer), reused by grain_drag_at for the drag.
+    partial : float64[DEPOSIT_GROUPS, 5, nx * nz] scratch (optional): the grains deposit
+                 in DEPOSIT_GROUPS fixed groups (in parallel), summed in group order, so
+                 the result is the same for any thread count. Without it, one serial pass.
     """
     nx, nz = s.shape
-    thickness = z_top - z_bot
-    inv_dx = nx / Lx
-    inv_dz = nz / thickness
-    grid_strain_rate = (w_top - w_bot) / thickness
     size = nx * nz
+    if partial is None:
+        _deposit_range(x, z, vx, vz, radius, 0, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz,
+                       s.reshape(size), ux.reshape(size), uz_rel.reshape(size), grad_s_x.reshape(size),
+                       grad_s_z.reshape(size), corners)
+        _normalise(nx, nz, Lx, z_bot, z_top, s.reshape(size), ux.reshape(size), uz_rel.reshape(size),
+                   grad_s_x.reshape(size), grad_s_z.reshape(size))
+        return
+    for g in prange(DEPOSIT_GROUPS):
+        part = partial[g]
+        _deposit_range(x, z, vx, vz, radius, g * n // DEPOSIT_GROUPS, (g + 1) * n // DEPOSIT_GROUPS, Lx,
+                       z_bot, z_top, w_bot, w_top, nx, nz, part[0], part[1], part[2], part[3], part[4], corners)
     solid = s.reshape(size)
     momentum_x = ux.reshape(size)
     momentum_z = uz_rel.reshape(size)
     slope_x = grad_s_x.reshape(size)
     slope_z = grad_s_z.reshape(size)
-    for c in range(size):
+    for c in prange(size):
+        a = 0.0
+        b = 0.0
+        d = 0.0
+        e = 0.0
+        f = 0.0
+        for g in range(DEPOSIT_GROUPS):
+            a += partial[g, 0, c]
+            b += partial[g, 1, c]
+            d += partial[g, 2, c]
+            e += partial[g, 3, c]
+            f += partial[g, 4, c]
+        solid[c] = a
+        momentum_x[c] = b
+        momentum_z[c] = d
+        slope_x[c] = e
+        slope_z[c] = f
+    _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x, slope_z)
+
+
+@njit(cache=True)
+def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w_top, nx, nz,
+                   solid, momentum_x, momentum_z, slope_x, slope_z, corners):
+    """Raw sums of grains first:last into the flat (nx * nz,) grids (zeroed first)."""
+    thickness = z_top - z_bot
+    inv_dx = nx / Lx
+    inv_dz = nz / thickness
+    grid_strain_rate = (w_top - w_bot) / thickness
+    for c in range(nx * nz):
         solid[c] = 0.0
         momentum_x[c] = 0.0
         momentum_z[c] = 0.0
         slope_x[c] = 0.0
         slope_z[c] = 0.0
-    for k in range(n):
+    for k in range(first, last):
         area = grain_area(z[k], radius[k], z_bot, z_top)
         if area <= 0.0:
+            if corners is not None:
+                corners[0, k] = -1.0
             continue
         i0, i1, j0, fx, fz, dfz = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
         c00, c10, c01, c11, a00, a10, a01, a11 = corner_shares(area, i0, i1, j0, fx, fz, nz)
+        if corners is not None:
+            corners[0, k] = c00
+            corners[1, k] = c10
+            corners[2, k] = a00
+            corners[3, k] = a10
+            corners[4, k] = a01
+            corners[5, k] = a11
         a0 = area * (1.0 - fz)
         a1 = area * fz
         vxk = vx[k]
@@ -298,8 +354,13 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
         slope_z[c01] -= gz0
         slope_z[c10] += gz1
         slope_z[c11] -= gz1
-    inv_area = inv_dx * inv_dz
-    for c in range(size):
+
+
+@njit(cache=True)
+def _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x, slope_z):
+    """Raw sums -> s, mean velocities and slopes (see deposit)."""
+    inv_area = nx / Lx * nz / (z_top - z_bot)
+    for c in range(nx * nz):
         if solid[c] > 0.0:
             momentum_x[c] /= solid[c]
             momentum_z[c] /= solid[c]
@@ -598,6 +659,30 @@ def grain_drag(x, z, radius, n, Lx, z_bot, z_top, fx, fz, drag_x, drag_z):
         drag_z[k] = a00 * flat_z[c00] + a10 * flat_z[c10] + a01 * flat_z[c01] + a11 * flat_z[c11]
 
 
+@njit(cache=True, parallel=True)
+def grain_drag_at(corners, n, fx, fz, drag_x, drag_z):
+    """grain_drag with the corner cells and areas the deposit stored (same positions): the
+    same values, without recomputing areas and weights."""
+    nx, nz = fx.shape
+    flat_x = fx.reshape(nx * nz)
+    flat_z = fz.reshape(nx * nz)
+    for k in prange(n):
+        if corners[0, k] < 0.0:
+            drag_x[k] = 0.0
+            drag_z[k] = 0.0
+            continue
+        c00 = np.uint64(corners[0, k])
+        c10 = np.uint64(corners[1, k])
+        a00 = corners[2, k]
+        a10 = corners[3, k]
+        a01 = corners[4, k]
+        a11 = corners[5, k]
+        c01 = c00 + np.uint64(1)
+        c11 = c10 + np.uint64(1)
+        drag_x[k] = a00 * flat_x[c00] + a10 * flat_x[c10] + a01 * flat_x[c01] + a11 * flat_x[c11]
+        drag_z[k] = a00 * flat_z[c00] + a10 * flat_z[c10] + a01 * flat_z[c01] + a11 * flat_z[c11]
+
+
 @njit(cache=True)
 def _all_finite(P):
     nx, nz = P.shape
@@ -609,7 +694,7 @@ def _all_finite(P):
 
 
 @njit(cache=True)
-def _finish(x, z, radius, n, Lx, z_bot, z_top, P, s, uz, work, drag_x, drag_z, w_bot, w_top):
+def _finish(n, Lx, z_bot, z_top, P, s, uz, work, corners, drag_x, drag_z, w_bot, w_top):
     """Absolute uz, finiteness check, gradient and drag; returns a status."""
     nx, nz = P.shape
     dx = Lx / nx
@@ -624,13 +709,13 @@ def _finish(x, z, radius, n, Lx, z_bot, z_top, P, s, uz, work, drag_x, drag_z, w
         return STATUS_NONFINITE
     pressure_gradient(P, dx, dz, 0.0, 0.0, work[W_GX], work[W_GZ])
     drag_density(work[W_GX], work[W_GZ], s, work[W_FX], work[W_FZ])
-    grain_drag(x, z, radius, n, Lx, z_bot, z_top, work[W_FX], work[W_FZ], drag_x, drag_z)
+    grain_drag_at(corners, n, work[W_FX], work[W_FZ], drag_x, drag_z)
     return STATUS_OK
 
 
 @njit(cache=True)
 def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
-               params, state, P, s, s_old, ux, uz, permeability, div_u, work, drag_x, drag_z):
+               params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z):
     """Deposit the initial solid fraction and set the drag of the current P.
 
     Call once before the first fluid_update (and after a restart that does not
@@ -639,7 +724,7 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
     """
     if not (z_top > z_bot):
         return STATUS_SOLVER
-    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, 0.0, 0.0, s, ux, uz, work[W_SX], work[W_SZ])
+    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, 0.0, 0.0, s, ux, uz, work[W_SX], work[W_SZ], corners, partial)
     nx, nz = s.shape
     for i in range(nx):
         for j in range(nz):
@@ -653,24 +738,24 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
     state[S_RESIDUAL] = 0.0
     state[S_SUBSTEPS] = 0.0
     state[S_UPDATES] = 0.0
-    return _finish(x, z, radius, n, Lx, z_bot, z_top, P, s, uz, work, drag_x, drag_z, 0.0, 0.0)
+    return _finish(n, Lx, z_bot, z_top, P, s, uz, work, corners, drag_x, drag_z, 0.0, 0.0)
 
 
 @njit(cache=True)
 def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
-                 params, state, P, s, s_old, ux, uz, permeability, div_u, work, drag_x, drag_z):
+                 params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z):
     """Advance the pore pressure by one fluid step and set the drag on every grain.
 
     x, z, vx, vz, radius : float64[>= n] grain state (x may lie outside [0, Lx))
     n : number of grains;  Lx : periodic width [d]
     z_bot, z_top : wall planes now [d] (mean z of the wall-grain centres)
     dt_f : time since the last fluid update [t0]
-    params, state, P, s, s_old, ux, uz, permeability, div_u, work : see module doc
+    params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial : see module doc
         (FluidGrid.kernel_args() returns them in this order, followed by drag_x, drag_z)
     drag_x, drag_z : out, float64[>= n] fluid force per grain [E d^2], to be added
         to the contact forces until the next update.
 
-    Order: deposit s^{n+1} and u_rel; exact undrained source -> P*; Carman-Kozeny
+    Order: deposit s^{n+1} and u_rel (keeping each grain's corner cells and areas in corners); exact undrained source -> P*; Carman-Kozeny
     permeability from s^{n+1}; conductances with (1 + beta P^n); implicit or
     explicit diffusion over dt_f; grad P and drag. Returns a status (module doc).
     """
@@ -686,7 +771,7 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
     for i in range(nx):
         for j in range(nz):
             s_old[i, j] = s[i, j]
-    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[W_SX], work[W_SZ])
+    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[W_SX], work[W_SZ], corners, partial)
     p_star = work[W_RHS]
     undrained_source(P, s, s_old, ux, uz, work[W_SX], work[W_SZ], dt_f, beta,
                      1.0 - params[P_PHI_MAX], 1.0 - params[P_PHI_MIN], p_star, div_u)
@@ -734,7 +819,7 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
     state[S_Z_BOT] = z_bot
     state[S_Z_TOP] = z_top
     state[S_UPDATES] += 1.0
-    finish = _finish(x, z, radius, n, Lx, z_bot, z_top, P, s, uz, work, drag_x, drag_z, w_bot, w_top)
+    finish = _finish(n, Lx, z_bot, z_top, P, s, uz, work, corners, drag_x, drag_z, w_bot, w_top)
     if finish != STATUS_OK:
         return finish
     return status

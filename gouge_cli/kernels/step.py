@@ -40,12 +40,12 @@ OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
 
 MAX_BLOCKS = 256    # most row blocks of the force pass
 # layout: int64 (N_LAYOUT,): row bounds of the blocks, offsets of each block's outgoing
-# and incoming crossing pairs, the block count it was built for (-1: stale, rebuild it), then
-# scratch for per-chunk counts
-L_ROWS, L_OUT, L_IN, L_BUILT, L_SCRATCH = 0, MAX_BLOCKS + 1, 2 * MAX_BLOCKS + 2, 3 * MAX_BLOCKS + 3, 3 * MAX_BLOCKS + 4
-KICK_CHUNKS = 64
-N_LAYOUT = L_SCRATCH + KICK_CHUNKS
-L_X_BUILD, L_Z_BUILD, L_LAYOUT = 6, 7, 11   # positions in the lists tuple (state.LIST_FIELDS)
+# and incoming crossing pairs, and the block count it was built for (-1: stale, rebuild it)
+L_ROWS, L_OUT, L_IN, L_BUILT = 0, MAX_BLOCKS + 1, 2 * MAX_BLOCKS + 2, 3 * MAX_BLOCKS + 3
+N_LAYOUT = 3 * MAX_BLOCKS + 4
+# positions in the lists tuple (state.LIST_FIELDS); cell_of is rebuild scratch, and between
+# rebuilds holds the per-grain flags of the skin check
+L_X_BUILD, L_Z_BUILD, L_LAYOUT, L_CELL_OF = 6, 7, 11, 12
 
 
 @njit(cache=NUMBA_CACHE)
@@ -253,7 +253,7 @@ def _kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_iner
 def _kick_check(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
                 x_build, z_build, params, late):
     """Second half kick; returns how many grains might move past skin/2 in the next drift.
-    late: (KICK_CHUNKS,) int64 scratch (a prange reduction would allocate on every call)."""
+    late: (N,) int64 scratch for per-grain flags (a prange reduction would allocate per call)."""
     n = x.shape[0]
     dt = params[DT]
     half = 0.5 * dt
@@ -261,25 +261,21 @@ def _kick_check(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_iner
     damp = params[BG_DAMPING]
     reach = 0.5 * params[SKIN]
     reach2 = reach * reach
-    for c in prange(KICK_CHUNKS):
-        count = 0
-        for i in range(c * n // KICK_CHUNKS, (c + 1) * n // KICK_CHUNKS):
-            ax = 0.0
-            az = 0.0
-            if body[i] == 0:
-                ax = force_x[i] * inv_mass[i] - damp * vx[i]
-                az = force_z[i] * inv_mass[i] - damp * vz[i]
-                vx[i] += half * ax
-                vz[i] += half * az
-                spin[i] += half * (torque[i] * inv_inertia[i] - damp * spin[i])
-            dx = minimum_image(x[i] - x_build[i], width) + dt * (vx[i] + half * ax)
-            dz = z[i] - z_build[i] + dt * (vz[i] + half * az)
-            if dx * dx + dz * dz > reach2:
-                count += 1
-        late[c] = count
+    for i in prange(n):
+        ax = 0.0
+        az = 0.0
+        if body[i] == 0:
+            ax = force_x[i] * inv_mass[i] - damp * vx[i]
+            az = force_z[i] * inv_mass[i] - damp * vz[i]
+            vx[i] += half * ax
+            vz[i] += half * az
+            spin[i] += half * (torque[i] * inv_inertia[i] - damp * spin[i])
+        dx = minimum_image(x[i] - x_build[i], width) + dt * (vx[i] + half * ax)
+        dz = z[i] - z_build[i] + dt * (vz[i] + half * az)
+        late[i] = dx * dx + dz * dz > reach2
     total = 0
-    for c in range(KICK_CHUNKS):
-        total += late[c]
+    for i in range(n):
+        total += late[i]
     return total
 
 
@@ -333,7 +329,7 @@ def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z):
     _wall_kick(wall, clock, params)
     _set_wall_grain_velocity(vx, vz, spin, top, wall)
     late = _kick_check(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                       x_build, z_build, params, lists[L_LAYOUT][L_SCRATCH:L_SCRATCH + KICK_CHUNKS])
+                       x_build, z_build, params, lists[L_CELL_OF])
     if late > 0:
         counters[K_NEED_REBUILD] = 1
     counters[K_STEP] += 1

@@ -24,7 +24,11 @@ def test_benchmark_runs_on_a_tiny_scene():
         assert r["rate_min"] > 0 and r["bytes_per_grain"] > 100
         assert r["identical_to_1_thread"] is True
     shares = results["fluid"]
-    assert len(shares) == 2 and all(0.0 < s["rate_undrained"] for s in shares)
+    assert len(shares) == 4 and all(0.0 < s["rate_undrained"] for s in shares)   # bench dt and Run 24 dt
+    assert {s["fluid_interval_steps"] for s in shares} == {1, 3}
+    assert [a["per_step"] for a in results["allocations"]] == [0.0, 0.0]   # nothing allocated in the step loop
+    for prof in results["profile_us"]:
+        assert 0 < prof["contact_forces"] < prof["whole_step"] and prof["steps_per_rebuild"] > 5
 
 
 def test_batch_script_forks_every_slip(tmp_path):

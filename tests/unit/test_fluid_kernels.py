@@ -50,6 +50,41 @@ def _grains(seed=0, n=130, width=12.0, z_bot=0.5, z_top=10.5):
     return x, z, radius
 
 
+def test_grouped_deposit_and_cached_drag():
+    """The grouped (parallel) deposit equals the serial pass to round-off and gives the same bits
+    for 1 and 2 threads; the drag from the cached corner cells equals grain_drag bit for bit."""
+    import numba
+
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains(seed=3, n=400)
+    z[:3] = z_top + 1.0                         # outside the layer: no deposit, no drag
+    rng = np.random.default_rng(4)
+    vx, vz = rng.normal(0, 1e-3, x.size), rng.normal(0, 1e-3, x.size)
+    serial = [np.empty((5, 4)) for _ in range(5)]
+    kernels.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *serial)
+    grouped = []
+    corners = np.zeros((6, x.size))
+    for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+        numba.set_num_threads(threads)
+        out = [np.empty((5, 4)) for _ in range(5)]
+        partial = np.zeros((kernels.DEPOSIT_GROUPS, 5, 20))
+        kernels.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial)
+        grouped.append(out)
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    for a, b in zip(grouped[0], grouped[1]):
+        assert a.tobytes() == b.tobytes()
+    for a, b in zip(serial, grouped[0]):
+        assert np.allclose(a, b, rtol=1e-13, atol=1e-15 * np.abs(a).max())
+    assert np.sum(corners[0] < 0) == np.sum([kernels.in_domain_area(zk, rk, z_bot, z_top) <= 0
+                                             for zk, rk in zip(z, radius)]) > 0
+    fx, fz = rng.normal(size=(2, 5, 4))
+    expected = np.zeros((2, x.size))
+    cached = np.zeros((2, x.size))
+    kernels.grain_drag(x, z, radius, x.size, width, z_bot, z_top, fx, fz, expected[0], expected[1])
+    kernels.grain_drag_at(corners, x.size, fx, fz, cached[0], cached[1])
+    assert expected.tobytes() == cached.tobytes() and np.abs(expected).max() > 0
+
+
 def test_deposit_conserves_area_and_is_periodic():
     width, z_bot, z_top = 12.0, 0.5, 10.5
     x, z, radius = _grains()
@@ -182,7 +217,7 @@ def test_from_config_and_kernel_args():
     assert grid.pressure.shape == (80, 20) and grid.drag_x.shape == (10_000,)
     assert grid.params[kernels.P_KAPPA_C] == 1e-5
     assert grid.params[kernels.P_SOLVER] == kernels.SOLVER_IMPLICIT
-    assert len(grid.kernel_args()) == 12
+    assert len(grid.kernel_args()) == 14
     thin = FluidGrid.from_config(FluidConfig(cell_size=20.0), 5.0, 0.0, 3.0, 4)
     assert (thin.nx, thin.nz) == (1, 2)
     explicit = FluidGrid.from_config(FluidConfig(solver="explicit"), 20.0, 0.0, 10.0, 4)
