@@ -131,7 +131,7 @@ class NumericsConfig(_Section):
     skin: float = Field(0.2, gt=0, le=2.0, description="Verlet skin [d]")
     threads: int = Field(
         0, ge=0, le=1024,
-        description="numba threads; 0 = auto: 1 below 4000 grains (parallel regions cost more than they "
+        description="numba threads; 0 = auto: 1 below 2000 grains (parallel regions cost more than they "
                     "save there), else all cores")
 
 

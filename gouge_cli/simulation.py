@@ -23,7 +23,7 @@ from .state import State
 from .timestep import choose_dt, contact_constants
 
 _EMPTY = np.zeros(0)
-AUTO_PARALLEL_MIN_GRAINS = 4000
+AUTO_PARALLEL_MIN_GRAINS = 2000
 
 
 def build_params(config: Config, dt: float, width: float, wall_mass: float) -> np.ndarray:

@@ -73,7 +73,7 @@ class State:
         self.cell_count = np.zeros(2 * n + 64, np.int64)
         self.x_build = self.x.copy()
         self.z_build = self.z.copy()
-        self._allocate_pairs(8 * n + 64)
+        self._allocate_pairs(4 * n + 64)     # ~2.5 listed pairs per grain in a dense layer; grows if needed
         self.counters[K.K_NEED_REBUILD] = 1
         if self.top.size:
             self.wall[K.W_Z] = self.z[self.top].mean()
