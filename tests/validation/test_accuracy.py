@@ -18,7 +18,7 @@ from gouge_cli.accuracy import (analytic_ladders, fit_order, prepare_start, run_
 from gouge_cli.cli.main import EXIT_BAD_INPUT, app
 from gouge_cli.config import build_config
 
-TINY = {"name": "tiny", "seed": 7, "packing": {"n_grains": 300, "width": 15},
+TINY = {"name": "tiny", "seed": 11, "packing": {"n_grains": 300, "width": 15},
         "loading": {"spring_constant": 2e-4, "velocity": 4e-5}, "numerics": {"dt_safety": 0.3},
         "run": {"duration": 80000}}
 

@@ -46,7 +46,7 @@ def second_half(series, name):
 
 
 def check_stiff_grains(sim, s):
-    sane(s, overlap=0.02, kinetic=1e-5, tau=(-0.1, 0.5))
+    sane(s, overlap=0.02, kinetic=5e-5, tau=(-0.1, 0.5))      # slip bursts reach ~1e-5
     assert s["time"][0] < sim.config.compaction.max_time        # compaction settled, did not give up
 
 
