@@ -94,20 +94,22 @@ def block_layout(start, index, n, nb, layout, cross_i, cross_k, cross_in, scratc
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
-def _pair(i, j, k, x, z, vx, vz, spin, radius, mass, shear, width, dt, c_n, c_t, damping, friction):
-    """hertz_mindlin for listed pair slot k = (i, j), updating shear[k]; touching flag first."""
-    dx = minimum_image(x[j] - x[i], width)
-    dz = z[j] - z[i]
-    rsum = radius[i] + radius[j]
+def _pair(xi, zi, vxi, vzi, wi, ri, mi, j, k, x, z, vx, vz, spin, radius, mass, shear, width, dt, c_n, c_t,
+          damping, friction):
+    """hertz_mindlin for listed pair slot k = (i, j) (grain i's values passed in), updating
+    shear[k]; touching flag first."""
+    dx = minimum_image(x[j] - xi, width)
+    dz = z[j] - zi
+    rj = radius[j]
+    rsum = ri + rj
     if dx * dx + dz * dz >= rsum * rsum:
         if shear[k] != 0.0:
             shear[k] = 0.0
         return False, 0.0, 0.0, 0.0, 0.0
-    mi = mass[i]
     mj = mass[j]
     fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
-        dx, dz, vx[j] - vx[i], vz[j] - vz[i], spin[i], spin[j], radius[i], radius[j],
-        mi * mj / (mi + mj), shear[k], dt, c_n, c_t, damping, friction)
+        dx, dz, vx[j] - vxi, vz[j] - vzi, wi, spin[j], ri, rj, mi * mj / (mi + mj), shear[k], dt,
+        c_n, c_t, damping, friction)
     shear[k] = ds
     return True, fx, fz, ti, tj
 
@@ -141,8 +143,10 @@ def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_
         for b in prange(nb):
             for q in range(layout[L_OUT + b], layout[L_OUT + b + 1]):
                 k = cross_k[q]
-                touching, fx, fz, ti, tj = _pair(cross_i[q], index[k], k, x, z, vx, vz, spin, radius, mass,
-                                                 shear, width, dt, c_n, c_t, damping, friction)
+                i = cross_i[q]
+                touching, fx, fz, ti, tj = _pair(x[i], z[i], vx[i], vz[i], spin[i], radius[i], mass[i], index[k], k,
+                                                 x, z, vx, vz, spin, radius, mass, shear, width, dt, c_n, c_t,
+                                                 damping, friction)
                 pair_fx[k] = fx
                 pair_fz[k] = fz
                 pair_ti[k] = ti
@@ -161,6 +165,13 @@ def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_
             force_z[g] += pair_fz[k]
             torque[g] += pair_tj[k]
         for i in range(lo, hi):
+            xi = x[i]
+            zi = z[i]
+            vxi = vx[i]
+            vzi = vz[i]
+            wi = spin[i]
+            ri = radius[i]
+            mi = mass[i]
             fxi = force_x[i]
             fzi = force_z[i]
             tsi = torque[i]
@@ -171,8 +182,8 @@ def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_
                     fzi -= pair_fz[k]
                     tsi += pair_ti[k]
                     continue
-                touching, fx, fz, ti, tj = _pair(i, j, k, x, z, vx, vz, spin, radius, mass, shear,
-                                                 width, dt, c_n, c_t, damping, friction)
+                touching, fx, fz, ti, tj = _pair(xi, zi, vxi, vzi, wi, ri, mi, j, k, x, z, vx, vz, spin, radius,
+                                                 mass, shear, width, dt, c_n, c_t, damping, friction)
                 if touching:
                     force_x[j] += fx
                     force_z[j] += fz
