@@ -241,10 +241,14 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
     return out
 
 
+def run24_config():
+    return load_config(find_config("thesis_run24_dry"))
+
+
 def run24_projection(rates: dict) -> dict:
     """Projected wall time of one Run 24 loading cycle (RUN24_CYCLE) and one slip
     (pi sqrt(m_b / k)), from grain-steps/s measured at that scene's size and time step."""
-    config = load_config(find_config("thesis_run24_dry"))
+    config = run24_config()
     sim = Simulation(config)
     dt = choose_dt(config)
     slip = math.pi * math.sqrt(sim.wall_mass_per_length / config.loading.spring_constant)
@@ -267,11 +271,11 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
     profiles = []
     allocations = []
     run24 = None
+    run24_dt = choose_dt(run24_config())
     for n in sizes:
         sim, start = prepare(n, dt, skin, cache)
         n_steps = max(min(steps, 500), steps * 10000 // max(n, 10000))      # about the same time per repeat
-        if permeability and n == 10000 or (permeability and len(sizes) == 1):
-            run24_dt = choose_dt(load_config(find_config("thesis_run24_dry")))
+        if permeability and (n == 10000 or len(sizes) == 1):
             for step in (dt, run24_dt):
                 for t in threads:
                     fluid.append(fluid_share(n, start, step, skin, permeability, t, steps, repeats))
@@ -290,9 +294,8 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
                 profiles.append({"n_grains": n, "threads": t, **profile_step(sim, start, t)})
         if projection and n == 10000:
             run24 = {}
+            at_dt = Simulation(bench_config(n, run24_dt, skin), arrays=start)
             for t in threads:
-                at_dt = Simulation(bench_config(n, choose_dt(load_config(find_config("thesis_run24_dry"))), skin),
-                                   arrays=start)
                 rates, _ = time_gouge(at_dt, start, t, steps, repeats)
                 run24[t] = float(np.median(rates))
             run24 = run24_projection(run24)

@@ -20,8 +20,7 @@ GRAIN_FIELDS = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv
                 "force_x", "force_z", "torque", "top")
 LIST_FIELDS = ("start", "index", "shear", "cross_i", "cross_k", "cross_in", "x_build", "z_build",
                "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count")
-assert tuple(LIST_FIELDS[i] for i in (K.L_X_BUILD, K.L_Z_BUILD, K.L_LAYOUT, K.L_CELL_OF)) == \
-    ("x_build", "z_build", "layout", "cell_of")
+assert tuple(LIST_FIELDS[i] for i in (K.L_X_BUILD, K.L_Z_BUILD, K.L_CELL_OF)) == ("x_build", "z_build", "cell_of")
 PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj")
 # (block layout, crossing pairs and cell arrays are derived or scratch, rebuilt on demand)
 EVOLVING = ("x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",

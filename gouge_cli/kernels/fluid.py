@@ -633,6 +633,15 @@ def drag_density(gx, gz, s, fx, fz):
                 fz[i, j] = 0.0
 
 
+@njit(cache=True, inline="always")
+def _gather(flat_x, flat_z, c00, c10, a00, a10, a01, a11):
+    """sum over the four corner cells of area x force density (c01 = c00 + 1, c11 = c10 + 1)."""
+    c01 = c00 + np.uint64(1)
+    c11 = c10 + np.uint64(1)
+    return (a00 * flat_x[c00] + a10 * flat_x[c10] + a01 * flat_x[c01] + a11 * flat_x[c11],
+            a00 * flat_z[c00] + a10 * flat_z[c10] + a01 * flat_z[c01] + a11 * flat_z[c11])
+
+
 @njit(cache=True, parallel=True)
 def grain_drag(x, z, radius, n, Lx, z_bot, z_top, fx, fz, drag_x, drag_z):
     """Fluid force on each grain, F_k = a_k sum_c W_kc f_c (thesis Eq. 12).
@@ -655,8 +664,7 @@ def grain_drag(x, z, radius, n, Lx, z_bot, z_top, fx, fz, drag_x, drag_z):
             continue
         i0, i1, j0, wx, wz, _ = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
         c00, c10, c01, c11, a00, a10, a01, a11 = corner_shares(area, i0, i1, j0, wx, wz, nz)
-        drag_x[k] = a00 * flat_x[c00] + a10 * flat_x[c10] + a01 * flat_x[c01] + a11 * flat_x[c11]
-        drag_z[k] = a00 * flat_z[c00] + a10 * flat_z[c10] + a01 * flat_z[c01] + a11 * flat_z[c11]
+        drag_x[k], drag_z[k] = _gather(flat_x, flat_z, c00, c10, a00, a10, a01, a11)
 
 
 @njit(cache=True, parallel=True)
@@ -671,16 +679,8 @@ def grain_drag_at(corners, n, fx, fz, drag_x, drag_z):
             drag_x[k] = 0.0
             drag_z[k] = 0.0
             continue
-        c00 = np.uint64(corners[0, k])
-        c10 = np.uint64(corners[1, k])
-        a00 = corners[2, k]
-        a10 = corners[3, k]
-        a01 = corners[4, k]
-        a11 = corners[5, k]
-        c01 = c00 + np.uint64(1)
-        c11 = c10 + np.uint64(1)
-        drag_x[k] = a00 * flat_x[c00] + a10 * flat_x[c10] + a01 * flat_x[c01] + a11 * flat_x[c11]
-        drag_z[k] = a00 * flat_z[c00] + a10 * flat_z[c10] + a01 * flat_z[c01] + a11 * flat_z[c11]
+        drag_x[k], drag_z[k] = _gather(flat_x, flat_z, np.uint64(corners[0, k]), np.uint64(corners[1, k]),
+                                       corners[2, k], corners[3, k], corners[4, k], corners[5, k])
 
 
 @njit(cache=True)

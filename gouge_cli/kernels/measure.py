@@ -8,6 +8,7 @@ import numpy as np
 from numba import njit
 
 from .. import NUMBA_CACHE
+from .contact import hertz_mindlin
 from .neighbors import minimum_image
 
 # indices of the vector returned by observe()
@@ -94,26 +95,21 @@ def observe(x, z, vx, vz, spin, radius, mass, body, force_x, force_z, start, ind
 @njit(cache=NUMBA_CACHE)
 def contact_list(x, z, radius, start, index, shear, width, c_normal, c_tangential, friction,
                  out_i, out_j, out_fx, out_fz):
-    """Touching pairs and the elastic part of their force on j [E d^2], for snapshots: normal
-    c_n sqrt(R_ij) xi^1.5 (no dashpot) and tangential -k_s ds clipped at mu F_n, from the
-    stored overlap and history (the step loop keeps no per-pair forces). Returns the count."""
+    """Touching pairs and the elastic part of their force on j [E d^2], for snapshots: the
+    contact law (kernels.contact.hertz_mindlin) at zero relative velocity, no dashpot and no
+    history increment, from the stored overlap and history (the step loop keeps no per-pair
+    forces). Returns the count."""
     m = 0
     for i in range(x.shape[0]):
         for k in range(start[i], start[i + 1]):
             j = index[k]
-            dx = minimum_image(x[j] - x[i], width)
-            dz = z[j] - z[i]
-            rsum = radius[i] + radius[j]
-            r2 = dx * dx + dz * dz
-            if r2 < rsum * rsum:
-                r = math.sqrt(r2)
-                overlap = rsum - r
-                root = math.sqrt(2.0 * radius[i] * radius[j] / rsum * overlap)
-                f_n = c_normal * root * overlap
-                f_s = min(max(-c_tangential * root * shear[k], -friction * f_n), friction * f_n)
+            fx, fz, _, _, _, overlap, _ = hertz_mindlin(
+                minimum_image(x[j] - x[i], width), z[j] - z[i], 0.0, 0.0, 0.0, 0.0, radius[i], radius[j],
+                0.0, shear[k], 0.0, c_normal, c_tangential, 0.0, friction)
+            if overlap > 0.0:
                 out_i[m] = i
                 out_j[m] = j
-                out_fx[m] = (f_n * dx - f_s * dz) / r
-                out_fz[m] = (f_n * dz + f_s * dx) / r
+                out_fx[m] = fx
+                out_fz[m] = fz
                 m += 1
     return m

@@ -45,7 +45,7 @@ L_ROWS, L_OUT, L_IN, L_BUILT = 0, MAX_BLOCKS + 1, 2 * MAX_BLOCKS + 2, 3 * MAX_BL
 N_LAYOUT = 3 * MAX_BLOCKS + 4
 # positions in the lists tuple (state.LIST_FIELDS); cell_of is rebuild scratch, and between
 # rebuilds holds the per-grain flags of the skin check
-L_X_BUILD, L_Z_BUILD, L_LAYOUT, L_CELL_OF = 6, 7, 11, 12
+L_X_BUILD, L_Z_BUILD, L_CELL_OF = 6, 7, 12
 
 
 @njit(cache=NUMBA_CACHE)
