@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from .kernels import step as K
@@ -21,7 +22,7 @@ GRAIN_FIELDS = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv
 LIST_FIELDS = ("start", "index", "shear", "cross_i", "cross_k", "cross_in", "x_build", "z_build",
                "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count")
 assert tuple(LIST_FIELDS[i] for i in (K.L_X_BUILD, K.L_Z_BUILD, K.L_CELL_OF)) == ("x_build", "z_build", "cell_of")
-PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj")
+PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_buf")
 # (block layout, crossing pairs and cell arrays are derived or scratch, rebuilt on demand)
 EVOLVING = ("x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
             "start", "index", "shear", "x_build", "z_build", "wall", "clock", "counters")
@@ -72,6 +73,9 @@ class State:
         self.cell_count = np.zeros(2 * n + 64, np.int64)
         self.x_build = self.x.copy()
         self.z_build = self.z.copy()
+        # one chunk buffer of the force pass per row block: as many as numba may run threads, and at
+        # least 16 (block counts beyond the thread count give the same bits; tests use them)
+        self.pair_buf = np.zeros((max(numba.config.NUMBA_NUM_THREADS, 16), K.N_BUF, K.PAIR_BUF))
         self._allocate_pairs(4 * n + 64)     # ~2.5 listed pairs per grain in a dense layer; grows if needed
         self.counters[K.K_NEED_REBUILD] = 1
         if self.top.size:

@@ -13,6 +13,7 @@ Arrays named in ``GRAIN``/``LIST`` order are passed as tuples from :mod:`gouge_c
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit, prange
 
 from .. import NUMBA_CACHE
@@ -46,6 +47,10 @@ N_LAYOUT = 3 * MAX_BLOCKS + 4
 # positions in the lists tuple (state.LIST_FIELDS); cell_of is rebuild scratch, and between
 # rebuilds holds the per-grain flags of the skin check
 L_X_BUILD, L_Z_BUILD, L_CELL_OF = 6, 7, 12
+# pair_buf: float64 (blocks, N_BUF, PAIR_BUF), per-block chunk of pair inputs and results
+B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ, B_RI, B_RJ, B_MI, B_MJ, B_SHEAR, B_FX, B_FZ, B_TI, B_TJ = range(15)
+N_BUF = 15
+PAIR_BUF = 256
 
 
 @njit(cache=NUMBA_CACHE)
@@ -103,8 +108,7 @@ def _pair(xi, zi, vxi, vzi, wi, ri, mi, j, k, x, z, vx, vz, spin, radius, mass, 
     rj = radius[j]
     rsum = ri + rj
     if dx * dx + dz * dz >= rsum * rsum:
-        if shear[k] != 0.0:
-            shear[k] = 0.0
+        shear[k] = 0.0                      # (also a -0.0 left by a sliding contact: same bits as _laws)
         return False, 0.0, 0.0, 0.0, 0.0
     mj = mass[j]
     fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
@@ -114,11 +118,83 @@ def _pair(xi, zi, vxi, vzi, wi, ri, mi, j, k, x, z, vx, vz, spin, radius, mass, 
     return True, fx, fz, ti, tj
 
 
-@njit(parallel=True, cache=NUMBA_CACHE)
+@njit(inline="always", cache=NUMBA_CACHE)
+def _fill(i, k0, k1, base, x, z, vx, vz, spin, radius, mass, index, shear, width, buf):
+    """Copy the inputs of pair slots k0:k1 of row i into buf[:, k - base]."""
+    xi = x[i]
+    zi = z[i]
+    vxi = vx[i]
+    vzi = vz[i]
+    wi = spin[i]
+    ri = radius[i]
+    mi = mass[i]
+    for k in range(k0, k1):
+        j = np.uint32(index[k])
+        q = np.uint64(k - base)
+        buf[B_DX, q] = minimum_image(x[j] - xi, width)
+        buf[B_DZ, q] = z[j] - zi
+        buf[B_DVX, q] = vx[j] - vxi
+        buf[B_DVZ, q] = vz[j] - vzi
+        buf[B_WI, q] = wi
+        buf[B_WJ, q] = spin[j]
+        buf[B_RI, q] = ri
+        buf[B_RJ, q] = radius[j]
+        buf[B_MI, q] = mi
+        buf[B_MJ, q] = mass[j]
+        buf[B_SHEAR, q] = shear[k]
+
+
+@njit(error_model="numpy", cache=NUMBA_CACHE)
+def _laws(m, buf, dt, c_n, c_t, damping, friction):
+    """hertz_mindlin on buf[:, :m], results in place: a loop without branches or gathers, which
+    LLVM vectorises (SIMD lanes do the same IEEE operations as the scalar law: same bits)."""
+    for q in range(m):
+        mi = buf[B_MI, q]
+        mj = buf[B_MJ, q]
+        fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
+            buf[B_DX, q], buf[B_DZ, q], buf[B_DVX, q], buf[B_DVZ, q], buf[B_WI, q], buf[B_WJ, q],
+            buf[B_RI, q], buf[B_RJ, q], mi * mj / (mi + mj), buf[B_SHEAR, q], dt, c_n, c_t, damping, friction)
+        buf[B_FX, q] = fx
+        buf[B_FZ, q] = fz
+        buf[B_TI, q] = ti
+        buf[B_TJ, q] = tj
+        buf[B_SHEAR, q] = ds
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def _scatter(i, k0, k1, base, hi, index, shear, pair_fx, pair_fz, pair_ti, force_x, force_z, torque, buf):
+    """Sum the results of slots k0:k1 of row i (buf[:, k - base]) into the grain forces, in slot
+    order: + on j, - on i; slots with j >= hi take their stored crossing-pair values."""
+    fxi = force_x[i]
+    fzi = force_z[i]
+    tsi = torque[i]
+    for k in range(k0, k1):
+        j = np.uint32(index[k])
+        if j >= hi:
+            fxi -= pair_fx[k]
+            fzi -= pair_fz[k]
+            tsi += pair_ti[k]
+            continue
+        q = np.uint64(k - base)
+        fx = buf[B_FX, q]
+        fz = buf[B_FZ, q]
+        force_x[j] += fx
+        force_z[j] += fz
+        torque[j] += buf[B_TJ, q]
+        fxi -= fx
+        fzi -= fz
+        tsi += buf[B_TI, q]
+        shear[k] = buf[B_SHEAR, q]
+    force_x[i] = fxi
+    force_z[i] = fzi
+    torque[i] = tsi
+
+
+@njit(parallel=True, error_model="numpy", cache=NUMBA_CACHE)
 def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_i, cross_k, cross_in,
-                   pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque, drag_x, drag_z,
+                   pair_fx, pair_fz, pair_ti, pair_tj, pair_buf, force_x, force_z, torque, drag_x, drag_z,
                    layout, scratch, params):
-    """force, torque (N,) = contact forces of all listed pairs (+ drag), in one fused pass.
+    """force, torque (N,) = contact forces of all listed pairs (+ drag).
 
     Summation order, the same for any thread count: grain g first receives the pairs where it
     is second (j), in increasing i, then subtracts its own row in list order, then adds drag.
@@ -126,7 +202,9 @@ def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_
     rows (:func:`block_layout`), the few pairs whose j lies in a later block (neighbours have
     nearby numbers) are computed first into pair_* [force on j, torques]; each block then
     starts its grains from those and runs the serial walk, reading the stored values for its
-    own crossing pairs. Shear history is updated in place (thesis Eqs. 8-11).
+    own crossing pairs. The walk goes in chunks of PAIR_BUF slots: copy the pair inputs into
+    pair_buf[block] (N_BUF, PAIR_BUF), evaluate the law on the whole chunk in a SIMD loop, sum
+    in slot order. Shear history is updated in place (thesis Eqs. 8-11).
     """
     n = x.shape[0]
     dt = params[DT]
@@ -136,7 +214,7 @@ def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_
     damping = params[DAMPING]
     friction = params[FRICTION]
     has_drag = drag_x.shape[0] == n
-    nb = min(max(int(params[THREADS]), 1), MAX_BLOCKS, max(n, 1))
+    nb = min(max(int(params[THREADS]), 1), MAX_BLOCKS, max(n, 1), pair_buf.shape[0])
     if layout[L_BUILT] != nb:
         block_layout(start, index, n, nb, layout, cross_i, cross_k, cross_in, scratch)
     if nb > 1:
@@ -154,6 +232,7 @@ def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_
     for b in prange(nb):
         lo = layout[L_ROWS + b]
         hi = layout[L_ROWS + b + 1]
+        buf = pair_buf[b]
         for g in range(lo, hi):
             force_x[g] = 0.0
             force_z[g] = 0.0
@@ -164,36 +243,22 @@ def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_
             force_x[g] += pair_fx[k]
             force_z[g] += pair_fz[k]
             torque[g] += pair_tj[k]
-        for i in range(lo, hi):
-            xi = x[i]
-            zi = z[i]
-            vxi = vx[i]
-            vzi = vz[i]
-            wi = spin[i]
-            ri = radius[i]
-            mi = mass[i]
-            fxi = force_x[i]
-            fzi = force_z[i]
-            tsi = torque[i]
-            for k in range(start[i], start[i + 1]):
-                j = index[k]
-                if j >= hi:
-                    fxi -= pair_fx[k]
-                    fzi -= pair_fz[k]
-                    tsi += pair_ti[k]
-                    continue
-                touching, fx, fz, ti, tj = _pair(xi, zi, vxi, vzi, wi, ri, mi, j, k, x, z, vx, vz, spin, radius,
-                                                 mass, shear, width, dt, c_n, c_t, damping, friction)
-                if touching:
-                    force_x[j] += fx
-                    force_z[j] += fz
-                    torque[j] += tj
-                    fxi -= fx
-                    fzi -= fz
-                    tsi += ti
-            force_x[i] = fxi
-            force_z[i] = fzi
-            torque[i] = tsi
+        i0 = lo                              # chunk: slots k0:k1, rows i0..i1
+        k0 = start[lo]
+        while i0 < hi:
+            k1 = min(k0 + PAIR_BUF, start[hi])
+            i1 = i0
+            while i1 + 1 < hi and start[i1 + 1] < k1:
+                i1 += 1
+            for i in range(i0, i1 + 1):      # copy in
+                _fill(i, max(k0, start[i]), min(start[i + 1], k1), k0, x, z, vx, vz, spin, radius, mass, index,
+                      shear, width, buf)
+            _laws(k1 - k0, buf, dt, c_n, c_t, damping, friction)
+            for i in range(i0, i1 + 1):      # sum out
+                _scatter(i, max(k0, start[i]), min(start[i + 1], k1), k0, hi, index, shear, pair_fx, pair_fz,
+                         pair_ti, force_x, force_z, torque, buf)
+            i0 = i1 + 1 if start[i1 + 1] <= k1 else i1
+            k0 = k1
         if has_drag:
             for g in range(lo, hi):
                 force_x[g] += drag_x[g]
@@ -310,9 +375,9 @@ def compute_forces(grains, lists, pair, wall, params, drag_x, drag_z):
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top = grains
     (start, index, shear, cross_i, cross_k, cross_in, x_build, z_build, new_start, new_index, new_shear, layout,
      cell_of, order, cell_count) = lists
-    pair_fx, pair_fz, pair_ti, pair_tj = pair
+    pair_fx, pair_fz, pair_ti, pair_tj, pair_buf = pair
     contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_i, cross_k, cross_in,
-                   pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque, drag_x, drag_z, layout,
+                   pair_fx, pair_fz, pair_ti, pair_tj, pair_buf, force_x, force_z, torque, drag_x, drag_z, layout,
                    new_start, params)
     wall_force(force_x, force_z, top, wall)
 
