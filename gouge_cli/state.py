@@ -73,9 +73,8 @@ class State:
         self.cell_count = np.zeros(2 * n + 64, np.int64)
         self.x_build = self.x.copy()
         self.z_build = self.z.copy()
-        # one chunk buffer of the force pass per row block: as many as numba may run threads, and at
-        # least 16 (block counts beyond the thread count give the same bits; tests use them)
-        self.pair_buf = np.zeros((max(numba.config.NUMBA_NUM_THREADS, 16), K.N_BUF, K.PAIR_BUF))
+        # one chunk buffer of the force pass per row block, as many as numba may run threads
+        self.pair_buf = np.zeros((max(numba.config.NUMBA_NUM_THREADS, 1), K.N_BUF, K.PAIR_BUF))
         self._allocate_pairs(4 * n + 64)     # ~2.5 listed pairs per grain in a dense layer; grows if needed
         self.counters[K.K_NEED_REBUILD] = 1
         if self.top.size:

@@ -1,9 +1,9 @@
 """Pore-fluid kernels on the Goren pressure grid (thesis Eqs. 12, 14-20; physics.md section 4).
 
-Pure compute, ``@njit(cache=True)``, no allocation: every array is allocated once
-by :class:`gouge_cli.fluid.FluidGrid` and passed in. Everything is dimensionless
-(d = E = rho_s = 1): lengths [d], time [t0], pressure [E], permeability [d^2],
-viscosity [E t0], compressibility [1/E].
+Pure compute (``error_model="numpy"``: IEEE inf/NaN instead of ZeroDivisionError, so loops
+vectorise), no allocation: every array is allocated once by :class:`gouge_cli.fluid.FluidGrid`
+and passed in. Everything is dimensionless (d = E = rho_s = 1): lengths [d], time [t0],
+pressure [E], permeability [d^2], viscosity [E t0], compressibility [1/E].
 
 Grid
 ----
@@ -98,6 +98,8 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from .. import NUMBA_CACHE
+
 P_KAPPA_C = 0        # Carman-Kozeny prefactor kappa_c [d^2]
 P_BETA = 1           # fluid compressibility beta [1/E]
 P_ETA = 2            # fluid viscosity eta [E t0]
@@ -147,7 +149,7 @@ STATUS_SOLVER = 1
 STATUS_NONFINITE = 2
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def segment_area(h, radius):
     """Area of a disc beyond a line at signed distance h from its centre.
 
@@ -168,7 +170,7 @@ def segment_area(h, radius):
     return 0.5 * radius * radius * angle_minus_sine
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def in_domain_area(z, radius, z_bot, z_top):
     """Area [d^2] of a disc (centre height z) between the planes z_bot and z_top.
 
@@ -186,7 +188,7 @@ def in_domain_area(z, radius, z_bot, z_top):
     return area
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def grain_area(z, radius, z_bot, z_top):
     """In-domain area [d^2] with a fast path for a grain clear of both planes."""
     if z - z_bot >= radius and z_top - z >= radius:
@@ -194,7 +196,7 @@ def grain_area(z, radius, z_bot, z_top):
     return in_domain_area(z, radius, z_bot, z_top)
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def cell_weights(x, z, inv_dx, inv_dz, z_bot, nx, nz):
     """Bilinear (cloud-in-cell) weights of a point; inv_dx = 1/dx, inv_dz = 1/dz.
 
@@ -223,7 +225,7 @@ def cell_weights(x, z, inv_dx, inv_dz, z_bot, nx, nz):
     return i0, i1, 0, fx, 0.0, 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
 def corner_shares(area, i0, i1, j0, fx, fz, nz):
     """Flat indices of the four cells around a point and the area each receives (same weights
     for the deposit and the drag): (c00, c10, c01, c11, a00, a10, a01, a11)."""
@@ -238,7 +240,7 @@ def corner_shares(area, i0, i1, j0, fx, fz, nz):
 DEPOSIT_GROUPS = 4     # grains deposit in this many fixed groups, summed in group order
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
 def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
             corners=None, partial=None):
     """Solid fraction, its kernel-consistent gradient and the grid-relative solid velocity.
@@ -297,7 +299,7 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
     _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x, slope_z)
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w_top, nx, nz,
                    solid, momentum_x, momentum_z, slope_x, slope_z, corners):
     """Raw sums of grains first:last into the flat (nx * nz,) grids (zeroed first)."""
@@ -356,7 +358,7 @@ def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w
         slope_z[c11] -= gz1
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x, slope_z):
     """Raw sums -> s, mean velocities and slopes (see deposit)."""
     inv_area = nx / Lx * nz / (z_top - z_bot)
@@ -369,7 +371,7 @@ def _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x,
         slope_z[c] *= inv_area
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def undrained_source(P, s, s_old, ux, uz_rel, grad_s_x, grad_s_z, dt_f, beta, s_min, s_max, p_star, div_u):
     """Pressure after the exact undrained response to the solid-fraction change.
 
@@ -392,7 +394,7 @@ def undrained_source(P, s, s_old, ux, uz_rel, grad_s_x, grad_s_z, dt_f, beta, s_
             div_u[i, j] = -2.0 * (s_end - s_start) / ((s_end + s_start) * dt_f)
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def permeability_field(s, kappa_c, phi_min, phi_max, permeability, capacity, beta):
     """Carman-Kozeny permeability (physics.md; thesis Eq. 20 corrected) and capacity.
 
@@ -407,7 +409,7 @@ def permeability_field(s, kappa_c, phi_min, phi_max, permeability, capacity, bet
             capacity[i, j] = beta * phi
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def face_conductances(P, permeability, dx, dz, beta, eta, tx, tz, tb):
     """Face conductances of div[(1 + beta P)(kappa/eta) grad P] per unit cell area.
 
@@ -438,7 +440,7 @@ def face_conductances(P, permeability, dx, dz, beta, eta, tx, tz, tb):
         tb[i, nz - 1] += (1.0 + 0.5 * beta * P[i, nz - 1]) * permeability[i, nz - 1] * 2.0 * cz
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def explicit_bound(capacity, tx, tz, tb):
     """Largest stable FTCS step [t0]: 2 / (Gershgorin bound on the eigenvalues of C^-1 L).
 
@@ -464,7 +466,7 @@ def explicit_bound(capacity, tx, tz, tb):
     return 2.0 / lam_max
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def _apply_operator(p, diag, tx, tz, q):
     """q = (C/dt + L) p for the 5-point operator (diag holds C/dt + sum of face conductances)."""
     nx, nz = p.shape
@@ -480,7 +482,7 @@ def _apply_operator(p, diag, tx, tz, q):
             q[i, j] = v
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def _factor_columns(diag, tz, cp, dinv):
     """Thomas factorisation of the z-column tridiagonal blocks of the operator."""
     nx, nz = diag.shape
@@ -493,7 +495,7 @@ def _factor_columns(diag, tz, cp, dinv):
             cp[i, j] = -tz[i, j] * dinv[i, j]
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def _solve_columns(r, tz, cp, dinv, out):
     """out = B^-1 r with B the z-column tridiagonal part of the operator."""
     nx, nz = r.shape
@@ -507,7 +509,7 @@ def _solve_columns(r, tz, cp, dinv, out):
             out[i, j] -= cp[i, j] * out[i, j + 1]
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def _dot(a, b):
     nx, nz = a.shape
     total = 0.0
@@ -517,7 +519,7 @@ def _dot(a, b):
     return total
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def conjugate_gradient(solution, rhs, diag, tx, tz, work, tol, max_iter):
     """Solve (C/dt + L) solution = rhs by z-line preconditioned conjugate gradients.
 
@@ -573,7 +575,7 @@ def conjugate_gradient(solution, rhs, diag, tx, tz, work, tol, max_iter):
     return max_iter, res, False
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def explicit_diffusion(P, capacity, tx, tz, tb, dt_sub, n_sub, scratch):
     """n_sub forward-Euler (FTCS) steps of C dP/dt = -L P with P = 0 on the planes."""
     nx, nz = P.shape
@@ -594,7 +596,7 @@ def explicit_diffusion(P, capacity, tx, tz, tb, dt_sub, n_sub, scratch):
                 P[i, j] = scratch[i, j]
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def pressure_gradient(P, dx, dz, p_bot, p_top, gx, gz):
     """Cell-centred grad P [E/d]: the mean of the two face gradients on each axis.
 
@@ -619,7 +621,7 @@ def pressure_gradient(P, dx, dz, p_bot, p_top, gx, gz):
             gz[i, j] = 0.5 * (below + above)
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def drag_density(gx, gz, s, fx, fz):
     """Drag per unit grain area f = -grad P / s [E/d] (s = 1 - phi unclamped; 0 where s = 0)."""
     nx, nz = s.shape
@@ -633,7 +635,7 @@ def drag_density(gx, gz, s, fx, fz):
                 fz[i, j] = 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
 def _gather(flat_x, flat_z, c00, c10, a00, a10, a01, a11):
     """sum over the four corner cells of area x force density (c01 = c00 + 1, c11 = c10 + 1)."""
     c01 = c00 + np.uint64(1)
@@ -642,7 +644,7 @@ def _gather(flat_x, flat_z, c00, c10, a00, a10, a01, a11):
             a00 * flat_z[c00] + a10 * flat_z[c10] + a01 * flat_z[c01] + a11 * flat_z[c11])
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
 def grain_drag(x, z, radius, n, Lx, z_bot, z_top, fx, fz, drag_x, drag_z):
     """Fluid force on each grain, F_k = a_k sum_c W_kc f_c (thesis Eq. 12).
 
@@ -667,7 +669,7 @@ def grain_drag(x, z, radius, n, Lx, z_bot, z_top, fx, fz, drag_x, drag_z):
         drag_x[k], drag_z[k] = _gather(flat_x, flat_z, c00, c10, a00, a10, a01, a11)
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
 def grain_drag_at(corners, n, fx, fz, drag_x, drag_z):
     """grain_drag with the corner cells and areas the deposit stored (same positions): the
     same values, without recomputing areas and weights."""
@@ -683,7 +685,7 @@ def grain_drag_at(corners, n, fx, fz, drag_x, drag_z):
                                        corners[2, k], corners[3, k], corners[4, k], corners[5, k])
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def _all_finite(P):
     nx, nz = P.shape
     for i in range(nx):
@@ -693,7 +695,7 @@ def _all_finite(P):
     return True
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def _finish(n, Lx, z_bot, z_top, P, s, uz, work, corners, drag_x, drag_z, w_bot, w_top):
     """Absolute uz, finiteness check, gradient and drag; returns a status."""
     nx, nz = P.shape
@@ -713,7 +715,7 @@ def _finish(n, Lx, z_bot, z_top, P, s, uz, work, corners, drag_x, drag_z, w_bot,
     return STATUS_OK
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
                params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z):
     """Deposit the initial solid fraction and set the drag of the current P.
@@ -741,7 +743,7 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
     return _finish(n, Lx, z_bot, z_top, P, s, uz, work, corners, drag_x, drag_z, 0.0, 0.0)
 
 
-@njit(cache=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
                  params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z):
     """Advance the pore pressure by one fluid step and set the drag on every grain.

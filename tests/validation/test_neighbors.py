@@ -155,6 +155,7 @@ def test_forces_bitwise_for_any_block_count(compacted):
     sim = compacted
     st, p = sim.state, sim.params.copy()
     shear0 = np.random.default_rng(3).normal(0.0, 1e-3, st.shear.shape)
+    st.pair_buf = np.zeros((16, K.N_BUF, K.PAIR_BUF))    # a chunk buffer per block (16 > threads here)
     results = []
     for blocks in (1, 2, 3, 7, 16):
         p[K.THREADS] = blocks
