@@ -40,7 +40,8 @@ from .simulation import Simulation
 from .timestep import choose_dt
 
 CACHE = Path("runs/bench/cache")
-DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "packing.py", "simulation.py",
+DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "kernels/reorder.py", "packing.py",
+               "simulation.py",
                "state.py", "config.py", "timestep.py")     # (and bench_config below)
 RUN24_CYCLE = 1.6e7     # [t0] one loading cycle of thesis Run 24 (physics.md section 6)
 
@@ -200,7 +201,9 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
     sim.advance(2000)
     per_rebuild_steps = (s.step - k0) / max(1, int(s.counters[K.K_REBUILDS]) - r0)
     g, lists, pairs = s.grains(), s.lists(), s.pairs()
-    (x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, fx, fz, tq, top) = g
+    (x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, fx, fz, tq, top, ident) = g
+    sort_every = int(p[K.SORT_EVERY])
+    p[K.SORT_EVERY] = 0        # rebuild alone; the re-numbering is timed on its own below
     xb, zb, flags = lists[K.L_X_BUILD], lists[K.L_Z_BUILD], lists[K.L_CELL_OF]
     shear0 = s.shear.copy()
     v0 = (s.vx.copy(), s.vz.copy(), s.spin.copy(), s.x.copy(), s.z.copy())
@@ -228,10 +231,14 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
                             reset=reset),
         "kick_check": timed(lambda: K._kick_check(x, z, vx, vz, spin, fx, fz, tq, inv_mass, inv_inertia, body, xb, zb,
                                                   p, flags), reset=reset),
-        "rebuild_each": timed(lambda: K.rebuild(g, lists, p, s.counters), n=max(3, repeats // 10), reset=reset),
+        "rebuild_each": timed(lambda: K.rebuild(g, lists, p, s.counters, *sim.drag), n=max(3, repeats // 10),
+                              reset=reset),
         "steps_per_rebuild": per_rebuild_steps,
+        "renumber_each": timed(lambda: K.renumber(g, lists, *sim.drag, p[K.WIDTH]), n=max(3, repeats // 10)),
+        "rebuilds_per_renumber": sort_every,
     }
     out["rebuild_per_step"] = out["rebuild_each"] / per_rebuild_steps
+    out["renumber_per_step"] = out["renumber_each"] / (per_rebuild_steps * sort_every) if sort_every else 0.0
     sim.threads = threads
     s.restore(start)
     t0 = time.perf_counter()

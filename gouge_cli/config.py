@@ -133,6 +133,11 @@ class NumericsConfig(_Section):
         0, ge=0, le=1024,
         description="numba threads; 0 = auto: 1 below 2000 grains (parallel regions cost more than they "
                     "save there), else all cores")
+    sort_every: Optional[int] = Field(
+        None, ge=0, le=1_000_000,
+        description="re-number the grains by position every this many neighbour-list rebuilds, so that "
+                    "neighbours stay close in memory as the layer shears; 0 = never; default 20 from "
+                    "2000 grains, else 0")
 
 
 class RunConfig(_Section):

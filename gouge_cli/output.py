@@ -5,7 +5,8 @@ Layout of ``run.h5``::
     /            attrs: config (YAML), scales (JSON), version, seed, dt, status, created
     /series/<q>  (T,) float64, resizable; attrs unit, description
     /snapshots/<step>/{x,z,radius,vx,vz,spin,body, contact_i, contact_j, contact_fx, contact_fz}
-                 attrs time, step; optional pressure/porosity fields when the scene has fluid
+                 attrs time, step; optional pressure/porosity fields when the scene has fluid;
+                 grains in their original (packing) order, contact_i/j in those numbers
 
 Rows are buffered and flushed every ``flush_rows`` rows or on close, so a crash loses at
 most the rows since the last flush and never corrupts earlier ones.
@@ -121,8 +122,8 @@ class RunFile:
         grp = self.h5["snapshots"].create_group(f"{s.step:012d}")
         grp.attrs["time"] = s.time
         grp.attrs["step"] = s.step
-        for name in ("x", "z", "radius", "vx", "vz", "spin", "body"):
-            grp.create_dataset(name, data=getattr(s, name), compression="gzip", compression_opts=1)
+        for name in ("x", "z", "radius", "vx", "vz", "spin", "body"):     # in original grain order
+            grp.create_dataset(name, data=s.by_id(getattr(s, name)), compression="gzip", compression_opts=1)
         npairs = int(s.start[-1])
         ci = np.empty(npairs, np.int32)
         cj = np.empty(npairs, np.int32)
@@ -131,6 +132,8 @@ class RunFile:
         p = sim.params
         m = M.contact_list(s.x, s.z, s.radius, s.start, s.index, s.shear, s.width, p[K.C_NORMAL],
                            p[K.C_TANGENTIAL], p[K.FRICTION], ci, cj, cfx, cfz)
+        ci[:m] = s.id[ci[:m]]
+        cj[:m] = s.id[cj[:m]]
         for name, arr in (("contact_i", ci), ("contact_j", cj), ("contact_fx", cfx), ("contact_fz", cfz)):
             grp.create_dataset(name, data=arr[:m], compression="gzip", compression_opts=1)
         grp["contact_fx"].attrs["description"] = "elastic contact force on grain j by grain i [E d^2] (no dashpot part)"

@@ -6,8 +6,8 @@ are then compacted under the normal stress (:func:`gouge_cli.simulation.compact`
 
 Grain numbering: strip by strip (STRIP d wide columns along x), bottom to top within a strip.
 Neighbours then have nearby numbers, so the force pass works in a small window of memory
-(+15-20 % grain-steps/s at 40,000 grains over row-by-row numbering; the order is set once
-and drifts only as far as the grains move relative to each other).
+(+15-20 % grain-steps/s at 40,000 grains over row-by-row numbering). As the layer shears the
+grains are re-numbered the same way (kernels.reorder, numerics.sort_every).
 """
 
 from __future__ import annotations
@@ -17,9 +17,8 @@ import math
 import numpy as np
 
 from .config import Config, ConfigError
+from .kernels.reorder import STRIP
 from .state import BOTTOM, FREE, TOP, State
-
-STRIP = 16.0    # [d] width of the numbering strips
 
 
 def build_packing(config: Config) -> State:

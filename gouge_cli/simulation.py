@@ -24,6 +24,7 @@ from .timestep import choose_dt, contact_constants
 
 _EMPTY = np.zeros(0)
 AUTO_PARALLEL_MIN_GRAINS = 2000
+AUTO_SORT_EVERY = 20        # rebuilds between re-numberings (~900 steps at the bench scene; LAMMPS: 1000)
 
 
 def build_params(config: Config, dt: float, width: float, wall_mass: float) -> np.ndarray:
@@ -85,6 +86,7 @@ class Simulation:
         p = build_params(config, self.dt, s.width, self.wall_mass_per_length * s.width)
         self.params = p
         self.threads = self._choose_threads(config.numerics.threads, s.n)
+        p[K.SORT_EVERY] = self._choose_sort_every(config.numerics.sort_every, s.n)
         self.compaction_settled: bool | None = None
         self.fluid = None
         self.drag = (_EMPTY, _EMPTY)
@@ -155,10 +157,16 @@ class Simulation:
             return min(requested, available)
         return 1 if n_grains < AUTO_PARALLEL_MIN_GRAINS else available
 
+    @staticmethod
+    def _choose_sort_every(requested: int | None, n_grains: int) -> int:
+        if requested is not None:
+            return requested
+        return AUTO_SORT_EVERY if n_grains >= AUTO_PARALLEL_MIN_GRAINS else 0
+
     def _rebuild(self):
         s = self.state
         self.params[K.THREADS] = numba.get_num_threads()
-        while not K.rebuild(s.grains(), s.lists(), self.params, s.counters):
+        while not K.rebuild(s.grains(), s.lists(), self.params, s.counters, *self.drag):
             s.grow_pairs(int(s.counters[K.K_NEEDED_CAPACITY]))
 
     def advance(self, nsteps: int):

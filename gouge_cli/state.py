@@ -15,16 +15,18 @@ import numpy as np
 
 from .kernels import step as K
 
-FREE, BOTTOM, TOP = 0, 1, 2
+FREE, BOTTOM, TOP = K.FREE, K.BOTTOM, K.TOP
 
 GRAIN_FIELDS = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inertia", "body",
-                "force_x", "force_z", "torque", "top")
+                "force_x", "force_z", "torque", "top", "id")
+# fixed properties of a grain, re-ordered with it (kernels.step.renumber)
+STATIC = ("radius", "mass", "inv_mass", "inv_inertia", "body")
 LIST_FIELDS = ("start", "index", "shear", "cross_i", "cross_k", "cross_in", "x_build", "z_build",
                "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count")
 assert tuple(LIST_FIELDS[i] for i in (K.L_X_BUILD, K.L_Z_BUILD, K.L_CELL_OF)) == ("x_build", "z_build", "cell_of")
 PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_buf")
 # (block layout, crossing pairs and cell arrays are derived or scratch, rebuilt on demand)
-EVOLVING = ("x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
+EVOLVING = ("id", "x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
             "start", "index", "shear", "x_build", "z_build", "wall", "clock", "counters")
 
 
@@ -63,7 +65,7 @@ class State:
         self.force_z = np.zeros(n)
         self.torque = np.zeros(n)
         self.top = np.flatnonzero(self.body == TOP).astype(np.int64)
-        self.bottom = np.flatnonzero(self.body == BOTTOM).astype(np.int64)
+        self.id = np.arange(n, dtype=np.int64)      # original grain number (grains are re-numbered in place)
         self.start = np.zeros(n + 1, np.int64)
         self.new_start = np.zeros(n + 1, np.int64)
         self.layout = np.zeros(K.N_LAYOUT, np.int64)
@@ -83,6 +85,17 @@ class State:
     @property
     def n(self) -> int:
         return self.x.shape[0]
+
+    @property
+    def bottom(self) -> np.ndarray:
+        """Current numbers of the bottom-wall grains."""
+        return np.flatnonzero(self.body == BOTTOM)
+
+    def by_id(self, values: np.ndarray) -> np.ndarray:
+        """A per-grain array in original grain order (as the packing numbered them)."""
+        out = np.empty_like(values)
+        out[self.id] = values
+        return out
 
     def _allocate_pairs(self, capacity: int, keep: int = 0):
         old = {name: getattr(self, name, None) for name in ("index", "shear")}
@@ -133,11 +146,23 @@ class State:
         return out
 
     def restore(self, arrays: dict):
-        """Load evolving arrays written by :meth:`arrays` (bit-exact)."""
+        """Load evolving arrays written by :meth:`arrays` (bit-exact), re-ordering the fixed
+        grain properties to the saved numbering (checkpoints without ``id``: packing order)."""
         npairs = int(arrays["start"][-1])
         if npairs > self.index.shape[0]:
             self._allocate_pairs(int(npairs * 1.25) + 64)
+        ident = np.asarray(arrays["id"]) if "id" in arrays else np.arange(self.n)
+        if ident.shape != self.id.shape:
+            raise ValueError(f"checkpoint has {ident.shape[0]} grains, scene has {self.n}")
+        if not np.array_equal(ident, self.id):
+            for name in STATIC:
+                values = getattr(self, name)
+                values[...] = self.by_id(values)[ident]
+            self.id[...] = ident
+            self.top[...] = np.flatnonzero(self.body == TOP)
         for name in EVOLVING:
+            if name == "id":
+                continue
             target = getattr(self, name)
             source = np.asarray(arrays[name])
             if name in ("index", "shear"):

@@ -24,7 +24,7 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     dt_f = interval * params[DT]
     for st in range(nsteps):
         if counters[K_NEED_REBUILD] != 0:
-            if not rebuild(grains, lists, params, counters):
+            if not rebuild(grains, lists, params, counters, drag_x, drag_z):
                 return LIST_OVERFLOW, st
         _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z)
         if counters[K_STEP] % interval == 0:

@@ -19,11 +19,14 @@ from numba import njit, prange
 from .. import NUMBA_CACHE
 from .contact import hertz_mindlin
 from .neighbors import build_neighbors, minimum_image
+from .reorder import permute, renumber_list, spatial_order
 
 # params: float64 array
 DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \
-    WALL_MASS, BG_DAMPING, DRIVE, THREADS = range(14)
-N_PARAMS = 14
+    WALL_MASS, BG_DAMPING, DRIVE, THREADS, SORT_EVERY = range(15)
+N_PARAMS = 15
+# body codes (state.body)
+FREE, BOTTOM, TOP = 0, 1, 2
 # wall: float64 array, the top body
 W_X, W_Z, W_VX, W_VZ, W_FX, W_FZ = range(6)
 N_WALL = 6
@@ -372,7 +375,7 @@ def _kick_check(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_iner
 @njit(cache=NUMBA_CACHE)
 def compute_forces(grains, lists, pair, wall, params, drag_x, drag_z):
     """Contact (+ drag) forces on every grain and on the top wall at the current state."""
-    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top = grains
+    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
     (start, index, shear, cross_i, cross_k, cross_in, x_build, z_build, new_start, new_index, new_shear, layout,
      cell_of, order, cell_count) = lists
     pair_fx, pair_fz, pair_ti, pair_tj, pair_buf = pair
@@ -383,11 +386,41 @@ def compute_forces(grains, lists, pair, wall, params, drag_x, drag_z):
 
 
 @njit(cache=NUMBA_CACHE)
-def rebuild(grains, lists, params, counters):
-    """Rebuild the neighbour list; False (and K_NEEDED_CAPACITY set) if it does not fit."""
-    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top = grains
+def renumber(grains, lists, drag_x, drag_z, width):
+    """Re-number the grains by position (kernels.reorder): every per-grain array (and the fluid
+    drag, when there is one), the top-wall index list and the half list with its shear history.
+    The original numbers travel in ``ident``."""
+    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
     (start, index, shear, cross_i, cross_k, cross_in, x_build, z_build, new_start, new_index, new_shear, layout,
      cell_of, order, cell_count) = lists
+    n = x.shape[0]
+    spatial_order(x, z, width, order, cell_of, cell_count)
+    renumber_list(cell_of, start, index, shear, new_start, new_index, new_shear)
+    for values in (x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, force_x, force_z, torque):
+        permute(values, order, new_shear)
+    if drag_x.shape[0] == n:
+        permute(drag_x, order, new_shear)
+        permute(drag_z, order, new_shear)
+    permute(body, order, cell_count)
+    permute(ident, order, cell_count)
+    m = 0
+    for i in range(n):
+        if body[i] == TOP:
+            top[m] = i
+            m += 1
+    layout[L_BUILT] = -1
+
+
+@njit(cache=NUMBA_CACHE)
+def rebuild(grains, lists, params, counters, drag_x, drag_z):
+    """Rebuild the neighbour list, re-numbering the grains first every params[SORT_EVERY]-th
+    rebuild; False (and K_NEEDED_CAPACITY set) if the list does not fit."""
+    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
+    (start, index, shear, cross_i, cross_k, cross_in, x_build, z_build, new_start, new_index, new_shear, layout,
+     cell_of, order, cell_count) = lists
+    every = int(params[SORT_EVERY])
+    if every > 0 and counters[K_REBUILDS] % every == 0:
+        renumber(grains, lists, drag_x, drag_z, params[WIDTH])
     npairs = build_neighbors(x, z, radius, body, params[WIDTH], params[SKIN], start, index, shear,
                              new_start, new_index, new_shear, x_build, z_build, cell_of, order, cell_count,
                              layout, params[THREADS] <= 1.0)
@@ -403,7 +436,7 @@ def rebuild(grains, lists, params, counters):
 
 @njit(cache=NUMBA_CACHE)
 def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z):
-    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top = grains
+    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
     x_build = lists[L_X_BUILD]
     z_build = lists[L_Z_BUILD]
     dt = params[DT]
@@ -431,7 +464,7 @@ def advance(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, 
     caller to enlarge the list arrays to counters[K_NEEDED_CAPACITY] and call again."""
     for s in range(nsteps):
         if counters[K_NEED_REBUILD] != 0:
-            if not rebuild(grains, lists, params, counters):
+            if not rebuild(grains, lists, params, counters, drag_x, drag_z):
                 return LIST_OVERFLOW, s
         _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z)
     return OK, nsteps

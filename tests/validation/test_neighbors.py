@@ -187,7 +187,7 @@ def test_shear_history_survives_rebuild(compacted):
     moved = rng.choice(free, 40, replace=False)
     st.z[moved] += rng.uniform(-0.6, 0.6, moved.size)
     st.x[moved] = (st.x[moved] + rng.uniform(-0.6, 0.6, moved.size)) % st.width
-    assert K.rebuild(st.grains(), st.lists(), p, st.counters)
+    assert K.rebuild(st.grains(), st.lists(), p, st.counters, *sim.drag)
     after = listed_pairs(st)
     assert brute_force_pairs(st, st.width, p[K.SKIN]) == set(after)
     kept = set(before) & set(after)
@@ -197,3 +197,41 @@ def test_shear_history_survives_rebuild(compacted):
         assert st.shear[after[pair]] == history[pair]
     for pair in new:
         assert st.shear[after[pair]] == 0.0
+
+
+def test_renumbering_moves_grains_with_their_pairs_and_history(compacted):
+    """kernels.step.renumber (grains re-numbered by position as the layer shears): every grain
+    keeps its position, velocity and properties under its original number (id), every listed
+    pair keeps its tangential history, the list is still exact, and the forces are unchanged up
+    to round-off (the sums run in a new order). Runs last: it re-numbers the shared packing."""
+    sim = compacted
+    st, p = sim.state, sim.params.copy()
+    p[K.SORT_EVERY] = 1
+    rng = np.random.default_rng(5)
+    st.shear[:st.start[-1]] = rng.normal(0.0, 1e-3, st.start[-1])
+    history = {tuple(sorted((int(st.id[i]), int(st.id[j])))): st.shear[k] for (i, j), k in listed_pairs(st).items()}
+    shear = st.shear.copy()
+    K.compute_forces(st.grains(), st.lists(), st.pairs(), st.wall, p, *sim.drag)
+    st.shear[:] = shear                 # (the force pass advanced the history; take it back)
+    before = {name: st.by_id(getattr(st, name)).copy()
+              for name in ("x", "z", "vx", "radius", "mass", "inv_inertia", "body", "force_x", "force_z", "torque")}
+    # scramble the numbering first (as long shear would), so that renumbering has work to do
+    K.renumber(st.grains(), st.lists(), *sim.drag, 7.0)          # (strips of a narrower box: another order)
+    assert not np.array_equal(st.id, np.arange(st.n))
+    st.counters[K.K_REBUILDS] = 0
+    assert K.rebuild(st.grains(), st.lists(), p, st.counters, *sim.drag)
+    assert sorted(st.id.tolist()) == list(range(st.n))
+    np.testing.assert_array_equal(st.top, np.flatnonzero(st.body == K.TOP))
+    pairs = listed_pairs(st)
+    assert brute_force_pairs(st, st.width, p[K.SKIN]) == set(pairs)
+    assert {tuple(sorted((int(st.id[i]), int(st.id[j])))): st.shear[k] for (i, j), k in pairs.items()} == history
+    K.compute_forces(st.grains(), st.lists(), st.pairs(), st.wall, p, *sim.drag)
+    for name in ("x", "z", "vx", "radius", "mass", "inv_inertia", "body"):
+        np.testing.assert_array_equal(st.by_id(getattr(st, name)), before[name], err_msg=name)
+    scale = np.abs(before["force_z"]).max()
+    for name in ("force_x", "force_z", "torque"):
+        np.testing.assert_allclose(st.by_id(getattr(st, name)), before[name], rtol=0, atol=1e-12 * scale,
+                                   err_msg=name)
+    # neighbours are close in number again: the median |j - i| of the listed pairs is small
+    span = [abs(j - i) for (i, j) in pairs]
+    assert np.median(span) < 40

@@ -1,0 +1,100 @@
+"""Spatial re-numbering of the grains, so that neighbours keep nearby numbers while the layer shears.
+
+The force pass walks grain rows in number order and reads each neighbour's data; with
+neighbours a few numbers apart that data is in cache. Shear mixes the packing's initial
+numbering (after one layer width of shear at 10,000 grains the 90th percentile of |j - i|
+grows from 29 to 770 and the step slows by ~25 %), so the grains are re-numbered every
+few rebuilds: strips STRIP d wide along x, then rows BIN d high, keeping the current order
+inside a bin (a stable counting sort, deterministic). The grain's original number travels
+with it in ``id`` so outputs can be written in a fixed order.
+
+Nothing is allocated: the permutation and its inverse live in the rebuild's scratch arrays.
+"""
+
+from __future__ import annotations
+
+from numba import njit
+
+from .. import NUMBA_CACHE
+
+STRIP = 16.0    # [d] width of the numbering strips (also the packing's initial numbering)
+BIN = 1.0       # [d] height of a row inside a strip
+
+
+@njit(cache=NUMBA_CACHE)
+def spatial_order(x, z, width, perm, inverse, count):
+    """perm (N,) int64: new -> old grain number, by (strip, row), stable; inverse: old -> new.
+    count: int64 scratch, len > number of bins (bins grow taller if it is too short)."""
+    n = x.shape[0]
+    zmin = z[0]
+    zmax = z[0]
+    for i in range(n):
+        zmin = min(zmin, z[i])
+        zmax = max(zmax, z[i])
+    strips = max(int(width / STRIP), 1)
+    strip_w = width / strips
+    height = BIN
+    rows = int((zmax - zmin) / height) + 1
+    while strips * rows >= count.shape[0]:
+        height *= 2.0
+        rows = int((zmax - zmin) / height) + 1
+    bins = strips * rows
+    for b in range(bins + 1):
+        count[b] = 0
+    for i in range(n):
+        s = min(int(x[i] / strip_w), strips - 1)
+        b = s * rows + min(int((z[i] - zmin) / height), rows - 1)
+        inverse[i] = b                      # (bin for now)
+        count[b + 1] += 1
+    for b in range(bins):
+        count[b + 1] += count[b]
+    for i in range(n):
+        b = inverse[i]
+        perm[count[b]] = i
+        count[b] += 1
+    for k in range(n):
+        inverse[perm[k]] = k
+
+
+@njit(cache=NUMBA_CACHE)
+def permute(values, perm, scratch):
+    """values[:] = values[perm] through scratch (same length or longer, same kind)."""
+    n = perm.shape[0]
+    for k in range(n):
+        scratch[k] = values[perm[k]]
+    for k in range(n):
+        values[k] = scratch[k]
+
+
+@njit(cache=NUMBA_CACHE)
+def renumber_list(inverse, start, index, shear, new_start, new_index, new_shear):
+    """The half list in the new numbering (pair (i, j) -> (min, max) of (inverse[i], inverse[j])),
+    rows in increasing number, each row's pairs in the order of their old slots; shear travels along."""
+    n = inverse.shape[0]
+    npairs = start[n]
+    for i in range(n + 1):
+        new_start[i] = 0
+    for i in range(n):
+        a = inverse[i]
+        for k in range(start[i], start[i + 1]):
+            b = inverse[index[k]]
+            new_start[min(a, b) + 1] += 1
+    for i in range(n):
+        new_start[i + 1] += new_start[i]
+    for i in range(n):                       # new_start[r] runs to the start of row r + 1, then shifts back
+        a = inverse[i]
+        for k in range(start[i], start[i + 1]):
+            b = inverse[index[k]]
+            r = min(a, b)
+            at = new_start[r]
+            new_index[at] = max(a, b)
+            new_shear[at] = shear[k]
+            new_start[r] = at + 1
+    for r in range(n, 0, -1):
+        new_start[r] = new_start[r - 1]
+    new_start[0] = 0
+    for i in range(n + 1):
+        start[i] = new_start[i]
+    for k in range(npairs):
+        index[k] = new_index[k]
+        shear[k] = new_shear[k]
