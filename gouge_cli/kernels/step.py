@@ -123,7 +123,8 @@ def _pair(xi, zi, vxi, vzi, wi, ri, mi, j, k, x, z, vx, vz, spin, radius, mass, 
 
 @njit(inline="always", cache=NUMBA_CACHE)
 def _fill(i, k0, k1, base, x, z, vx, vz, spin, radius, mass, index, shear, width, buf):
-    """Copy the inputs of pair slots k0:k1 of row i into buf[:, k - base]."""
+    """Copy the inputs of pair slots k0:k1 of row i into buf[:, k - base] (block-crossing slots
+    too, which keeps the loop free of branches; _scatter ignores their results)."""
     xi = x[i]
     zi = z[i]
     vxi = vx[i]
