@@ -45,6 +45,23 @@ def test_start_is_before_a_slip(start):
     assert 100.0 < start.interval < 2000.0
 
 
+def test_start_moves_up_to_the_capped_lead(tmp_path):
+    """Seed 1 keeps its pre-slip checkpoint at a stress peak 5,800 t0 before the onset; the
+    ladder start is advanced to MAX_LEAD_SLIPS slip durations before it, and the interval runs
+    from there to the slip end plus 10 %."""
+    from gouge_cli.accuracy import MAX_LEAD_SLIPS, slip_duration, slip_end
+    from gouge_cli.checkpoint import read_checkpoint
+    from gouge_cli.simulation import Simulation
+    start = prepare_start(build_config({**TINY, "seed": 1}), tmp_path)
+    ck = read_checkpoint(start.source)
+    sim = Simulation(start.config, arrays=start.state)
+    duration = slip_duration(start.config, sim.wall_mass_per_length)
+    onset = ck.extra["onset_time"]
+    assert onset - ck.time > 10 * duration
+    assert onset - sim.state.time == pytest.approx(MAX_LEAD_SLIPS * duration, abs=sim.dt)
+    assert start.interval == pytest.approx(1.1 * (slip_end(start.source, ck.extra) - sim.state.time))
+
+
 def test_dt_ladder_errors_fall_with_dt(start):
     result = run_scene_ladders(start, scene_ladders(start.config, quick=True, fluid=False), samples=200)
     assert [r.level.setting for r in result["results"]] == ["dt_safety=0.4", "dt_safety=0.2", "dt_safety=0.1"]
