@@ -240,7 +240,7 @@ def corner_shares(area, i0, i1, j0, fx, fz, nz):
 DEPOSIT_GROUPS = 4     # grains deposit in this many fixed groups, summed in group order
 
 
-@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
             corners=None, partial=None):
     """Solid fraction, its kernel-consistent gradient and the grid-relative solid velocity.
@@ -270,6 +270,16 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
         _normalise(nx, nz, Lx, z_bot, z_top, s.reshape(size), ux.reshape(size), uz_rel.reshape(size),
                    grad_s_x.reshape(size), grad_s_z.reshape(size))
         return
+    _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
+                     corners, partial)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
+def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
+                     corners, partial):
+    """deposit in DEPOSIT_GROUPS fixed groups of grains (in parallel), summed in group order."""
+    nx, nz = s.shape
+    size = nx * nz
     for g in prange(DEPOSIT_GROUPS):
         part = partial[g]
         _deposit_range(x, z, vx, vz, radius, g * n // DEPOSIT_GROUPS, (g + 1) * n // DEPOSIT_GROUPS, Lx,
