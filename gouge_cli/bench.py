@@ -16,7 +16,9 @@ slip of the thesis Run 24 scene (physics.md section 6) at the rates measured her
 
 from __future__ import annotations
 
+import hashlib
 import json
+import math
 import os
 import re
 import resource
@@ -26,14 +28,11 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import math
-
 import numba
 import numpy as np
 
-import hashlib
-
 from . import __version__
+from .accuracy import slip_duration
 from .config import build_config, find_config, load_config
 from .kernels import step as K
 from .simulation import Simulation
@@ -41,8 +40,7 @@ from .timestep import choose_dt
 
 CACHE = Path("runs/bench/cache")
 DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "kernels/reorder.py", "packing.py",
-               "simulation.py",
-               "state.py", "config.py", "timestep.py")     # (and bench_config below)
+               "simulation.py", "state.py", "config.py", "timestep.py")     # (and bench_config below)
 RUN24_CYCLE = 1.6e7     # [t0] one loading cycle of thesis Run 24 (physics.md section 6)
 
 
@@ -258,7 +256,7 @@ def run24_projection(rates: dict) -> dict:
     config = run24_config()
     sim = Simulation(config)
     dt = choose_dt(config)
-    slip = math.pi * math.sqrt(sim.wall_mass_per_length / config.loading.spring_constant)
+    slip = slip_duration(config, sim.wall_mass_per_length)
     n = sim.state.n
     out = {"n_grains": n, "dt": dt, "cycle_t0": RUN24_CYCLE, "slip_t0": slip, "by_threads": {}}
     for threads, rate in rates.items():

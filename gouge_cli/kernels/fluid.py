@@ -767,9 +767,10 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
     drag_x, drag_z : out, float64[>= n] fluid force per grain [E d^2], to be added
         to the contact forces until the next update.
 
-    Order: deposit s^{n+1} and u_rel (keeping each grain's corner cells and areas in corners); exact undrained source -> P*; Carman-Kozeny
-    permeability from s^{n+1}; conductances with (1 + beta P^n); implicit or
-    explicit diffusion over dt_f; grad P and drag. Returns a status (module doc).
+    Order: deposit s^{n+1} and u_rel (keeping each grain's corner cells and areas in
+    corners); exact undrained source -> P*; Carman-Kozeny permeability from s^{n+1};
+    conductances with (1 + beta P^n); implicit or explicit diffusion over dt_f; grad P and
+    drag. Returns a status (module doc).
     """
     nx, nz = P.shape
     thickness = z_top - z_bot

@@ -65,6 +65,26 @@ def _scan_row(i, x, z, radius, body, width, skin, cell_of, count, order, ncx, nc
     return found
 
 
+@njit(inline="always", cache=NUMBA_CACHE)
+def bucket_order(key, nbins, count, order):
+    """Stable counting sort: order (N,) = grain numbers by key (N,) in [0, nbins); afterwards
+    count[b] is the first position of bucket b in order and count[nbins] = N. count: len > nbins."""
+    n = key.shape[0]
+    for b in range(nbins + 1):
+        count[b] = 0
+    for i in range(n):
+        count[key[i] + 1] += 1
+    for b in range(nbins):
+        count[b + 1] += count[b]
+    for i in range(n):              # count[b] runs up to the start of bucket b + 1, then is shifted back
+        b = key[i]
+        order[count[b]] = i
+        count[b] += 1
+    for b in range(nbins, 0, -1):
+        count[b] = count[b - 1]
+    count[0] = 0
+
+
 @njit(parallel=True, cache=NUMBA_CACHE)
 def build_neighbors(x, z, radius, body, width, skin, start, index, shear, new_start, new_index, new_shear,
                     x_build, z_build, cell_of, order, count, scratch, serial):
@@ -98,23 +118,11 @@ def build_neighbors(x, z, radius, body, width, skin, start, index, shear, new_st
         cell *= 1.25
     cw = width / ncx
     ncell = ncx * ncz
-    for c in range(ncell + 1):
-        count[c] = 0
     for i in range(n):
         cx = min(int(x[i] / cw), ncx - 1)
         cz = min(int((z[i] - zmin) / cell), ncz - 1)
-        c = cz * ncx + cx
-        cell_of[i] = c
-        count[c + 1] += 1
-    for c in range(ncell):
-        count[c + 1] += count[c]
-    for i in range(n):              # count[c] runs up to the start of cell c + 1, then is shifted back
-        c = cell_of[i]
-        order[count[c]] = i
-        count[c] += 1
-    for c in range(ncell, 0, -1):
-        count[c] = count[c - 1]
-    count[0] = 0
+        cell_of[i] = cz * ncx + cx
+    bucket_order(cell_of, ncell, count, order)
 
     nb = 1 if serial else LIST_BLOCKS
     region = capacity // nb

@@ -16,6 +16,7 @@ from __future__ import annotations
 from numba import njit
 
 from .. import NUMBA_CACHE
+from .neighbors import bucket_order
 
 STRIP = 16.0    # [d] width of the numbering strips (also the packing's initial numbering)
 BIN = 1.0       # [d] height of a row inside a strip
@@ -38,20 +39,10 @@ def spatial_order(x, z, width, perm, inverse, count):
     while strips * rows >= count.shape[0]:
         height *= 2.0
         rows = int((zmax - zmin) / height) + 1
-    bins = strips * rows
-    for b in range(bins + 1):
-        count[b] = 0
     for i in range(n):
         s = min(int(x[i] / strip_w), strips - 1)
-        b = s * rows + min(int((z[i] - zmin) / height), rows - 1)
-        inverse[i] = b                      # (bin for now)
-        count[b + 1] += 1
-    for b in range(bins):
-        count[b + 1] += count[b]
-    for i in range(n):
-        b = inverse[i]
-        perm[count[b]] = i
-        count[b] += 1
+        inverse[i] = s * rows + min(int((z[i] - zmin) / height), rows - 1)     # (the bin, for now)
+    bucket_order(inverse, strips * rows, count, perm)
     for k in range(n):
         inverse[perm[k]] = k
 

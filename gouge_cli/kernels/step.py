@@ -102,23 +102,16 @@ def block_layout(start, index, n, nb, layout, cross_i, cross_k, cross_in, scratc
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
-def _pair(xi, zi, vxi, vzi, wi, ri, mi, j, k, x, z, vx, vz, spin, radius, mass, shear, width, dt, c_n, c_t,
-          damping, friction):
-    """hertz_mindlin for listed pair slot k = (i, j) (grain i's values passed in), updating
-    shear[k]; touching flag first."""
-    dx = minimum_image(x[j] - xi, width)
-    dz = z[j] - zi
-    rj = radius[j]
-    rsum = ri + rj
-    if dx * dx + dz * dz >= rsum * rsum:
-        shear[k] = 0.0                      # (also a -0.0 left by a sliding contact: same bits as _laws)
-        return False, 0.0, 0.0, 0.0, 0.0
+def _pair(i, j, k, x, z, vx, vz, spin, radius, mass, shear, width, dt, c_n, c_t, damping, friction):
+    """hertz_mindlin for listed pair slot k = (i, j), updating shear[k] (0 once apart), with the
+    same inputs as _fill / _laws give it (same bits)."""
+    mi = mass[i]
     mj = mass[j]
     fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
-        dx, dz, vx[j] - vxi, vz[j] - vzi, wi, spin[j], ri, rj, mi * mj / (mi + mj), shear[k], dt,
-        c_n, c_t, damping, friction)
+        minimum_image(x[j] - x[i], width), z[j] - z[i], vx[j] - vx[i], vz[j] - vz[i], spin[i], spin[j],
+        radius[i], radius[j], mi * mj / (mi + mj), shear[k], dt, c_n, c_t, damping, friction)
     shear[k] = ds
-    return True, fx, fz, ti, tj
+    return fx, fz, ti, tj
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
@@ -225,10 +218,8 @@ def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_
         for b in prange(nb):
             for q in range(layout[L_OUT + b], layout[L_OUT + b + 1]):
                 k = cross_k[q]
-                i = cross_i[q]
-                touching, fx, fz, ti, tj = _pair(x[i], z[i], vx[i], vz[i], spin[i], radius[i], mass[i], index[k], k,
-                                                 x, z, vx, vz, spin, radius, mass, shear, width, dt, c_n, c_t,
-                                                 damping, friction)
+                fx, fz, ti, tj = _pair(cross_i[q], index[k], k, x, z, vx, vz, spin, radius, mass, shear, width, dt,
+                                       c_n, c_t, damping, friction)
                 pair_fx[k] = fx
                 pair_fz[k] = fz
                 pair_ti[k] = ti
