@@ -68,7 +68,7 @@ class FluidGrid:
         self.state[kernels.S_Z_BOT] = z_bot
         self.state[kernels.S_Z_TOP] = z_top
         self._allocate_grid(self.nx, self.nz)
-        self.corners = np.zeros((6, self.n_grains))
+        self.corners = np.zeros((kernels.N_CORNERS, self.n_grains))
         self.drag_x = np.zeros(self.n_grains)
         self.drag_z = np.zeros(self.n_grains)
 
@@ -83,7 +83,7 @@ class FluidGrid:
         self.permeability = np.zeros(shape)
         self.div_u = np.zeros(shape)
         self.work = np.zeros((kernels.N_WORK, nx, nz))
-        self.partial = np.zeros((kernels.DEPOSIT_GROUPS, 5, nx * nz))
+        self.partial = np.zeros((kernels.DEPOSIT_GROUPS, nx * nz, kernels.N_MOMENTS))
 
     @classmethod
     def from_config(cls, fluid_config, Lx: float, z_bot: float, z_top: float, n_grains: int) -> "FluidGrid":

@@ -83,8 +83,8 @@ state  : float64[N_STATE]   indices S_* below; S_Z_BOT/S_Z_TOP are the planes at
                             the last update and must be checkpointed with P and s
 P, s, s_old, ux, uz, permeability, div_u : float64[nx, nz]
 work   : float64[N_WORK, nx, nz]   scratch, indices W_* below
-corners : float64[6, N]            per-grain deposit cells and areas (see deposit), reused for the drag
-partial : float64[DEPOSIT_GROUPS, 5, nx * nz]   per-group deposit sums (see deposit)
+corners : float64[N_CORNERS, N]    per-grain deposit cells and areas (see deposit), reused for the drag
+partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit)
 drag_x, drag_z : float64[N]        force on each grain [E d^2]
 
 Status: STATUS_OK 0; STATUS_SOLVER 1 (CG not converged in max_iter: P is the
@@ -238,6 +238,14 @@ def corner_shares(area, i0, i1, j0, fx, fz, nz):
 
 
 DEPOSIT_GROUPS = 4     # grains deposit in this many fixed groups, summed in group order
+# corners rows: flat indices of a grain's cells (i0, j0) and (i1, j0), the areas its four cells
+# receive, and d fz / dz (see cell_weights)
+C_00, C_10, C_A00, C_A10, C_A01, C_A11, C_DFZ = range(7)
+N_CORNERS = 7
+# moments a grain adds to the record of its cell c00: its four shares a00, a10, a01, a11, the
+# same times vx and times vz - w(z), and the z-slope terms (a00 + a01) dfz, (a10 + a11) dfz
+M_S, M_U, M_W, M_G = 0, 4, 8, 12
+N_MOMENTS = 16         # (14 used; padded so that a record is two cache lines)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -254,12 +262,17 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  [1/d]: the derivative of s_c with respect to the cell position,
                  so that moving every grain by delta changes s by -delta . grad_s
                  to first order (a rigid translation generates no source).
-    corners : float64[6, >= n] out (optional), per grain: flat indices c00, c10 of its
-                 corner cells and the areas a00, a10, a01, a11 they receive (c00 = -1 for
-                 a grain outside the layer), reused by grain_drag_at for the drag.
-    partial : float64[DEPOSIT_GROUPS, 5, nx * nz] scratch (optional): the grains deposit
-                 in DEPOSIT_GROUPS fixed groups (in parallel), summed in group order, so
-                 the result is the same for any thread count. Without it, one serial pass.
+    corners : float64[N_CORNERS, >= n] out (rows C_*), per grain: flat indices c00, c10 of its
+                 corner cells, the areas a00, a10, a01, a11 they receive (c00 = -1 for a
+                 grain outside the layer) and d fz/dz; reused by grain_drag_at for the drag.
+    partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS] scratch. With corners and partial,
+                 the fast form: a vectorised pass for the cells and areas (_corners_range),
+                 then each grain adds 14 moments to the record of its cell c00
+                 (_moments_range), in DEPOSIT_GROUPS fixed groups of grains (in parallel)
+                 summed in group order, and one pass over the cells collects the four shares
+                 (_expand): the same sums regrouped (equal to round-off), the same bits for
+                 any thread count. Without partial, the direct serial form, the definition:
+                 every grain adds to its four cells (the tests' reference).
     """
     nx, nz = s.shape
     size = nx * nz
@@ -277,42 +290,152 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
 def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
                      corners, partial):
-    """deposit in DEPOSIT_GROUPS fixed groups of grains (in parallel), summed in group order."""
+    """deposit's fast form: cells and moments in DEPOSIT_GROUPS fixed groups (in parallel), summed
+    in group order into partial[0], collected per cell."""
     nx, nz = s.shape
     size = nx * nz
     for g in prange(DEPOSIT_GROUPS):
-        part = partial[g]
-        _deposit_range(x, z, vx, vz, radius, g * n // DEPOSIT_GROUPS, (g + 1) * n // DEPOSIT_GROUPS, Lx,
-                       z_bot, z_top, w_bot, w_top, nx, nz, part[0], part[1], part[2], part[3], part[4], corners)
+        first = g * n // DEPOSIT_GROUPS
+        last = (g + 1) * n // DEPOSIT_GROUPS
+        _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
+        _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, partial[g], corners)
+    total = partial[0]
+    for c in prange(size):
+        for g in range(1, DEPOSIT_GROUPS):
+            for m in range(N_MOMENTS):
+                total[c, m] += partial[g, c, m]
     solid = s.reshape(size)
     momentum_x = ux.reshape(size)
     momentum_z = uz_rel.reshape(size)
     slope_x = grad_s_x.reshape(size)
     slope_z = grad_s_z.reshape(size)
-    for c in prange(size):
-        a = 0.0
-        b = 0.0
-        d = 0.0
-        e = 0.0
-        f = 0.0
-        for g in range(DEPOSIT_GROUPS):
-            a += partial[g, 0, c]
-            b += partial[g, 1, c]
-            d += partial[g, 2, c]
-            e += partial[g, 3, c]
-            f += partial[g, 4, c]
-        solid[c] = a
-        momentum_x[c] = b
-        momentum_z[c] = d
-        slope_x[c] = e
-        slope_z[c] = f
+    _expand(total, nx, nz, nx / Lx, solid, momentum_x, momentum_z, slope_x, slope_z)
     _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x, slope_z)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners):
+    """corners[:, first:last]: grain_area, cell_weights and corner_shares, the same values.
+    A loop without calls or branches (SIMD) for grains clear of both planes with x in
+    [0, Lx + dx/2); it marks the others (d fz/dz = -1), which then take the scalar path."""
+    inv_dx = nx / Lx
+    inv_dz = nz / (z_top - z_bot)
+    fnx = float(nx)
+    fnz = float(nz)
+    c00, c10, a00, a10, a01, a11, dfz = (corners[C_00], corners[C_10], corners[C_A00], corners[C_A10],
+                                         corners[C_A01], corners[C_A11], corners[C_DFZ])
+    for kk in range(first, last):
+        k = np.uint64(kk)
+        zk = z[k]
+        r = radius[k]
+        area = math.pi * r * r
+        xi = x[k] * inv_dx - 0.5
+        fi = math.floor(xi)
+        fx = xi - fi
+        fi = fi + fnx if fi < 0.0 else fi
+        f1 = fi + 1.0
+        f1 = 0.0 if f1 == fnx else f1
+        zeta = (zk - z_bot) * inv_dz - 0.5
+        fj = math.floor(zeta)
+        inside = (fj >= 0.0) & (fj < fnz - 1.0)
+        top = fj >= fnz - 1.0
+        j0 = fj if inside else (fnz - 2.0 if top else 0.0)
+        fz = zeta - fj if inside else (1.0 if top else 0.0)
+        a0 = area * (1.0 - fz)
+        a1 = area * fz
+        c00[k] = fi * fnz + j0
+        c10[k] = f1 * fnz + j0
+        a00[k] = a0 * (1.0 - fx)
+        a10[k] = a0 * fx
+        a01[k] = a1 * (1.0 - fx)
+        a11[k] = a1 * fx
+        odd = (zk - z_bot < r) | (z_top - zk < r) | (fi < 0.0) | (fi >= fnx)
+        dfz[k] = -1.0 if odd else (inv_dz if inside else 0.0)
+    for k in range(first, last):
+        if dfz[k] >= 0.0:
+            continue
+        area = grain_area(z[k], radius[k], z_bot, z_top)
+        if area <= 0.0:
+            c00[k] = -1.0
+            dfz[k] = 0.0
+            continue
+        i0, i1, j0, fx, fz, slope = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
+        c00[k], c10[k], _, _, a00[k], a10[k], a01[k], a11[k] = corner_shares(area, i0, i1, j0, fx, fz, nz)
+        dfz[k] = slope
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners):
+    """moments (nx * nz, N_MOMENTS) of grains first:last (zeroed first) from their corners."""
+    grid_strain_rate = (w_top - w_bot) / (z_top - z_bot)
+    for c in range(moments.shape[0]):
+        for m in range(N_MOMENTS):
+            moments[c, m] = 0.0
+    flat = moments.reshape(moments.size)
+    c00, a00s, a10s, a01s, a11s, dfz = (corners[C_00], corners[C_A00], corners[C_A10], corners[C_A01],
+                                         corners[C_A11], corners[C_DFZ])
+    for kk in range(first, last):
+        k = np.uint64(kk)
+        if c00[k] < 0.0:
+            continue
+        r = np.uint64(c00[k]) * np.uint64(N_MOMENTS)
+        a00 = a00s[k]
+        a10 = a10s[k]
+        a01 = a01s[k]
+        a11 = a11s[k]
+        u = vx[k]
+        w = vz[k] - (w_bot + (z[k] - z_bot) * grid_strain_rate)
+        flat[r + M_S] += a00
+        flat[r + M_S + 1] += a10
+        flat[r + M_S + 2] += a01
+        flat[r + M_S + 3] += a11
+        flat[r + M_U] += a00 * u
+        flat[r + M_U + 1] += a10 * u
+        flat[r + M_U + 2] += a01 * u
+        flat[r + M_U + 3] += a11 * u
+        flat[r + M_W] += a00 * w
+        flat[r + M_W + 1] += a10 * w
+        flat[r + M_W + 2] += a01 * w
+        flat[r + M_W + 3] += a11 * w
+        flat[r + M_G] += (a00 + a01) * dfz[k]
+        flat[r + M_G + 1] += (a10 + a11) * dfz[k]
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _expand(moments, nx, nz, inv_dx, solid, momentum_x, momentum_z, slope_x, slope_z):
+    """Raw sums per cell (as _deposit_range leaves them) from the moment records of the grains
+    whose cell c00 is this one (share 00), the one to its left (10), below (01), left-below (11)."""
+    for i in range(nx):
+        il = i - 1 if i > 0 else nx - 1
+        for j in range(nz):
+            c = i * nz + j
+            own = moments[c]
+            left = moments[il * nz + j]
+            a = own[M_S] + left[M_S + 1]
+            b = own[M_U] + left[M_U + 1]
+            e = own[M_W] + left[M_W + 1]
+            gx = (own[M_S] + own[M_S + 1]) - (left[M_S] + left[M_S + 1])
+            gz = own[M_G] + left[M_G + 1]
+            if j > 0:
+                below = moments[c - 1]
+                corner = moments[il * nz + j - 1]
+                a += below[M_S + 2] + corner[M_S + 3]
+                b += below[M_U + 2] + corner[M_U + 3]
+                e += below[M_W + 2] + corner[M_W + 3]
+                gx += (below[M_S + 2] + below[M_S + 3]) - (corner[M_S + 2] + corner[M_S + 3])
+                gz -= below[M_G] + corner[M_G + 1]
+            solid[c] = a
+            momentum_x[c] = b
+            momentum_z[c] = e
+            slope_x[c] = gx * inv_dx
+            slope_z[c] = gz
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w_top, nx, nz,
                    solid, momentum_x, momentum_z, slope_x, slope_z, corners):
-    """Raw sums of grains first:last into the flat (nx * nz,) grids (zeroed first)."""
+    """Raw sums of grains first:last into the flat (nx * nz,) grids (zeroed first), each grain
+    adding to its four cells (the direct form of the deposit)."""
     thickness = z_top - z_bot
     inv_dx = nx / Lx
     inv_dz = nz / thickness
@@ -327,17 +450,18 @@ def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w
         area = grain_area(z[k], radius[k], z_bot, z_top)
         if area <= 0.0:
             if corners is not None:
-                corners[0, k] = -1.0
+                corners[C_00, k] = -1.0
             continue
         i0, i1, j0, fx, fz, dfz = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
         c00, c10, c01, c11, a00, a10, a01, a11 = corner_shares(area, i0, i1, j0, fx, fz, nz)
         if corners is not None:
-            corners[0, k] = c00
-            corners[1, k] = c10
-            corners[2, k] = a00
-            corners[3, k] = a10
-            corners[4, k] = a01
-            corners[5, k] = a11
+            corners[C_00, k] = c00
+            corners[C_10, k] = c10
+            corners[C_A00, k] = a00
+            corners[C_A10, k] = a10
+            corners[C_A01, k] = a01
+            corners[C_A11, k] = a11
+            corners[C_DFZ, k] = dfz
         a0 = area * (1.0 - fz)
         a1 = area * fz
         vxk = vx[k]
@@ -521,12 +645,35 @@ def _solve_columns(r, tz, cp, dinv, out):
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _dot(a, b):
-    nx, nz = a.shape
-    total = 0.0
-    for i in range(nx):
-        for j in range(nz):
-            total += a[i, j] * b[i, j]
-    return total
+    """sum a * b over all cells, in four interleaved partial sums (fixed order: the same bits
+    every time; four independent additions in flight instead of one chain)."""
+    fa = a.reshape(a.size)
+    fb = b.reshape(b.size)
+    n4 = fa.size - fa.size % 4
+    s0 = s1 = s2 = s3 = 0.0
+    for c in range(0, n4, 4):
+        k = np.uint64(c)
+        s0 += fa[k] * fb[k]
+        s1 += fa[k + 1] * fb[k + 1]
+        s2 += fa[k + 2] * fb[k + 2]
+        s3 += fa[k + 3] * fb[k + 3]
+    for c in range(n4, fa.size):
+        s0 += fa[c] * fb[c]
+    return (s0 + s1) + (s2 + s3)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _step_residual(alpha, p, q, solution, r):
+    """solution += alpha p, r -= alpha q; returns r . r (summed as _dot)."""
+    fp = p.reshape(p.size)
+    fq = q.reshape(q.size)
+    fx = solution.reshape(solution.size)
+    fr = r.reshape(r.size)
+    for c in range(fr.size):
+        k = np.uint64(c)
+        fx[k] += alpha * fp[k]
+        fr[k] -= alpha * fq[k]
+    return _dot(r, r)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -566,13 +713,7 @@ def conjugate_gradient(solution, rhs, diag, tx, tz, work, tol, max_iter):
     for it in range(1, max_iter + 1):
         _apply_operator(p, diag, tx, tz, q)
         alpha = rz / _dot(p, q)
-        rr = 0.0
-        for i in range(nx):
-            for j in range(nz):
-                solution[i, j] += alpha * p[i, j]
-                r[i, j] -= alpha * q[i, j]
-                rr += r[i, j] * r[i, j]
-        res = math.sqrt(rr) / rhs_norm
+        res = math.sqrt(_step_residual(alpha, p, q, solution, r)) / rhs_norm
         if res <= tol:
             return it, res, True
         _solve_columns(r, tz, cp, dinv, zv)
@@ -638,8 +779,9 @@ def drag_density(gx, gz, s, fx, fz):
     for i in range(nx):
         for j in range(nz):
             if s[i, j] > 0.0:
-                fx[i, j] = -gx[i, j] / s[i, j]
-                fz[i, j] = -gz[i, j] / s[i, j]
+                inv = -1.0 / s[i, j]
+                fx[i, j] = gx[i, j] * inv
+                fz[i, j] = gz[i, j] * inv
             else:
                 fx[i, j] = 0.0
                 fz[i, j] = 0.0
@@ -687,12 +829,12 @@ def grain_drag_at(corners, n, fx, fz, drag_x, drag_z):
     flat_x = fx.reshape(nx * nz)
     flat_z = fz.reshape(nx * nz)
     for k in prange(n):
-        if corners[0, k] < 0.0:
+        if corners[C_00, k] < 0.0:
             drag_x[k] = 0.0
             drag_z[k] = 0.0
             continue
-        drag_x[k], drag_z[k] = _gather(flat_x, flat_z, np.uint64(corners[0, k]), np.uint64(corners[1, k]),
-                                       corners[2, k], corners[3, k], corners[4, k], corners[5, k])
+        drag_x[k], drag_z[k] = _gather(flat_x, flat_z, np.uint64(corners[C_00, k]), np.uint64(corners[C_10, k]),
+                                       corners[C_A00, k], corners[C_A10, k], corners[C_A01, k], corners[C_A11, k])
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")

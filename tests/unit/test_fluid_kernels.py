@@ -63,11 +63,11 @@ def test_grouped_deposit_and_cached_drag():
     serial = [np.empty((5, 4)) for _ in range(5)]
     kernels.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *serial)
     grouped = []
-    corners = np.zeros((6, x.size))
+    corners = np.zeros((kernels.N_CORNERS, x.size))
     for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
         numba.set_num_threads(threads)
         out = [np.empty((5, 4)) for _ in range(5)]
-        partial = np.zeros((kernels.DEPOSIT_GROUPS, 5, 20))
+        partial = np.zeros((kernels.DEPOSIT_GROUPS, 20, kernels.N_MOMENTS))
         kernels.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial)
         grouped.append(out)
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
