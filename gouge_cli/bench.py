@@ -147,7 +147,8 @@ def time_lammps(n_grains: int, ranks: int, steps: int, dt: float, skin: float, s
 def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability: float, threads: int,
                 steps: int, repeats: int) -> dict:
     """Undrained (implicit fluid, kappa_c = permeability) vs dry from the same state: rates and the
-    fluid share of a step, 1 - rate_undrained / rate_dry."""
+    fluid share of a step, 1 - rate_undrained / rate_dry, from the medians of the alternating
+    repeats and (fluid_share_best) from the fastest of each, the less noise-prone figure."""
     wet = Simulation(bench_config(n_grains, dt, skin, permeability), arrays=start)
     dry = Simulation(bench_config(n_grains, dt, skin), arrays=start)
     wet_start = (wet.state.arrays(), wet.fluid.arrays())
@@ -165,7 +166,8 @@ def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability
     dry_rate, wet_rate = float(np.median(rates["dry"])), float(np.median(rates["undrained"]))
     return {"n_grains": n_grains, "threads": threads, "permeability": permeability, "dt": dt,
             "fluid_interval_steps": wet.fluid_interval, "grid": list(wet.fluid.pressure.shape),
-            "rate_dry": dry_rate, "rate_undrained": wet_rate, "fluid_share": 1.0 - wet_rate / dry_rate}
+            "rate_dry": dry_rate, "rate_undrained": wet_rate, "fluid_share": 1.0 - wet_rate / dry_rate,
+            "fluid_share_best": 1.0 - max(rates["undrained"]) / max(rates["dry"])}
 
 
 def allocations_per_step(sim: Simulation, start: dict, threads: int, steps: int = 400) -> float | None:
