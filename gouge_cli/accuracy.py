@@ -542,7 +542,7 @@ def block_slider_errors(dt: float, m=1.0, k=1e-2, sigma=1e-2, mu_s=0.6, mu_d=0.5
     p = np.zeros(K.N_PARAMS)
     p[K.DT], p[K.WIDTH], p[K.SIGMA], p[K.SPRING], p[K.V_LOAD] = dt, 1.0, sigma, k, v_load
     p[K.WALL_MASS], p[K.DRIVE] = m, 1.0
-    wall, clock, out = np.zeros(K.N_WALL), np.zeros(2), np.zeros(5)
+    wall, clock, out = np.zeros(K.N_WALL), np.zeros(K.N_CLOCK), np.zeros(5)
     t_end = (mu_s * sigma / k) / v_load + 3.0 * math.pi * math.sqrt(m / k)
     if not _block_slip(wall, clock, p, mu_s, mu_d, int(t_end / dt), out):
         return {"duration": float("nan"), "slip": float("nan"), "peak_velocity": float("nan")}

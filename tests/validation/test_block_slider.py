@@ -128,7 +128,7 @@ def test_free_fall_under_normal_stress():
     m, sigma, length, dt = 0.7, 3e-4, 12.0, 0.1
     params = make_params(dt, length, sigma, 1e-3, 0.0, m)
     params[K.DRIVE] = 0.0        # compaction: no spring, no motion along x
-    wall, clock = np.zeros(K.N_WALL), np.zeros(2)
+    wall, clock = np.zeros(K.N_WALL), np.zeros(K.N_CLOCK)
     wall[W_VX] = 1.0
     for _ in range(1000):
         wall_kick(wall, clock, params)
