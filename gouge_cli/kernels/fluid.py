@@ -317,7 +317,8 @@ def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s,
 def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners):
     """corners[:, first:last]: grain_area, cell_weights and corner_shares, the same values.
     A loop without calls or branches (SIMD) for grains clear of both planes with x in
-    [0, Lx + dx/2); it marks the others (d fz/dz = -1), which then take the scalar path."""
+    [dx/2 - Lx, Lx + dx/2) (one periodic wrap at most); it marks the others (d fz/dz = -1),
+    which then take the scalar path."""
     inv_dx = nx / Lx
     inv_dz = nz / (z_top - z_bot)
     fnx = float(nx)
