@@ -7,13 +7,13 @@ from numba import njit
 
 from .. import NUMBA_CACHE
 from .fluid import fluid_update
-from .step import DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, LIST_OVERFLOW, OK, W_Z, WIDTH, _step, rebuild
+from .step import DT, FLUID_FAILED, K_STEP, LIST_OVERFLOW, OK, W_Z, WIDTH, _step
 
 
 @njit(cache=NUMBA_CACHE)
 def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, drag_z,
                   fluid, interval, z_bottom, fluid_status):
-    """As advance, plus a pore-pressure update (kernels.fluid.fluid_update) after every
+    """As kernels.step.advance, plus a pore-pressure update (kernels.fluid.fluid_update) after every
     `interval`-th step (step count multiple of interval) over dt_f = interval * dt; the drag
     it leaves in drag_x/drag_z acts on the grains until the next update. fluid: the tuple
     FluidGrid.kernel_args() without drag. Returns (FLUID_FAILED, steps) with fluid_status[0]
@@ -22,12 +22,14 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work, corners, partial = fluid
     n = x.shape[0]
     dt_f = interval * params[DT]
+    owed = False
     for st in range(nsteps):
-        if counters[K_NEED_REBUILD] != 0:
-            if not rebuild(grains, lists, params, counters, drag_x, drag_z):
-                return LIST_OVERFLOW, st
-        _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z)
-        if counters[K_STEP] % interval == 0:
+        update = (counters[K_STEP] + 1) % interval == 0       # this step ends with a fluid update
+        close = update or st == nsteps - 1
+        if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close):
+            return LIST_OVERFLOW, st
+        owed = not close
+        if update:
             status = fluid_update(x, z, vx, vz, radius, n, params[WIDTH], z_bottom, wall[W_Z], dt_f,
                                   fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work, corners, partial,
                                   drag_x, drag_z)

@@ -2,12 +2,15 @@
 
 One step (``_step``):
   1. top wall: half kick with last step's force, drift; its grains take its velocity
-  2. free grains: half kick (v, w) with last step's force; every grain drifts (x periodic)
+  2. free grains: half kick (v, w) with last step's force; every grain drifts (x periodic);
+     if any grain is now farther than skin/2 from where the list was built, rebuild it
   3. contact forces at the new positions with the half-step velocities (tangential
      history ds += v_t dt), summed per grain in a fixed order
   4. top wall: grain force + spring k L_x (V_s t + s0 - x) along x, - sigma L_x along z; half kick
-  5. free grains: half kick; flag a neighbour rebuild if any grain may pass skin/2 next step
-The neighbour list is rebuilt at the start of a step, never in the middle.
+  5. free grains: half kick
+Within one ``advance`` the grains' step-5 kick is done in the same pass as the next step's
+step-2 kick and drift (same operations in the same order: the bits do not depend on how a
+run is cut into advance calls); the state is at a whole step when advance returns.
 Arrays named in ``GRAIN``/``LIST`` order are passed as tuples from :mod:`gouge_cli.state`.
 """
 
@@ -36,6 +39,8 @@ N_CLOCK = 3
 # counters: int64 array
 K_STEP, K_REBUILDS, K_PAIRS, K_NEED_REBUILD, K_NEEDED_CAPACITY, K_PHASE = range(6)
 N_COUNTERS = 6
+# counters[K_NEED_REBUILD]: 0, 1 (rebuild after the next drift) or MID_STEP (drifted, rebuild pending)
+MID_STEP = 2
 # phases (counters[K_PHASE])
 COMPACTION, LOADING = 0, 1
 # return codes of advance
@@ -299,69 +304,84 @@ def _set_wall_grain_velocity(vx, vz, spin, top, wall):
         spin[i] = 0.0
 
 
-@njit(parallel=True, cache=NUMBA_CACHE)
-def _kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, params):
-    n = x.shape[0]
-    dt = params[DT]
-    half = 0.5 * dt
-    width = params[WIDTH]
-    damp = params[BG_DAMPING]
-    for i in prange(n):
-        if body[i] == 0:
-            vx[i] += half * (force_x[i] * inv_mass[i] - damp * vx[i])
-            vz[i] += half * (force_z[i] * inv_mass[i] - damp * vz[i])
-            spin[i] += half * (torque[i] * inv_inertia[i] - damp * spin[i])
-        xn = x[i] + dt * vx[i]
-        if xn >= width:
-            xn -= width
-        elif xn < 0.0:
-            xn += width
-        x[i] = xn
-        z[i] += dt * vz[i]
-
-
 @njit(inline="always", cache=NUMBA_CACHE)
-def _kick_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, x_build, z_build,
-              dt, width, damp, reach2):
-    """Second half kick of grain i (free grains); 1 if it may move past skin/2 in the next drift."""
+def _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, x_build, z_build,
+              double, dt, width, damp, reach2):
+    """Half kick of grain i if it is free (two in a row if double: the previous step's second
+    and this step's first, same bits as two passes), then its drift, x periodic. Returns 1 if
+    it then lies farther than sqrt(reach2) from its position at the last list build."""
     half = 0.5 * dt
-    ax = 0.0
-    az = 0.0
     if body[i] == 0:
-        ax = force_x[i] * inv_mass[i] - damp * vx[i]
-        az = force_z[i] * inv_mass[i] - damp * vz[i]
-        vx[i] += half * ax
-        vz[i] += half * az
-        spin[i] += half * (torque[i] * inv_inertia[i] - damp * spin[i])
-    dx = minimum_image(x[i] - x_build[i], width) + dt * (vx[i] + half * ax)
-    dz = z[i] - z_build[i] + dt * (vz[i] + half * az)
+        ax = force_x[i] * inv_mass[i]
+        az = force_z[i] * inv_mass[i]
+        aw = torque[i] * inv_inertia[i]
+        u = vx[i]
+        v = vz[i]
+        w = spin[i]
+        u += half * (ax - damp * u)
+        v += half * (az - damp * v)
+        w += half * (aw - damp * w)
+        if double:
+            u += half * (ax - damp * u)
+            v += half * (az - damp * v)
+            w += half * (aw - damp * w)
+        vx[i] = u
+        vz[i] = v
+        spin[i] = w
+    xn = x[i] + dt * vx[i]
+    if xn >= width:
+        xn -= width
+    elif xn < 0.0:
+        xn += width
+    zn = z[i] + dt * vz[i]
+    x[i] = xn
+    z[i] = zn
+    dx = minimum_image(xn - x_build[i], width)
+    dz = zn - z_build[i]
     return 1 if dx * dx + dz * dz > reach2 else 0
 
 
 @njit(parallel=True, cache=NUMBA_CACHE)
-def _kick_check(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                x_build, z_build, params, late):
-    """Second half kick; returns how many grains might move past skin/2 in the next drift.
-    late: (N,) int64 scratch for per-grain flags (a prange reduction would allocate per call).
-    One thread: a plain loop (no flags, as fast as a vectorised reduction)."""
+def _kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, x_build, z_build,
+                double, params, late):
+    """Half kick (two if double) and drift of every grain; returns how many grains lie farther
+    than skin/2 from their build positions (the list must be rebuilt before forces).
+    late: (>= threads,) int64 scratch, one count per block of grains (fixed blocks, any order
+    of completion gives the same integer sum)."""
     n = x.shape[0]
     dt = params[DT]
     width = params[WIDTH]
     damp = params[BG_DAMPING]
     reach = 0.5 * params[SKIN]
     reach2 = reach * reach
+    nb = min(max(int(params[THREADS]), 1), late.shape[0], max(n, 1))
     total = 0
-    if params[THREADS] <= 1.0:
+    if nb == 1:
         for i in range(n):
-            total += _kick_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                               x_build, z_build, dt, width, damp, reach2)
+            total += _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
+                               x_build, z_build, double, dt, width, damp, reach2)
         return total
-    for i in prange(n):
-        late[i] = _kick_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                            x_build, z_build, dt, width, damp, reach2)
-    for i in range(n):
-        total += late[i]
+    for b in prange(nb):
+        count = 0
+        for i in range(b * n // nb, (b + 1) * n // nb):
+            count += _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
+                               x_build, z_build, double, dt, width, damp, reach2)
+        late[b] = count
+    for b in range(nb):
+        total += late[b]
     return total
+
+
+@njit(parallel=True, cache=NUMBA_CACHE)
+def _kick(vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, params):
+    """Second half kick of the free grains (the state is then at a whole step)."""
+    half = 0.5 * params[DT]
+    damp = params[BG_DAMPING]
+    for i in prange(vx.shape[0]):
+        if body[i] == 0:
+            vx[i] += half * (force_x[i] * inv_mass[i] - damp * vx[i])
+            vz[i] += half * (force_z[i] * inv_mass[i] - damp * vz[i])
+            spin[i] += half * (torque[i] * inv_inertia[i] - damp * spin[i])
 
 
 @njit(cache=NUMBA_CACHE)
@@ -427,37 +447,45 @@ def rebuild(grains, lists, params, counters, drag_x, drag_z):
 
 
 @njit(cache=NUMBA_CACHE)
-def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z):
+def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close):
+    """One step (module docstring). owed: the grains still owe the previous step their second
+    half kick, which is fused into this step's first; close: end with the grains' second half
+    kick (the state is then at a whole step), else leave it owed to the next step. False if the
+    rebuild overflows the list: the step is then left drifted (counters[K_NEED_REBUILD] =
+    MID_STEP) and the next call resumes it at the rebuild."""
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
-    x_build = lists[L_X_BUILD]
-    z_build = lists[L_Z_BUILD]
     dt = params[DT]
-    _wall_kick(wall, clock, params)
-    wall[W_X] += dt * wall[W_VX]
-    wall[W_Z] += dt * wall[W_VZ]
-    _set_wall_grain_velocity(vx, vz, spin, top, wall)
-    _kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, params)
-    clock[C_TIME] += dt
-    if params[DRIVE] > 0.0:
-        clock[C_DRIVE_TIME] += dt
+    if counters[K_NEED_REBUILD] != MID_STEP:
+        _wall_kick(wall, clock, params)
+        wall[W_X] += dt * wall[W_VX]
+        wall[W_Z] += dt * wall[W_VZ]
+        _set_wall_grain_velocity(vx, vz, spin, top, wall)
+        late = _kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
+                           lists[L_X_BUILD], lists[L_Z_BUILD], owed, params, lists[L_CELL_OF])
+        clock[C_TIME] += dt
+        if params[DRIVE] > 0.0:
+            clock[C_DRIVE_TIME] += dt
+        if late > 0:
+            counters[K_NEED_REBUILD] = 1
+    if counters[K_NEED_REBUILD] != 0:
+        if not rebuild(grains, lists, params, counters, drag_x, drag_z):
+            counters[K_NEED_REBUILD] = MID_STEP
+            return False
     compute_forces(grains, lists, pair, wall, params, drag_x, drag_z)
     _wall_kick(wall, clock, params)
-    _set_wall_grain_velocity(vx, vz, spin, top, wall)
-    late = _kick_check(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                       x_build, z_build, params, lists[L_CELL_OF])
-    if late > 0:
-        counters[K_NEED_REBUILD] = 1
     counters[K_STEP] += 1
+    if close:
+        _set_wall_grain_velocity(vx, vz, spin, top, wall)
+        _kick(vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, params)
+    return True
 
 
 @njit(cache=NUMBA_CACHE)
 def advance(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, drag_z):
-    """Run up to nsteps dry steps. Returns (status, steps done); status LIST_OVERFLOW asks the
-    caller to enlarge the list arrays to counters[K_NEEDED_CAPACITY] and call again."""
+    """Run up to nsteps dry steps, the grains' half kicks between steps fused. Returns (status,
+    whole steps done); status LIST_OVERFLOW asks the caller to enlarge the list arrays to
+    counters[K_NEEDED_CAPACITY] and call again (the interrupted step resumes)."""
     for s in range(nsteps):
-        if counters[K_NEED_REBUILD] != 0:
-            if not rebuild(grains, lists, params, counters, drag_x, drag_z):
-                return LIST_OVERFLOW, s
-        _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z)
+        if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, s > 0, s == nsteps - 1):
+            return LIST_OVERFLOW, s
     return OK, nsteps
-
