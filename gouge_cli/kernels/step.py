@@ -346,29 +346,26 @@ def _kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_iner
                 double, params, late):
     """Half kick (two if double) and drift of every grain; returns how many grains lie farther
     than skin/2 from their build positions (the list must be rebuilt before forces).
-    late: (>= threads,) int64 scratch, one count per block of grains (fixed blocks, any order
-    of completion gives the same integer sum)."""
+    late: (N,) int64 scratch for per-grain flags (a prange reduction would allocate per call).
+    One thread: a plain loop (no flags). [A prange over blocks of grains with an inner loop
+    measured 2-4x slower than this prange over grains: 35 against 13 us at 10,000 grains.]"""
     n = x.shape[0]
     dt = params[DT]
     width = params[WIDTH]
     damp = params[BG_DAMPING]
     reach = 0.5 * params[SKIN]
     reach2 = reach * reach
-    nb = min(max(int(params[THREADS]), 1), late.shape[0], max(n, 1))
     total = 0
-    if nb == 1:
+    if params[THREADS] <= 1.0:
         for i in range(n):
             total += _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
                                x_build, z_build, double, dt, width, damp, reach2)
         return total
-    for b in prange(nb):
-        count = 0
-        for i in range(b * n // nb, (b + 1) * n // nb):
-            count += _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                               x_build, z_build, double, dt, width, damp, reach2)
-        late[b] = count
-    for b in range(nb):
-        total += late[b]
+    for i in prange(n):
+        late[i] = _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
+                            x_build, z_build, double, dt, width, damp, reach2)
+    for i in range(n):
+        total += late[i]
     return total
 
 
