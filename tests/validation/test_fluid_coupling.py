@@ -11,6 +11,7 @@ import pytest
 from gouge_cli.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.config import build_config
 from gouge_cli.forks import branch_config
+from gouge_cli.kernels.step import K_REBUILDS
 from gouge_cli.simulation import Simulation
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}, "seed": 3,
@@ -100,14 +101,18 @@ def test_fluid_restart_is_bitwise(sheared, tmp_path, sort_every):
 def test_fluid_bits_do_not_depend_on_advance_calls(sheared):
     """Undrained: the grains' half kicks are fused between steps except around a fluid update
     and at the end of a call; cutting 600 steps into calls of 1, 2, 4, 5, 88 and 500 steps (off
-    the update rhythm) gives the same bits as one call."""
+    the update rhythm) gives the same bits as one call, with list rebuilds on the way (skin
+    0.001 d)."""
     config, arrays = sheared
     wet = branch_config(config, 1e-5)
     dt = Simulation(wet, arrays=arrays).dt
-    wet = wet.model_copy(update={"fluid": wet.fluid.model_copy(update={"step": 3 * dt})})
+    wet = wet.model_copy(update={"fluid": wet.fluid.model_copy(update={"step": 3 * dt}),
+                                 "numerics": wet.numerics.model_copy(update={"skin": 0.001})})   # rebuilds
     one = Simulation(wet, arrays=arrays)
     assert one.fluid_interval == 3
+    rebuilds = int(one.state.counters[K_REBUILDS])
     one.advance(600)
+    assert one.state.counters[K_REBUILDS] >= rebuilds + 3
     cut = Simulation(wet, arrays=arrays)
     for chunk in (1, 2, 4, 5, 88, 500):
         cut.advance(chunk)
