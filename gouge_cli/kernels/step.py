@@ -305,6 +305,12 @@ def _set_wall_grain_velocity(vx, vz, spin, top, wall):
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
+def _half_kick(v, a, half, damp):
+    """Velocity (or spin) v after half a step of acceleration a with background damping."""
+    return v + half * (a - damp * v)
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
 def _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, x_build, z_build,
               double, dt, width, damp, reach2):
     """Half kick of grain i if it is free (two in a row if double: the previous step's second
@@ -315,16 +321,13 @@ def _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_ine
         ax = force_x[i] * inv_mass[i]
         az = force_z[i] * inv_mass[i]
         aw = torque[i] * inv_inertia[i]
-        u = vx[i]
-        v = vz[i]
-        w = spin[i]
-        u += half * (ax - damp * u)
-        v += half * (az - damp * v)
-        w += half * (aw - damp * w)
+        u = _half_kick(vx[i], ax, half, damp)
+        v = _half_kick(vz[i], az, half, damp)
+        w = _half_kick(spin[i], aw, half, damp)
         if double:
-            u += half * (ax - damp * u)
-            v += half * (az - damp * v)
-            w += half * (aw - damp * w)
+            u = _half_kick(u, ax, half, damp)
+            v = _half_kick(v, az, half, damp)
+            w = _half_kick(w, aw, half, damp)
         vx[i] = u
         vz[i] = v
         spin[i] = w
@@ -376,9 +379,9 @@ def _kick(vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, p
     damp = params[BG_DAMPING]
     for i in prange(vx.shape[0]):
         if body[i] == 0:
-            vx[i] += half * (force_x[i] * inv_mass[i] - damp * vx[i])
-            vz[i] += half * (force_z[i] * inv_mass[i] - damp * vz[i])
-            spin[i] += half * (torque[i] * inv_inertia[i] - damp * spin[i])
+            vx[i] = _half_kick(vx[i], force_x[i] * inv_mass[i], half, damp)
+            vz[i] = _half_kick(vz[i], force_z[i] * inv_mass[i], half, damp)
+            spin[i] = _half_kick(spin[i], torque[i] * inv_inertia[i], half, damp)
 
 
 @njit(cache=NUMBA_CACHE)
