@@ -84,7 +84,9 @@ state  : float64[N_STATE]   indices S_* below; S_Z_BOT/S_Z_TOP are the planes at
 P, s, s_old, ux, uz, permeability, div_u : float64[nx, nz]
 work   : float64[N_WORK, nx, nz]   scratch, indices W_* below
 corners : float64[N_CORNERS, N]    per-grain deposit cells and areas (see deposit), reused for the drag
-partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit)
+partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit);
+                            allocate it zeroed: between calls it is zero outside the columns flagged
+                            in it (M_FLAG)
 drag_x, drag_z : float64[N]        force on each grain [E d^2]
 
 Status: STATUS_OK 0; STATUS_SOLVER 1 (CG not converged in max_iter: P is the
@@ -99,6 +101,7 @@ import numpy as np
 from numba import njit, prange
 
 from .. import NUMBA_CACHE
+from .step import closed_velocity
 
 P_KAPPA_C = 0        # Carman-Kozeny prefactor kappa_c [d^2]
 P_BETA = 1           # fluid compressibility beta [1/E]
@@ -245,12 +248,14 @@ N_CORNERS = 7
 # moments a grain adds to the record of its cell c00: its four shares a00, a10, a01, a11, the
 # same times vx and times vz - w(z), and the z-slope terms (a00 + a01) dfz, (a10 + a11) dfz
 M_S, M_U, M_W, M_G = 0, 4, 8, 12
-N_MOMENTS = 16         # (14 used; padded so that a record is two cache lines)
+M_FLAG = 15            # in the first record of a grid column: 1 if the group added to that column
+N_MOMENTS = 16         # (14 moments and the flag; padded so that a record is two cache lines)
+N_SUMMED = 14
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
-            corners=None, partial=None):
+            corners=None, partial=None, grain_kick=None):
     """Solid fraction, its kernel-consistent gradient and the grid-relative solid velocity.
 
     x, z, vx, vz, radius : float64[>= n] grain centres [d], velocities [v0], radii [d]
@@ -273,10 +278,18 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  (_expand): the same sums regrouped (equal to round-off), the same bits for
                  any thread count. Without partial, the direct serial form, the definition:
                  every grain adds to its four cells (the tests' reference).
+    grain_kick : (fast form only) None, or (owed, force_x, force_z, inv_mass, body, half, damp,
+                 wall_vx, wall_vz): grain forces, inverse masses and kinds, half a time step,
+                 the background damping and the top wall's velocity (kernels.step). If owed,
+                 each grain's velocity is taken after the second half kick it still owes
+                 (kernels.step.closed_velocity): the same bits as closing the step first,
+                 without a pass over the grains.
     """
     nx, nz = s.shape
     size = nx * nz
     if partial is None:
+        if grain_kick is not None:
+            raise ValueError("deposit: grain_kick needs the fast form (corners and partial)")
         _deposit_range(x, z, vx, vz, radius, 0, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz,
                        s.reshape(size), ux.reshape(size), uz_rel.reshape(size), grad_s_x.reshape(size),
                        grad_s_z.reshape(size), corners)
@@ -284,12 +297,12 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                    grad_s_x.reshape(size), grad_s_z.reshape(size))
         return
     _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
-                     corners, partial)
+                     corners, partial, grain_kick)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
 def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
-                     corners, partial):
+                     corners, partial, grain_kick):
     """deposit's fast form: cells and moments in DEPOSIT_GROUPS fixed groups (in parallel), summed
     in group order into partial[0], collected per cell."""
     nx, nz = s.shape
@@ -298,12 +311,17 @@ def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s,
         first = g * n // DEPOSIT_GROUPS
         last = (g + 1) * n // DEPOSIT_GROUPS
         _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
-        _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, partial[g], corners)
+        _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, partial[g], corners, nz, grain_kick)
     total = partial[0]
-    for c in prange(size):
+    for i in prange(nx):                 # the groups' columns (a group's grains are nearby), in group order
+        head = i * nz
         for g in range(1, DEPOSIT_GROUPS):
-            for m in range(N_MOMENTS):
-                total[c, m] += partial[g, c, m]
+            if partial[g, head, M_FLAG] == 0.0:
+                continue                 # all +0.0 there, and x + (+0.0) is x (sums are never -0.0)
+            total[head, M_FLAG] = 1.0
+            for c in range(head, head + nz):
+                for m in range(N_SUMMED):
+                    total[c, m] += partial[g, c, m]
     solid = s.reshape(size)
     momentum_x = ux.reshape(size)
     momentum_z = uz_rel.reshape(size)
@@ -366,15 +384,33 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners):
-    """moments (nx * nz, N_MOMENTS) of grains first:last (zeroed first) from their corners."""
+def _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz, grain_kick):
+    """moments (nx * nz, N_MOMENTS) of grains first:last from their corners, flagging (M_FLAG)
+    the grid columns they add to. Zeroes the columns flagged by the previous call first, so
+    the rest of moments must be zero on entry (a zeroed allocation keeps it so). grain_kick:
+    see deposit (velocities after the owed half kick when its first item is true)."""
+    if grain_kick is None:                  # (the arrays after False are not read)
+        _moments_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz,
+                      (False, vx, vz, vx, vx, 0.0, 0.0, 0.0, 0.0))
+    else:
+        _moments_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz, grain_kick)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _moments_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz, grain_kick):
+    """_moments_range with a grain_kick tuple."""
+    owed, force_x, force_z, inv_mass, body, half, damp, wall_vx, wall_vz = grain_kick
     grid_strain_rate = (w_top - w_bot) / (z_top - z_bot)
-    for c in range(moments.shape[0]):
-        for m in range(N_MOMENTS):
-            moments[c, m] = 0.0
+    for head in range(0, moments.shape[0], nz):
+        if moments[head, M_FLAG] != 0.0:
+            for c in range(head, head + nz):
+                for m in range(N_MOMENTS):
+                    moments[c, m] = 0.0
     flat = moments.reshape(moments.size)
     c00, a00s, a10s, a01s, a11s, dfz = (corners[C_00], corners[C_A00], corners[C_A10], corners[C_A01],
                                          corners[C_A11], corners[C_DFZ])
+    inv_nz = 1.0 / nz
+    column = np.uint64(nz) * np.uint64(N_MOMENTS)
     for kk in range(first, last):
         k = np.uint64(kk)
         if c00[k] < 0.0:
@@ -384,8 +420,13 @@ def _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, 
         a10 = a10s[k]
         a01 = a01s[k]
         a11 = a11s[k]
-        u = vx[k]
-        w = vz[k] - (w_bot + (z[k] - z_bot) * grid_strain_rate)
+        if owed:
+            u, v = closed_velocity(body[k], vx[k], vz[k], force_x[k] * inv_mass[k], force_z[k] * inv_mass[k],
+                                   half, damp, wall_vx, wall_vz)
+        else:
+            u = vx[k]
+            v = vz[k]
+        w = v - (w_bot + (z[k] - z_bot) * grid_strain_rate)
         flat[r + M_S] += a00
         flat[r + M_S + 1] += a10
         flat[r + M_S + 2] += a01
@@ -400,6 +441,8 @@ def _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, 
         flat[r + M_W + 3] += a11 * w
         flat[r + M_G] += (a00 + a01) * dfz[k]
         flat[r + M_G + 1] += (a10 + a11) * dfz[k]
+        # column of c00 = i nz + j (j < nz): floor((i nz + j) / nz) with 1/nz rounded is still i
+        flat[np.uint64(math.floor(c00[k] * inv_nz)) * column + np.uint64(M_FLAG)] = 1.0
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -898,7 +941,8 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
-                 params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z):
+                 params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z,
+                 grain_kick=None):
     """Advance the pore pressure by one fluid step and set the drag on every grain.
 
     x, z, vx, vz, radius : float64[>= n] grain state (x may lie outside [0, Lx))
@@ -909,6 +953,8 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
         (FluidGrid.kernel_args() returns them in this order, followed by drag_x, drag_z)
     drag_x, drag_z : out, float64[>= n] fluid force per grain [E d^2], to be added
         to the contact forces until the next update.
+    grain_kick : None, or (owed, ...) as in deposit, when the grains may still owe their second
+        half kick: the deposit then takes the whole-step velocities without storing them.
 
     Order: deposit s^{n+1} and u_rel (keeping each grain's corner cells and areas in
     corners); exact undrained source -> P*; Carman-Kozeny permeability from s^{n+1};
@@ -927,7 +973,8 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
     for i in range(nx):
         for j in range(nz):
             s_old[i, j] = s[i, j]
-    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[W_SX], work[W_SZ], corners, partial)
+    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[W_SX], work[W_SZ], corners, partial,
+            grain_kick)
     p_star = work[W_RHS]
     undrained_source(P, s, s_old, ux, uz, work[W_SX], work[W_SZ], dt_f, beta,
                      1.0 - params[P_PHI_MAX], 1.0 - params[P_PHI_MIN], p_star, div_u)

@@ -85,6 +85,45 @@ def test_grouped_deposit_and_cached_drag():
     assert expected.tobytes() == cached.tobytes() and np.abs(expected).max() > 0
 
 
+def test_grouped_deposit_reuses_its_scratch_and_takes_owed_kicks():
+    """partial is reused between calls (only the columns a group touched are cleared): a deposit
+    after one from grains elsewhere gives the bits of a fresh scratch. With grain_kick, the
+    velocities are the whole-step ones (closing half kick for free grains, the wall velocity
+    for top-wall grains, bottom-wall grains as stored): the bits of closing first."""
+    from gouge_cli.kernels import step
+
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains(seed=5, n=400)
+    rng = np.random.default_rng(6)
+    vx, vz, fx, fz = rng.normal(0, 1e-3, (4, x.size))
+    inv_mass = rng.uniform(1.0, 3.0, x.size)
+    body = np.zeros(x.size, np.int8)
+    body[:20] = step.TOP
+    body[20:40] = step.BOTTOM
+    half, damp, wall_v = 0.05, 0.3, (2e-3, -1e-3)
+
+    def run(partial, xs, grain_kick=None, u=vx, w=vz):
+        out = [np.empty((5, 4)) for _ in range(5)]
+        corners = np.zeros((kernels.N_CORNERS, x.size))
+        kernels.deposit(xs, z, u, w, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial,
+                        grain_kick)
+        return b"".join(a.tobytes() for a in out)
+
+    fresh = run(np.zeros((kernels.DEPOSIT_GROUPS, 20, kernels.N_MOMENTS)), x)
+    reused = np.zeros((kernels.DEPOSIT_GROUPS, 20, kernels.N_MOMENTS))
+    run(reused, np.sort(x)[::-1] + 0.37 * width)           # groups in other columns first
+    assert run(reused, x) == fresh
+    closed_x, closed_z = vx.copy(), vz.copy()
+    free = body == step.FREE
+    closed_x[free] = vx[free] + half * (fx[free] * inv_mass[free] - damp * vx[free])
+    closed_z[free] = vz[free] + half * (fz[free] * inv_mass[free] - damp * vz[free])
+    closed_x[body == step.TOP], closed_z[body == step.TOP] = wall_v
+    partial = np.zeros((kernels.DEPOSIT_GROUPS, 20, kernels.N_MOMENTS))
+    owed = run(partial, x, (True, fx, fz, inv_mass, body, half, damp, *wall_v))
+    assert owed == run(partial, x, u=closed_x, w=closed_z) != fresh
+    assert run(partial, x, (False, fx, fz, inv_mass, body, half, damp, *wall_v)) == fresh
+
+
 def test_deposit_conserves_area_and_is_periodic():
     width, z_bot, z_top = 12.0, 0.5, 10.5
     x, z, radius = _grains()
