@@ -3,11 +3,14 @@
 
 from __future__ import annotations
 
-from numba import njit
+import numpy as np
+from numba import njit, prange
 
 from .. import NUMBA_CACHE
-from .fluid import fluid_update
-from .step import BG_DAMPING, DT, FLUID_FAILED, K_STEP, LIST_OVERFLOW, OK, W_VX, W_VZ, W_Z, WIDTH, _step, close_step
+from .fluid import fluid_begin, fluid_drag, fluid_solve
+from .step import (BG_DAMPING, DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, L_CELL_OF, L_X_BUILD, L_Z_BUILD,
+                   LIST_OVERFLOW, OK, SKIN, THREADS, W_VX, W_VZ, W_Z, WIDTH, _move_one, _step, close_step,
+                   open_step)
 
 
 @njit(cache=NUMBA_CACHE)
@@ -17,29 +20,83 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     `interval`-th step (step count multiple of interval) over dt_f = interval * dt; the drag
     it leaves in drag_x/drag_z acts on the grains until the next update. fluid: the tuple
     FluidGrid.kernel_args() without drag. Returns (FLUID_FAILED, steps) with fluid_status[0]
-    set if the fluid update fails. The step before an update is not closed: the deposit takes
-    the grains' whole-step velocities from the half kick they owe (the same bits)."""
-    x, z, vx, vz, radius, inv_mass, body = grains[0], grains[1], grains[2], grains[3], grains[5], grains[7], grains[9]
-    force_x, force_z = grains[10], grains[11]
+    set if the fluid update fails (the grains may then be drifted into the next step).
+
+    The step before an update is not closed: the deposit takes the grains' whole-step
+    velocities from the half kick they owe. When another step follows in this call, its
+    steps 1-2 (wall, kicks and drift: they need neither the pressure nor the drag) run while
+    the grid is solved (_solve_and_drift). Both keep the bits of doing one thing after the
+    other."""
+    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
     fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work, corners, partial = fluid
     n = x.shape[0]
+    width = params[WIDTH]
     dt_f = interval * params[DT]
     half = 0.5 * params[DT]
     owed = False
+    drifted = False
     for st in range(nsteps):
         update = (counters[K_STEP] + 1) % interval == 0       # this step ends with a fluid update
         close = st == nsteps - 1
-        if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close):
+        if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close, drifted):
             return LIST_OVERFLOW, st
         owed = not close
-        if update:
-            status = fluid_update(x, z, vx, vz, radius, n, params[WIDTH], z_bottom, wall[W_Z], dt_f,
-                                  fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work, corners, partial,
-                                  drag_x, drag_z, (owed, force_x, force_z, inv_mass, body, half, params[BG_DAMPING],
-                                                   wall[W_VX], wall[W_VZ]))
-            if status != 0:
-                if owed:
-                    close_step(grains, wall, params)
-                fluid_status[0] = status
-                return FLUID_FAILED, st + 1
+        drifted = False
+        if not update:
+            continue
+        z_top = wall[W_Z]
+        status = fluid_begin(x, z, vx, vz, radius, n, width, z_bottom, z_top, dt_f, fstate, s, s_old, ux, uz, work,
+                             corners, partial, (owed, force_x, force_z, inv_mass, body, half, params[BG_DAMPING],
+                                                wall[W_VX], wall[W_VZ]))
+        if status == 0:
+            if close or n < 2:
+                status = fluid_solve(width, z_bottom, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm,
+                                     div_u, work)
+            else:
+                open_step(grains, wall, clock, params)
+                late = _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
+                                        lists[L_X_BUILD], lists[L_Z_BUILD], owed, params, width, z_bottom, z_top,
+                                        dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work,
+                                        lists[L_CELL_OF])
+                if late > 0:
+                    counters[K_NEED_REBUILD] = 1
+                status = lists[L_CELL_OF][0]
+                drifted = True
+            fluid_drag(n, work, corners, drag_x, drag_z, status)
+        if status != 0:
+            if owed and not drifted:
+                close_step(grains, wall, params)
+            fluid_status[0] = status
+            return FLUID_FAILED, st + 1
     return OK, nsteps
+
+
+@njit(parallel=True, cache=NUMBA_CACHE)
+def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, x_build, z_build,
+                     owed, params, width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work,
+                     out):
+    """fluid_solve (serial, grid only) as one task while the other threads (or the same one, after
+    it) run step 2 of the next step, the grains' kicks and drift (_move_one), in fixed parts: no
+    data is shared, so the bits are those of one after the other. Returns how many grains are
+    now past skin/2; out: int64 scratch (>= parts + 1), out[0] = fluid_solve's status.
+    [Arrays, not the grains/lists tuples: unpacked from tuples inside this parallel function,
+    the two tasks ran ~1.7x slower than one after the other.]"""
+    n = x.shape[0]
+    dt = params[DT]
+    damp = params[BG_DAMPING]
+    reach = 0.5 * params[SKIN]
+    reach2 = reach * reach
+    parts = max(min(int(params[THREADS]) - 1, n - 1), 1)      # (n >= 2)
+    for t in prange(parts + 1):
+        if t == 0:
+            out[0] = fluid_solve(width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work)
+        else:
+            count = 0                # (unsigned bounds: no negative-index checks in the loop)
+            for i in range(np.uint64((t - 1) * n // parts), np.uint64(t * n // parts)):
+                count += _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
+                                   x_build, z_build, owed, dt, width, damp, reach2)
+            out[t] = count
+    total = 0
+    for t in range(1, parts + 1):
+        total += out[t]
+    return total

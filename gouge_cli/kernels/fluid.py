@@ -892,8 +892,8 @@ def _all_finite(P):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _finish(n, Lx, z_bot, z_top, P, s, uz, work, corners, drag_x, drag_z, w_bot, w_top):
-    """Absolute uz, finiteness check, gradient and drag; returns a status."""
+def _finish_grid(Lx, z_bot, z_top, P, s, uz, work, w_bot, w_top):
+    """Absolute uz, finiteness check, gradient and drag density; returns a status."""
     nx, nz = P.shape
     dx = Lx / nx
     dz = (z_top - z_bot) / nz
@@ -901,14 +901,22 @@ def _finish(n, Lx, z_bot, z_top, P, s, uz, work, corners, drag_x, drag_z, w_bot,
         for j in range(nz):
             uz[i, j] += w_bot + (j + 0.5) / nz * (w_top - w_bot)
     if not _all_finite(P):
-        for k in range(n):
-            drag_x[k] = 0.0
-            drag_z[k] = 0.0
         return STATUS_NONFINITE
     pressure_gradient(P, dx, dz, 0.0, 0.0, work[W_GX], work[W_GZ])
     drag_density(work[W_GX], work[W_GZ], s, work[W_FX], work[W_FZ])
-    grain_drag_at(corners, n, work[W_FX], work[W_FZ], drag_x, drag_z)
     return STATUS_OK
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def fluid_drag(n, work, corners, drag_x, drag_z, status):
+    """Third part of fluid_update: the drag on every grain from the drag density, at the positions
+    of the deposit (corners); zero after a non-finite pressure (status STATUS_NONFINITE)."""
+    if status == STATUS_NONFINITE:
+        for k in range(n):
+            drag_x[k] = 0.0
+            drag_z[k] = 0.0
+        return
+    grain_drag_at(corners, n, work[W_FX], work[W_FZ], drag_x, drag_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -936,7 +944,9 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
     state[S_RESIDUAL] = 0.0
     state[S_SUBSTEPS] = 0.0
     state[S_UPDATES] = 0.0
-    return _finish(n, Lx, z_bot, z_top, P, s, uz, work, corners, drag_x, drag_z, 0.0, 0.0)
+    status = _finish_grid(Lx, z_bot, z_top, P, s, uz, work, 0.0, 0.0)
+    fluid_drag(n, work, corners, drag_x, drag_z, status)
+    return status
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -959,15 +969,27 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
     Order: deposit s^{n+1} and u_rel (keeping each grain's corner cells and areas in
     corners); exact undrained source -> P*; Carman-Kozeny permeability from s^{n+1};
     conductances with (1 + beta P^n); implicit or explicit diffusion over dt_f; grad P and
-    drag. Returns a status (module doc).
+    drag. Returns a status (module doc). In three parts, fluid_begin (reads the grains),
+    fluid_solve (the grid only) and fluid_drag, so that a caller can move the grains while
+    the grid is solved.
     """
-    nx, nz = P.shape
-    thickness = z_top - z_bot
-    if not (thickness > 0.0 and dt_f > 0.0):
+    status = fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old, ux, uz, work, corners,
+                         partial, grain_kick)
+    if status != STATUS_OK:
+        return status
+    status = fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, permeability, div_u, work)
+    fluid_drag(n, work, corners, drag_x, drag_z, status)
+    return status
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old, ux, uz, work, corners, partial,
+                grain_kick):
+    """First part of fluid_update (same arguments): s^n kept, deposit s^{n+1} and u_rel, the
+    only part that reads the grains' positions and velocities. Returns a status."""
+    if not (z_top - z_bot > 0.0 and dt_f > 0.0):
         return STATUS_SOLVER
-    dx = Lx / nx
-    dz = thickness / nz
-    beta = params[P_BETA]
+    nx, nz = s.shape
     w_bot = (z_bot - state[S_Z_BOT]) / dt_f
     w_top = (z_top - state[S_Z_TOP]) / dt_f
     for i in range(nx):
@@ -975,6 +997,19 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
             s_old[i, j] = s[i, j]
     deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[W_SX], work[W_SZ], corners, partial,
             grain_kick)
+    return STATUS_OK
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, permeability, div_u, work):
+    """Second part of fluid_update, on the grid only (serial): source, permeability, diffusion,
+    gradient and drag density. Returns a status."""
+    nx, nz = P.shape
+    dx = Lx / nx
+    dz = (z_top - z_bot) / nz
+    beta = params[P_BETA]
+    w_bot = (z_bot - state[S_Z_BOT]) / dt_f
+    w_top = (z_top - state[S_Z_TOP]) / dt_f
     p_star = work[W_RHS]
     undrained_source(P, s, s_old, ux, uz, work[W_SX], work[W_SZ], dt_f, beta,
                      1.0 - params[P_PHI_MAX], 1.0 - params[P_PHI_MIN], p_star, div_u)
@@ -1022,7 +1057,7 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
     state[S_Z_BOT] = z_bot
     state[S_Z_TOP] = z_top
     state[S_UPDATES] += 1.0
-    finish = _finish(n, Lx, z_bot, z_top, P, s, uz, work, corners, drag_x, drag_z, w_bot, w_top)
+    finish = _finish_grid(Lx, z_bot, z_top, P, s, uz, work, w_bot, w_top)
     if finish != STATUS_OK:
         return finish
     return status

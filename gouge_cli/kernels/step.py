@@ -388,6 +388,21 @@ def _kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_iner
     return total
 
 
+@njit(cache=NUMBA_CACHE)
+def open_step(grains, wall, clock, params):
+    """Step 1: the top wall's half kick and drift, its grains take its velocity; the clock
+    advances by dt."""
+    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
+    dt = params[DT]
+    _wall_kick(wall, clock, params)
+    wall[W_X] += dt * wall[W_VX]
+    wall[W_Z] += dt * wall[W_VZ]
+    _set_wall_grain_velocity(vx, vz, spin, top, wall)
+    clock[C_TIME] += dt
+    if params[DRIVE] > 0.0:
+        clock[C_DRIVE_TIME] += dt
+
+
 @njit(parallel=True, cache=NUMBA_CACHE)
 def _kick(vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, params):
     """Second half kick of the free grains (the state is then at a whole step)."""
@@ -463,24 +478,17 @@ def rebuild(grains, lists, params, counters, drag_x, drag_z):
 
 
 @njit(cache=NUMBA_CACHE)
-def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close):
+def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close, drifted):
     """One step (module docstring). owed: the grains still owe the previous step their second
     half kick, which is fused into this step's first; close: end with the grains' second half
-    kick (the state is then at a whole step), else leave it owed to the next step. False if the
-    rebuild overflows the list: the step is then left drifted (counters[K_NEED_REBUILD] =
-    MID_STEP) and the next call resumes it at the rebuild."""
+    kick (the state is then at a whole step), else leave it owed to the next step; drifted:
+    steps 1-2 are already done (open_step and _move_one of every grain, rebuild flag set). False if the rebuild overflows the list: the step is then left drifted
+    (counters[K_NEED_REBUILD] = MID_STEP) and the next call resumes it at the rebuild."""
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
-    dt = params[DT]
-    if counters[K_NEED_REBUILD] != MID_STEP:
-        _wall_kick(wall, clock, params)
-        wall[W_X] += dt * wall[W_VX]
-        wall[W_Z] += dt * wall[W_VZ]
-        _set_wall_grain_velocity(vx, vz, spin, top, wall)
+    if counters[K_NEED_REBUILD] != MID_STEP and not drifted:
+        open_step(grains, wall, clock, params)
         late = _kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
                            lists[L_X_BUILD], lists[L_Z_BUILD], owed, params, lists[L_CELL_OF])
-        clock[C_TIME] += dt
-        if params[DRIVE] > 0.0:
-            clock[C_DRIVE_TIME] += dt
         if late > 0:
             counters[K_NEED_REBUILD] = 1
     if counters[K_NEED_REBUILD] != 0:
@@ -510,6 +518,7 @@ def advance(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, 
     whole steps done); status LIST_OVERFLOW asks the caller to enlarge the list arrays to
     counters[K_NEEDED_CAPACITY] and call again (the interrupted step resumes)."""
     for s in range(nsteps):
-        if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, s > 0, s == nsteps - 1):
+        if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, s > 0, s == nsteps - 1,
+                     False):
             return LIST_OVERFLOW, s
     return OK, nsteps

@@ -99,10 +99,11 @@ def test_fluid_restart_is_bitwise(sheared, tmp_path, sort_every):
 
 
 def test_fluid_bits_do_not_depend_on_advance_calls(sheared):
-    """Undrained: the grains' half kicks are fused between steps except around a fluid update
-    and at the end of a call; cutting 600 steps into calls of 1, 2, 4, 5, 88 and 500 steps (off
-    the update rhythm) gives the same bits as one call, with list rebuilds on the way (skin
-    0.001 d)."""
+    """Undrained: the grains' half kicks are fused between steps except at the end of a call (the
+    deposit takes the owed kick), and the next step's drift runs while the grid is solved, except
+    at the end of a call; cutting 600 steps into calls of 1, 2, 4, 5, 88 and 500 steps (off the
+    update rhythm) gives the same bits as one call, with list rebuilds on the way (skin 0.001 d),
+    and so do one call on 2 threads (drift and grid solve concurrent) and 600 calls of one step."""
     config, arrays = sheared
     wet = branch_config(config, 1e-5)
     dt = Simulation(wet, arrays=arrays).dt
@@ -120,6 +121,18 @@ def test_fluid_bits_do_not_depend_on_advance_calls(sheared):
         assert values.tobytes() == cut.state.arrays()[name].tobytes(), name
     for name, values in one.fluid.arrays().items():
         assert values.tobytes() == cut.fluid.arrays()[name].tobytes(), name
+    two = Simulation(wet.model_copy(update={"numerics": wet.numerics.model_copy(update={"threads": 2})}),
+                     arrays=arrays)
+    assert two.threads == 2
+    two.advance(600)
+    steps = Simulation(wet, arrays=arrays)       # one step per call: no overlapped drift at all
+    for _ in range(600):
+        steps.advance(1)
+    for other in (two, steps):
+        for name, values in one.state.arrays().items():
+            assert values.tobytes() == other.state.arrays()[name].tobytes(), name
+        for name, values in one.fluid.arrays().items():
+            assert values.tobytes() == other.fluid.arrays()[name].tobytes(), name
 
 
 DRY_PROBE = """
