@@ -3,14 +3,12 @@
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit, prange
 
 from .. import NUMBA_CACHE
 from .fluid import fluid_begin, fluid_drag, fluid_solve
 from .step import (BG_DAMPING, DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, L_CELL_OF, L_X_BUILD, L_Z_BUILD,
-                   LIST_OVERFLOW, OK, SKIN, THREADS, W_VX, W_VZ, W_Z, WIDTH, _move_one, _step, close_step,
-                   open_step)
+                   LIST_OVERFLOW, OK, THREADS, W_VX, W_VZ, W_Z, WIDTH, _step, close_step, move_range, open_step)
 
 
 @njit(cache=NUMBA_CACHE)
@@ -76,26 +74,19 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
                      owed, params, width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work,
                      out):
     """fluid_solve (serial, grid only) as one task while the other threads (or the same one, after
-    it) run step 2 of the next step, the grains' kicks and drift (_move_one), in fixed parts: no
+    it) run step 2 of the next step, the grains' kicks and drift (move_range), in fixed parts: no
     data is shared, so the bits are those of one after the other. Returns how many grains are
     now past skin/2; out: int64 scratch (>= parts + 1), out[0] = fluid_solve's status.
     [Arrays, not the grains/lists tuples: unpacked from tuples inside this parallel function,
     the two tasks ran ~1.7x slower than one after the other.]"""
     n = x.shape[0]
-    dt = params[DT]
-    damp = params[BG_DAMPING]
-    reach = 0.5 * params[SKIN]
-    reach2 = reach * reach
     parts = max(min(int(params[THREADS]) - 1, n - 1), 1)      # (n >= 2)
     for t in prange(parts + 1):
         if t == 0:
             out[0] = fluid_solve(width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work)
         else:
-            count = 0                # (unsigned bounds: no negative-index checks in the loop)
-            for i in range(np.uint64((t - 1) * n // parts), np.uint64(t * n // parts)):
-                count += _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                                   x_build, z_build, owed, dt, width, damp, reach2)
-            out[t] = count
+            out[t] = move_range((t - 1) * n // parts, t * n // parts, x, z, vx, vz, spin, force_x, force_z, torque,
+                                inv_mass, inv_inertia, body, x_build, z_build, owed, params)
     total = 0
     for t in range(1, parts + 1):
         total += out[t]

@@ -983,6 +983,12 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
+def _plane_velocities(state, z_bot, z_top, dt_f):
+    """[v0] velocities of the bottom and top planes since the last update (grid velocity w(z))."""
+    return (z_bot - state[S_Z_BOT]) / dt_f, (z_top - state[S_Z_TOP]) / dt_f
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old, ux, uz, work, corners, partial,
                 grain_kick):
     """First part of fluid_update (same arguments): s^n kept, deposit s^{n+1} and u_rel, the
@@ -990,8 +996,7 @@ def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old
     if not (z_top - z_bot > 0.0 and dt_f > 0.0):
         return STATUS_SOLVER
     nx, nz = s.shape
-    w_bot = (z_bot - state[S_Z_BOT]) / dt_f
-    w_top = (z_top - state[S_Z_TOP]) / dt_f
+    w_bot, w_top = _plane_velocities(state, z_bot, z_top, dt_f)
     for i in range(nx):
         for j in range(nz):
             s_old[i, j] = s[i, j]
@@ -1008,8 +1013,7 @@ def fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, perm
     dx = Lx / nx
     dz = (z_top - z_bot) / nz
     beta = params[P_BETA]
-    w_bot = (z_bot - state[S_Z_BOT]) / dt_f
-    w_top = (z_top - state[S_Z_TOP]) / dt_f
+    w_bot, w_top = _plane_velocities(state, z_bot, z_top, dt_f)
     p_star = work[W_RHS]
     undrained_source(P, s, s_old, ux, uz, work[W_SX], work[W_SZ], dt_f, beta,
                      1.0 - params[P_PHI_MAX], 1.0 - params[P_PHI_MIN], p_star, div_u)
