@@ -10,8 +10,10 @@ kernel version, since pre-shearing 160,000 grains takes minutes.
 
 Also measured: the cost of each part of a step (profile), numba runtime allocations per
 step (NRT statistics: two advances of different length from the same state), the fluid
-share of an undrained step, and the projected wall time of one loading cycle and of one
-slip of the thesis Run 24 scene (physics.md section 6) at the rates measured here.
+share of an undrained step, the contact pass on the first m grains of the largest packing
+(cost per grain against working-set size, at the same kind of rows and pairs), and the
+projected wall time of one loading cycle and of one slip of the thesis Run 24 scene
+(physics.md section 6) at the rates measured here.
 """
 
 from __future__ import annotations
@@ -247,6 +249,50 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
     return out
 
 
+def sub_system(s, m: int) -> tuple:
+    """Grains 0..m-1 of state s and the listed pairs among them (same order, shear copied):
+    arguments of kernels.step.contact_forces for one thread, without drag."""
+    rows = np.repeat(np.arange(s.n), np.diff(s.start))
+    npairs = int(s.start[-1])
+    keep = (rows < m) & (s.index[:npairs] < m)
+    start = np.zeros(m + 1, np.int64)
+    np.cumsum(np.bincount(rows[keep], minlength=m), out=start[1:])
+    index, shear = s.index[:npairs][keep].copy(), s.shear[:npairs][keep].copy()
+    grain = tuple(a[:m].copy() for a in (s.x, s.z, s.vx, s.vz, s.spin, s.radius, s.mass))
+    one = np.zeros(1, np.int64)
+    layout = np.full(K.N_LAYOUT, -1, np.int64)
+    return (*grain, start, index, shear, one, one, one, *(np.zeros(1) for _ in range(4)),
+            np.zeros((1, K.N_BUF, K.PAIR_BUF)), *(np.zeros(m) for _ in range(3)), np.zeros(0), np.zeros(0),
+            layout, np.zeros(m + 1, np.int64))
+
+
+def footprint_profile(sim: Simulation, start: dict, sizes, repeats: int = 5) -> list[dict]:
+    """Contact pass on one thread over the first m grains (in list order) of one packing, for each
+    m in sizes: the same kind of rows and pairs, working sets of different sizes. Nanoseconds
+    per grain (best of `repeats`), pairs per grain and the bytes the pass touches."""
+    s = sim.state
+    s.restore(start)
+    p = sim.params.copy()
+    p[K.THREADS] = 1
+    numba.set_num_threads(1)
+    out = []
+    for m in sorted(v for v in sizes if v <= s.n):
+        args = sub_system(s, m)
+        npairs = int(args[7][-1])
+        calls = max(3, 200000 // m)
+        K.contact_forces(*args, p)
+        best = math.inf
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            for _ in range(calls):
+                K.contact_forces(*args, p)
+            best = min(best, (time.perf_counter() - t0) / calls)
+        touched = sum(a.nbytes for a in args[:7]) + 3 * 8 * m + args[7].nbytes + npairs * 12
+        out.append({"of_n_grains": s.n, "first_grains": m, "pairs_per_grain": npairs / m,
+                    "working_set_mb": touched / 2**20, "ns_per_grain": best * 1e9 / m})
+    return out
+
+
 def run24_config():
     return load_config(find_config("thesis_run24_dry"))
 
@@ -276,6 +322,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
     fluid = []
     profiles = []
     allocations = []
+    footprint = []
     run24 = None
     run24_dt = choose_dt(run24_config())
     for n in sizes:
@@ -298,6 +345,8 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
                                 "per_step": allocations_per_step(sim, start, t)})
             if profile:
                 profiles.append({"n_grains": n, "threads": t, **profile_step(sim, start, t)})
+        if profile and len(sizes) > 1 and n == max(sizes):
+            footprint = footprint_profile(sim, start, sizes)
         if projection and n == 10000:
             run24 = {}
             at_dt = Simulation(bench_config(n, run24_dt, skin), arrays=start)
@@ -319,6 +368,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
         "fluid": fluid,
         "profile_us": profiles,
         "allocations": allocations,
+        "footprint": footprint,
         "run24": run24,
     }
 

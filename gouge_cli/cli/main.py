@@ -229,6 +229,19 @@ def bench(
                          f"{r['rebuild_per_step']:.0f}", f"{r['renumber_each']:.0f}", f"{r['renumber_per_step']:.1f}",
                          f"{r['whole_step']:.0f}")
         out.print(prof)
+    if results["footprint"]:
+        own = {r["n_grains"]: r["contact_forces"] * 1e3 / r["n_grains"] for r in results["profile_us"]
+               if r["threads"] == 1}
+        big = results["footprint"][0]["of_n_grains"]
+        foot = Table(title=f"contact pass, 1 thread, ns per grain: the first m grains of the {big:,}-grain "
+                     "packing (same rows, smaller working set) and the m-grain packing itself")
+        for col in ("m", "pairs/grain", "working set MB", f"first m of {big:,}", "own packing"):
+            foot.add_column(col, justify="right")
+        for r in results["footprint"]:
+            m = r["first_grains"]
+            foot.add_row(f"{m:,}", f"{r['pairs_per_grain']:.2f}", f"{r['working_set_mb']:.2f}",
+                         f"{r['ns_per_grain']:.1f}", f"{own[m]:.1f}" if m in own else "")
+        out.print(foot)
     for a in results["allocations"]:
         per = "unavailable" if a["per_step"] is None else f"{a['per_step']:g}"
         out.print(f"numba runtime allocations per step, N {a['n_grains']}, {a['threads']} thread(s): {per}",

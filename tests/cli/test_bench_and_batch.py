@@ -10,7 +10,10 @@ from pathlib import Path
 
 import yaml
 
-from gouge_cli.bench import run_benchmark
+import numpy as np
+
+from gouge_cli.bench import footprint_profile, prepare, run_benchmark, sub_system
+from gouge_cli.kernels import step as K
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -30,6 +33,27 @@ def test_benchmark_runs_on_a_tiny_scene():
     for prof in results["profile_us"]:
         assert all(prof[k] > 0 for k in ("contact_forces", "kick_drift", "rebuild_each", "whole_step"))
         assert prof["steps_per_rebuild"] > 5    # (no timing comparisons here: the machine is shared)
+
+
+def test_footprint_sub_systems_are_the_first_rows_of_the_packing():
+    sim, start = prepare(600, 0.89, 0.2)
+    s, p = sim.state, sim.params.copy()
+    p[K.THREADS] = 1
+    whole = sub_system(s, s.n)          # every pair: the contact pass gives the run's own forces, bit for bit
+    K.contact_forces(*whole, p)
+    K.compute_forces(s.grains(), s.lists(), s.pairs(), s.wall, p, np.zeros(0), np.zeros(0))
+    assert np.array_equal(whole[18], s.force_x) and np.array_equal(whole[20], s.torque)
+    assert np.array_equal(whole[9], s.shear[:s.start[-1]])
+    s.restore(start)
+    m = 250
+    part = sub_system(s, m)             # exactly the listed pairs with both grains below m, in list order
+    pairs = [(i, int(s.index[k])) for i in range(m) for k in range(s.start[i], s.start[i + 1]) if s.index[k] < m]
+    got = [(i, int(part[8][k])) for i in range(m) for k in range(part[7][i], part[7][i + 1])]
+    assert got == pairs and len(pairs) > m
+    rows = footprint_profile(sim, start, (m, 600, 5000), repeats=1)
+    assert [r["first_grains"] for r in rows] == [m, 600]
+    assert all(r["ns_per_grain"] > 0 and r["of_n_grains"] == 600 for r in rows)
+    assert rows[0]["working_set_mb"] < rows[1]["working_set_mb"]
 
 
 def test_batch_script_forks_every_slip(tmp_path):
