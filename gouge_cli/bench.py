@@ -191,6 +191,22 @@ def allocations_per_step(sim: Simulation, start: dict, threads: int, steps: int 
     return (counts[1] - counts[0]) / (3 * steps)
 
 
+def best_seconds(fn, calls: int, repeats: int, reset=None) -> float:
+    """Seconds per call of fn(): the best over `repeats` of the mean over `calls` calls, timing
+    fn alone (reset(), if given, runs untimed before each call)."""
+    best = math.inf
+    for _ in range(repeats):
+        total = 0.0
+        for _ in range(calls):
+            if reset:
+                reset()
+            t0 = time.perf_counter()
+            fn()
+            total += time.perf_counter() - t0
+        best = min(best, total / calls)
+    return best
+
+
 def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) -> dict:
     """Microseconds per step in each part: contact pass, the kick pass (the closing half kick
     of one step, the first of the next and the drift, fused), and the
@@ -212,17 +228,7 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
     v0 = (s.vx.copy(), s.vz.copy(), s.spin.copy(), s.x.copy(), s.z.copy())
 
     def timed(fn, n=repeats, reset=None):
-        best = math.inf
-        for _ in range(3):
-            total = 0.0
-            for _ in range(n):
-                if reset:
-                    reset()
-                t0 = time.perf_counter()
-                fn()
-                total += time.perf_counter() - t0
-            best = min(best, total / n)
-        return best * 1e6
+        return best_seconds(fn, n, 3, reset) * 1e6
 
     def reset():
         s.shear[:] = shear0
@@ -251,7 +257,8 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
 
 def sub_system(s, m: int) -> tuple:
     """Grains 0..m-1 of state s and the listed pairs among them (same order, shear copied):
-    arguments of kernels.step.contact_forces for one thread, without drag."""
+    arguments of kernels.step.contact_forces for one thread, without drag, in its order (7 start,
+    8 index, 9 shear, 18-20 force_x, force_z, torque)."""
     rows = np.repeat(np.arange(s.n), np.diff(s.start))
     npairs = int(s.start[-1])
     keep = (rows < m) & (s.index[:npairs] < m)
@@ -279,15 +286,9 @@ def footprint_profile(sim: Simulation, start: dict, sizes, repeats: int = 5) -> 
     for m in sorted(v for v in sizes if v <= s.n):
         args = sub_system(s, m)
         npairs = int(args[7][-1])
-        calls = max(3, 200000 // m)
         K.contact_forces(*args, p)
-        best = math.inf
-        for _ in range(repeats):
-            t0 = time.perf_counter()
-            for _ in range(calls):
-                K.contact_forces(*args, p)
-            best = min(best, (time.perf_counter() - t0) / calls)
-        touched = sum(a.nbytes for a in args[:7]) + 3 * 8 * m + args[7].nbytes + npairs * 12
+        best = best_seconds(lambda: K.contact_forces(*args, p), max(3, 200000 // m), repeats)
+        touched = sum(args[k].nbytes for k in (*range(10), 18, 19, 20))   # grains, list, forces
         out.append({"of_n_grains": s.n, "first_grains": m, "pairs_per_grain": npairs / m,
                     "working_set_mb": touched / 2**20, "ns_per_grain": best * 1e9 / m})
     return out
