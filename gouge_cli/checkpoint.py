@@ -2,17 +2,17 @@
 
 A checkpoint is an HDF5 file: datasets ``state/<name>`` (see State.EVOLVING) and, with fluid,
 ``fluid/<name>``; attributes ``config`` (YAML of the validated config), ``extra`` (JSON:
-detector state, slip number, parent run, ...) and ``checksum`` (SHA-256 over every dataset's
-name, dtype, shape and bytes). It is written to a temporary file in the same directory and
+detector state, slip number, parent run, ...), ``provenance`` (JSON, see
+:mod:`gouge_cli.provenance`) and ``checksum`` (SHA-256 over every dataset's name, dtype, shape
+and bytes). It is written to a temporary file in the same directory and
 renamed over the target, so a crash never leaves a half-written checkpoint behind.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
@@ -20,6 +20,7 @@ import numpy as np
 import yaml
 
 from . import __version__
+from . import provenance
 from .config import Config, ConfigError, build_config, dump_config
 
 
@@ -34,6 +35,7 @@ class Checkpoint:
     fluid: dict
     extra: dict
     path: Path | None = None
+    provenance: dict = field(default_factory=dict)
 
     @property
     def time(self) -> float:
@@ -54,19 +56,14 @@ def _plain(value):
 
 
 def _digest(groups: dict[str, dict[str, np.ndarray]]) -> str:
-    h = hashlib.sha256()
-    for group in sorted(groups):
-        for name in sorted(groups[group]):
-            arr = np.ascontiguousarray(groups[group][name])
-            h.update(f"{group}/{name}:{arr.dtype.str}:{arr.shape}".encode())
-            h.update(arr.tobytes())
-    return h.hexdigest()
+    return provenance.state_digest(groups)
 
 
 def snapshot_of(sim, extra: dict | None = None) -> Checkpoint:
     """In-memory copy of the simulation's evolving state (cheap enough to keep a few)."""
     fluid = sim.fluid.arrays() if sim.fluid is not None else {}
-    return Checkpoint(sim.config, sim.state.arrays(), fluid, dict(extra or {}))
+    return Checkpoint(sim.config, sim.state.arrays(), fluid, dict(extra or {}),
+                      provenance=provenance.collect(sim.threads))
 
 
 def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
@@ -84,6 +81,7 @@ def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
             h5.attrs["config"] = dump_config(checkpoint.config)
             h5.attrs["extra"] = json.dumps(checkpoint.extra, default=_plain)
             h5.attrs["version"] = __version__
+            h5.attrs["provenance"] = provenance.dumps(checkpoint.provenance or provenance.collect())
             h5.attrs["checksum"] = _digest(groups)
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
@@ -105,6 +103,7 @@ def read_checkpoint(path: Path, overrides: list[str] | dict | None = None) -> Ch
             config_text = h5.attrs["config"]
             extra = json.loads(h5.attrs["extra"])
             checksum = h5.attrs["checksum"]
+            stored = provenance.loads(h5.attrs.get("provenance"))
     except (OSError, KeyError, ValueError) as err:
         raise CheckpointError(f"checkpoint {path} is unreadable or truncated ({err})") from None
     groups.setdefault("fluid", {})
@@ -114,4 +113,4 @@ def read_checkpoint(path: Path, overrides: list[str] | dict | None = None) -> Ch
         config = build_config(yaml.safe_load(config_text), overrides)
     except ConfigError as err:
         raise ConfigError(f"{err}") from None
-    return Checkpoint(config, groups["state"], groups["fluid"], extra, path)
+    return Checkpoint(config, groups["state"], groups["fluid"], extra, path, stored)

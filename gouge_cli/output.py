@@ -2,7 +2,10 @@
 
 Layout of ``run.h5``::
 
-    /            attrs: config (YAML), scales (JSON), version, seed, dt, status, created
+    /            attrs: config (YAML), scales (JSON), version, seed, dt, status, created,
+                 provenance (JSON: version, commit, command, libraries, CPU, threads; see
+                 gouge_cli.provenance), provenance_resumed (JSON, of the latest resume) and
+                 final_state_hash (16 hex digits of the state when the run stopped)
     /series/<q>  (T,) float64, resizable; attrs unit, description
     /snapshots/<step>/{x,z,radius,vx,vz,spin,body, contact_i, contact_j, contact_fx, contact_fz}
                  attrs time, step; optional pressure/porosity fields when the scene has fluid;
@@ -21,7 +24,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from . import __version__
+from . import __version__, provenance
 from .config import Config, dump_config
 from .kernels import measure as M
 from .kernels import step as K
@@ -55,7 +58,7 @@ class RunFile:
     """Append-only writer of one run file."""
 
     def __init__(self, path: Path, config: Config, dt: float, extra_attrs: dict | None = None,
-                 flush_rows: int = 200, mode: str = "w"):
+                 flush_rows: int = 200, mode: str = "w", threads: int | None = None):
         self.path = Path(path)
         self.flush_rows = flush_rows
         self._rows: list[dict] = []
@@ -70,10 +73,13 @@ class RunFile:
             a["status"] = "running"
             a["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
             a["units"] = "dimensionless: length d, stress E, time t0 = d/sqrt(E/rho_s); see scales"
+            a["provenance"] = provenance.dumps(provenance.collect(threads))
             for key, value in (extra_attrs or {}).items():
                 a[key] = value
             self.h5.create_group("series")
             self.h5.create_group("snapshots")
+        else:
+            self.h5.attrs["provenance_resumed"] = provenance.dumps(provenance.collect(threads))
 
     def append(self, row: dict):
         self._rows.append(row)
@@ -145,9 +151,11 @@ class RunFile:
     def set_attr(self, key: str, value):
         self.h5.attrs[key] = value
 
-    def close(self, status: str = "finished"):
+    def close(self, status: str = "finished", final_state_hash: str | None = None):
         if self.h5.id.valid:
             self.flush()
+            if final_state_hash is not None:
+                self.h5.attrs["final_state_hash"] = final_state_hash
             if "deborah" in self.h5["series"]:
                 deborah = self.h5["series/deborah"][...]
                 if deborah.size:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import h5py
 
+from . import provenance
 from .checkpoint import CheckpointError, read_checkpoint, snapshot_of, write_checkpoint
 from .config import Config, dump_config
 from .events import SlipRecorder
@@ -125,7 +126,7 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
     sim = Simulation(config)
     writer = RunFile(out_dir / "run.h5", config, sim.dt,
                      extra_attrs={"n_grains": sim.state.n, "width": sim.state.width,
-                                  "wall_mass_per_length": sim.wall_mass_per_length})
+                                  "wall_mass_per_length": sim.wall_mass_per_length}, threads=sim.threads)
     n, steps0 = sim.state.n, sim.state.step
     try:
         progress = None if quiet else ProgressReport("compaction", config.compaction.max_time, n, live=live)
@@ -149,9 +150,9 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
     except KeyboardInterrupt:
         status, recorder = "interrupted", None
     except PhysicsError as err:
-        writer.close(f"failed: {err}")
+        writer.close(f"failed: {err}", provenance.sim_hash(sim))
         raise
-    writer.close(status)
+    writer.close(status, provenance.sim_hash(sim))
     wall = time.perf_counter() - t_start
     steps = sim.state.step - steps0
     return RunResult(out_dir, status, steps, wall, steps * n / max(wall, 1e-9), sim,
@@ -172,10 +173,13 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
         status = str(h5.attrs["status"])
     if status == "finished":
         raise RunDirError(f"{run_dir} already finished; nothing to resume")
+    note = provenance.risk_line(ck.provenance, f"{latest}")
+    if note and not quiet:
+        print(note, file=sys.stderr, flush=True)
     t_start = time.perf_counter()
     sim = Simulation(ck.config, arrays=ck.state, fluid_arrays=ck.fluid)
     rec_state = ck.extra.get("slip_recorder", {})
-    writer = RunFile(run_dir / "run.h5", ck.config, sim.dt, mode="a")
+    writer = RunFile(run_dir / "run.h5", ck.config, sim.dt, mode="a", threads=sim.threads)
     writer.truncate_after(ck.time, ck.step, int(rec_state.get("count", 0)))
     writer.set_attr("status", "running")
     steps0 = sim.state.step
@@ -184,7 +188,7 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
                                       label=f"resume {ck.config.name}", recorder_state=rec_state)
     except KeyboardInterrupt:
         status, recorder = "interrupted", None
-    writer.close(status)
+    writer.close(status, provenance.sim_hash(sim))
     wall = time.perf_counter() - t_start
     steps = sim.state.step - steps0
     return RunResult(run_dir, status, steps, wall, steps * sim.state.n / max(wall, 1e-9), sim,

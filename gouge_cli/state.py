@@ -14,6 +14,7 @@ import numba
 import numpy as np
 
 from .kernels import step as K
+from .portable import sphere_mass
 
 FREE, BOTTOM, TOP = K.FREE, K.BOTTOM, K.TOP
 
@@ -28,11 +29,6 @@ PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_buf")
 # (block layout, crossing pairs and cell arrays are derived or scratch, rebuilt on demand)
 EVOLVING = ("id", "x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
             "start", "index", "shear", "x_build", "z_build", "wall", "clock", "counters")
-
-
-def sphere_mass(radius: np.ndarray, density: float) -> np.ndarray:
-    """m = rho pi D^3 / 6 (thesis: discs carry sphere mass)."""
-    return density * np.pi * (2.0 * radius) ** 3 / 6.0
 
 
 @dataclass

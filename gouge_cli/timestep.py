@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 
 from .config import Config, ConfigError
+from .portable import cube, power
 
 CHAIN_FACTOR = 10.0
 
@@ -27,7 +28,7 @@ def contact_constants(config: Config) -> tuple[float, float]:
     m = config.material
     nu = m.poisson_ratio
     c_normal = math.sqrt(2.0) * m.youngs_modulus / (3.0 * (1.0 - nu * nu))
-    c_tangential = 2.0 ** 1.5 * m.youngs_modulus / ((2.0 - nu) * (1.0 + nu)) * m.tangential_stiffness_factor
+    c_tangential = 2.0 * math.sqrt(2.0) * m.youngs_modulus / ((2.0 - nu) * (1.0 + nu)) * m.tangential_stiffness_factor
     return c_normal, c_tangential
 
 
@@ -42,9 +43,9 @@ def stability_bound(config: Config) -> StepBound:
     c_normal, c_tangential = contact_constants(config)
     d_min = config.packing.diameter_min
     r_pair = 0.5 * d_min  # harmonic mean radius of two smallest grains
-    mass = config.material.density * math.pi * d_min ** 3 / 6.0
+    mass = config.material.density * math.pi * cube(d_min) / 6.0
     force = CHAIN_FACTOR * config.loading.normal_stress * config.packing.diameter_max
-    overlap = (force / (c_normal * math.sqrt(r_pair))) ** (2.0 / 3.0)
+    overlap = power(force / (c_normal * math.sqrt(r_pair)), 2.0 / 3.0)
     k_s = c_tangential * math.sqrt(r_pair * overlap)
     k_n = 1.5 * c_normal * math.sqrt(r_pair * overlap)
     dt_t = 2.0 * math.sqrt(mass / 7.0 / k_s)
