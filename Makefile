@@ -1,17 +1,31 @@
 # gouge: one-command setup. `make demo` runs the demo scene, `make test` the test suite;
-# both create .venv and install the package first.
+# both create .venv and install the package first, at the exact versions of constraints.txt
+# (the tested environment; `make lock` refreshes it from pyproject.toml's lower bounds).
 PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test validate bench lammps-bench clean
+.PHONY: install demo test validate bench lammps-bench clean lock
 
-$(STAMP): pyproject.toml
+LOCK := constraints.txt
+UV_VERSION := 0.13.9
+
+$(STAMP): pyproject.toml $(LOCK)
 	$(PY) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet --upgrade "pip>=24"
+	$(BIN)/python -m pip install --quiet -c $(LOCK) -e '.[test]'
 	touch $(STAMP)
+
+# Re-resolve every dependency (all extras, Python 3.10+) to the newest allowed versions; then
+# run `make test` and commit constraints.txt together with what it was tested with.
+lock:
+	$(PY) -m venv .lockenv
+	.lockenv/bin/python -m pip install --quiet uv==$(UV_VERSION)
+	.lockenv/bin/uv pip compile pyproject.toml --all-extras --universal --fork-strategy fewest --python-version 3.10 \
+	    --no-header --quiet -o $(LOCK)
+	sed -i '1i # Tested environment for gouge (make demo / make test / CI install with -c). Refresh: make lock' $(LOCK)
+	rm -rf .lockenv
 
 install: $(STAMP)
 

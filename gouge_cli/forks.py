@@ -11,12 +11,15 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
 
+from . import provenance
 from .checkpoint import read_checkpoint
 from .config import Config, ConfigError, build_config
 from .events import lead_time
@@ -79,6 +82,10 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
             raise ConfigError(f"--perm = {perm:g}: the permeability prefactor kappa_c must be a positive number [d^2]")
     entry = next(e for e in catalog if int(e["number"]) == slip)
     ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
+    risks = provenance.bit_risks(ck.provenance)
+    note = provenance.risk_line(ck.provenance, f"the checkpoint of slip {slip}")
+    if note and not quiet:
+        print(note, file=sys.stderr, flush=True)
     fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
     branches = [None] + list(perms)
     for perm in branches:
@@ -97,7 +104,8 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         t0 = time.perf_counter()
         sim = Simulation(config, arrays=ck.state)
         writer = RunFile(out_dir / "run.h5", config, sim.dt, extra_attrs={
-            "parent_run": str(run_dir), "parent_checkpoint": str(entry["checkpoint"]), "fork_slip": slip,
+            "parent_run": os.path.relpath(run_dir, out_dir), "parent_checkpoint": str(entry["checkpoint"]),
+            "fork_slip": slip,
             "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
             "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
             "end_time": ck.time + duration})
@@ -106,10 +114,11 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
                                       label=f"slip {slip} {name}", checkpoints=False,
                                       stop_after_slip=stop_after_slip)
-        writer.close(status)
+        writer.close(status, provenance.sim_hash(sim))
         first = recorder.slips[0] if recorder.slips else None
         results.append(BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first))
     summary = pair_summary(run_dir, slip, ck.time, results)
+    summary["library_differences_from_parent"] = risks
     (fork_dir / "pair.json").write_text(json.dumps(summary, indent=2, default=str))
     return summary
 
@@ -118,7 +127,7 @@ def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[Bran
     keys = ("onset_time", "static_strength", "stress_drop", "peak_velocity", "mean_velocity", "duration", "slip")
     branches = {}
     for r in results:
-        branches[r.name] = {"status": r.status, "dir": str(r.out_dir), "wall_seconds": round(r.wall_seconds, 3),
+        branches[r.name] = {"status": r.status, "dir": r.out_dir.name, "wall_seconds": round(r.wall_seconds, 3),
                             "steps": r.steps,
                             "first_slip": {k: r.first_slip[k] for k in keys} if r.first_slip else None}
     drained = branches["drained"]["first_slip"]
@@ -129,4 +138,4 @@ def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[Bran
         b["ratio_to_drained"] = {k: (u[k] / drained[k] if drained[k] else None)
                                  for k in ("peak_velocity", "stress_drop", "duration")}
         b["stronger_than_drained"] = u["static_strength"] > drained["static_strength"]
-    return {"run": str(run_dir), "slip": slip, "start_time": start_time, "branches": branches}
+    return {"run": "../..", "slip": slip, "start_time": start_time, "branches": branches}

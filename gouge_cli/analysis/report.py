@@ -629,7 +629,7 @@ def classify_fork(fork_dir: Path) -> list[ForkPair]:
             if d_main is not None and not math.isfinite(drained_strength):
                 drained_strength = _nan_ext(drained.tau_over_sigma[:d_main.onset_index + 1], np.max)
             fired = [name for name, on in result.criteria.items() if on]
-            parent = info.parent_run or str(fork_dir.parent.parent)
+            parent = str(fork_dir.parent.parent)     # parent_run is stored relative to the branch
             row = {
                 "run": parent,
                 "slip": int(info.fork_slip) if info.fork_slip is not None else _slip_number(fork_dir),
