@@ -33,7 +33,7 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from . import __version__
+from . import __version__, provenance
 from .accuracy import slip_duration
 from .config import build_config, find_config, load_config
 from .kernels import step as K
@@ -42,7 +42,7 @@ from .timestep import choose_dt
 
 CACHE = Path("runs/bench/cache")
 DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "kernels/reorder.py", "packing.py",
-               "simulation.py", "state.py", "config.py", "timestep.py")     # (and bench_config below)
+               "simulation.py", "state.py", "config.py", "timestep.py", "portable.py")     # (and bench_config below)
 RUN24_CYCLE = 1.6e7     # [t0] one loading cycle of thesis Run 24 (physics.md section 6)
 
 
@@ -363,6 +363,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
                         rows.append(BenchRow(f"lammps-{style}", n, t, n_steps, rate, rate, rate))
     return {
         "machine": {"cpus": os.cpu_count(), "numba_threads": all_threads},
+        "provenance": provenance.collect(all_threads),
         "dt": dt, "skin": skin,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "rows": [asdict(r) for r in rows],

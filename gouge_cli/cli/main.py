@@ -201,6 +201,11 @@ def bench(
     results = run_benchmark(size_list, thread_list, steps, repeats, dt, skin, lammps, permeability=perm or None,
                             lammps_max=lammps_max, cache=cache if str(cache) else None, profile=profile)
     write_results(results, json_out)
+    prov = results["provenance"]
+    out.print(f"measured on: {prov['cpu']['model']} ({prov['cpu']['vector_width_bits']}-bit vectors: "
+              f"{' '.join(prov['cpu']['vector_features'])}; numba target {prov['cpu']['numba_target']}), "
+              f"{results['machine']['cpus']} cores; numpy {prov['libraries']['numpy']}, numba "
+              f"{prov['libraries']['numba']}, llvmlite {prov['libraries']['llvmlite']}", highlight=False)
     table = Table(title=f"grain-steps per second (dt {dt}, skin {skin}; steady shear)")
     for col in ("code", "N", "threads", "steps", "min", "median", "max", "bytes/grain", "bitwise = 1 thread",
                 "gouge / this"):

@@ -210,3 +210,48 @@ def test_resume_after_kill_9_matches_uninterrupted(scene_file, finished_run, tmp
     assert np.array_equal(sa["wall_vx"], sb["wall_vx"])
     ca, cb = slip_catalog(finished_run), slip_catalog(out)
     assert [e["onset_time"] for e in ca] == [e["onset_time"] for e in cb]
+
+
+def test_run_file_and_checkpoints_record_provenance(finished_run):
+    """Version, commit, command, library versions, CPU and threads in run.h5 and every checkpoint;
+    the final state's hash in run.h5."""
+    import json
+    import re
+
+    import numba
+
+    from gouge_cli import provenance
+    with h5py.File(finished_run / "run.h5", "r") as h5:
+        prov = json.loads(h5.attrs["provenance"])
+        final_hash = h5.attrs["final_state_hash"]
+    assert re.fullmatch(r"[0-9a-f]{16}", final_hash)
+    assert prov["gouge_version"] and (re.fullmatch(r"[0-9a-f]{40}(\+dirty)?", prov["git_commit"])
+                                      or prov["git_commit"] == "not a git checkout")
+    assert isinstance(prov["command"], list) and prov["command"]
+    libs = prov["libraries"]
+    assert libs["numpy"] == np.__version__ and libs["numba"] == numba.__version__ and libs["h5py"] == h5py.__version__
+    assert {"python", "llvmlite", "libc"} <= set(libs)
+    assert prov["cpu"]["model"] and isinstance(prov["cpu"]["vector_features"], list)
+    assert prov["cpu"]["vector_width_bits"] in (128, 256, 512) and prov["threads"] >= 1
+    for path in [finished_run / "checkpoints" / "latest.h5"] + sorted((finished_run / "checkpoints").glob("slip_*.h5")):
+        ck = read_checkpoint(path)
+        assert ck.provenance["libraries"] == libs and ck.provenance["threads"] >= 1, path
+        assert provenance.bit_risks(ck.provenance) == []
+
+
+def test_moved_run_directory_still_forks(finished_run, tmp_path):
+    """Stored paths are relative: a run directory copied elsewhere forks from its own checkpoints,
+    and the branch's parent_run points back at the moved run."""
+    import json
+    import re
+    import shutil
+    moved = tmp_path / "elsewhere" / "tiny"
+    shutil.copytree(finished_run, moved, ignore=shutil.ignore_patterns("forks"))
+    slip = next(int(e["number"]) for e in slip_catalog(moved) if e["checkpoint"])
+    summary = run_fork(moved, slip, [], duration=100.0, quiet=True)
+    branch = moved / "forks" / f"slip_{slip:03d}" / "drained"
+    with h5py.File(branch / "run.h5", "r") as h5:
+        assert (branch / h5.attrs["parent_run"]).resolve() == moved.resolve()
+        assert re.fullmatch(r"[0-9a-f]{16}", h5.attrs["final_state_hash"])
+    stored = json.loads((branch.parent / "pair.json").read_text())
+    assert (branch.parent / stored["run"]).resolve() == moved.resolve() and summary["library_differences_from_parent"] == []

