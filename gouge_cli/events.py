@@ -130,7 +130,8 @@ class SlipRecorder:
             extra = dict(self.pending.extra)
             extra.update(slip=self.count, onset_time=slip.onset_time)
             write_checkpoint(self.checkpoint_dir / name,
-                             Checkpoint(self.pending.config, self.pending.state, self.pending.fluid, extra))
+                             Checkpoint(self.pending.config, self.pending.state, self.pending.fluid, extra,
+                                        provenance=self.pending.provenance))
             entry["checkpoint"] = f"checkpoints/{name}"
             entry["checkpoint_time"] = self.pending.time
         self.slips.append(entry)

@@ -1,38 +1,21 @@
 """Shared fixtures for the test suite (kept small on purpose).
 
-``GOUGE_TEST_SEED_OFFSET=N`` shifts the seed of every packing the suite builds by N (scene
-dicts, shipped configs and defaults alike, through one wrapper of ``build_packing``), so
-``GOUGE_TEST_SEED_OFFSET=7 make test`` shows that no test depends on the trajectory of the seed
-it happens to use.
+``GOUGE_TEST_SEED_OFFSET=N`` shifts the seed of every packing the suite builds (tests/seed_offset.py).
 """
 
 from __future__ import annotations
 
-import os
+import sys
+from pathlib import Path
 
 import numba
 import numpy as np
 import pytest
 
-SEED_OFFSET = int(os.environ.get("GOUGE_TEST_SEED_OFFSET", "0"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import seed_offset  # noqa: E402
 
-
-@pytest.fixture(autouse=True, scope="session")
-def seed_offset():
-    """Every packing built in this process uses seed + GOUGE_TEST_SEED_OFFSET."""
-    if not SEED_OFFSET:
-        yield 0
-        return
-    from gouge_cli import packing, simulation
-
-    original = packing.build_packing
-
-    def shifted(config):
-        return original(config.model_copy(update={"seed": config.seed + SEED_OFFSET}))
-
-    packing.build_packing = simulation.build_packing = shifted
-    yield SEED_OFFSET
-    packing.build_packing = simulation.build_packing = original
+seed_offset.install()
 
 
 @pytest.fixture
