@@ -84,7 +84,7 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
     risks = provenance.bit_risks(ck.provenance)
     note = provenance.risk_line(ck.provenance, f"the checkpoint of slip {slip}")
-    if note and not quiet:
+    if note:
         print(note, file=sys.stderr, flush=True)
     fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
     branches = [None] + list(perms)

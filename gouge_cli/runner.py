@@ -174,7 +174,7 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
     if status == "finished":
         raise RunDirError(f"{run_dir} already finished; nothing to resume")
     note = provenance.risk_line(ck.provenance, f"{latest}")
-    if note and not quiet:
+    if note:
         print(note, file=sys.stderr, flush=True)
     t_start = time.perf_counter()
     sim = Simulation(ck.config, arrays=ck.state, fluid_arrays=ck.fluid)

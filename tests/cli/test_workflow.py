@@ -255,3 +255,23 @@ def test_moved_run_directory_still_forks(finished_run, tmp_path):
         assert re.fullmatch(r"[0-9a-f]{16}", h5.attrs["final_state_hash"])
     stored = json.loads((branch.parent / "pair.json").read_text())
     assert (branch.parent / stored["run"]).resolve() == moved.resolve() and summary["library_differences_from_parent"] == []
+
+
+def test_restart_names_library_differences_from_the_parent(finished_run, tmp_path):
+    """A checkpoint written with another numpy: restart says so in one line before running and
+    pair.json records it; the fork still runs."""
+    import json
+    import shutil
+    run = tmp_path / "other_numpy"
+    shutil.copytree(finished_run, run, ignore=shutil.ignore_patterns("forks"))
+    slip = next(int(e["number"]) for e in slip_catalog(run) if e["checkpoint"])
+    path = run / "checkpoints" / f"slip_{slip:03d}.h5"
+    with h5py.File(path, "r+") as h5:
+        prov = json.loads(h5.attrs["provenance"])
+        prov["libraries"]["numpy"] = "1.0.0"
+        h5.attrs["provenance"] = json.dumps(prov)
+    result = gouge("restart", run, "--slip", slip, "--perm", "1e-5", "--duration", "50", "--quiet")
+    assert result.exit_code == 0, result.output
+    assert f"numpy 1.0.0 -> {np.__version__}" in result.output
+    pair = json.loads((run / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())
+    assert pair["library_differences_from_parent"] == [f"numpy 1.0.0 -> {np.__version__}"]
