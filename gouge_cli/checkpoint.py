@@ -21,6 +21,7 @@ import yaml
 
 from . import __version__
 from .config import Config, ConfigError, build_config, dump_config
+from .filedoc import document_checkpoint
 
 
 class CheckpointError(ValueError):
@@ -85,6 +86,7 @@ def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
             h5.attrs["extra"] = json.dumps(checkpoint.extra, default=_plain)
             h5.attrs["version"] = __version__
             h5.attrs["checksum"] = _digest(groups)
+            document_checkpoint(h5)
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
         os.replace(tmp, path)

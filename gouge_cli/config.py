@@ -30,6 +30,7 @@ def _quantity(dimension: str):
         scales = (info.context or {}).get("scales", Scales())
         return to_dimensionless(value, dimension, scales)
 
+    convert.dimension = dimension       # read by gouge_cli.config_doc (schema, commented defaults)
     return BeforeValidator(convert)
 
 
@@ -148,6 +149,10 @@ class OutputConfig(_Section):
     series_interval: Time = Field(10.0, gt=0, description="time-series cadence [t0]")
     snapshot_interval: Time = Field(1e4, gt=0, description="grain-snapshot cadence [t0]")
     checkpoint_interval: Time = Field(2e4, gt=0, description="cadence of checkpoints/latest.h5 for resume [t0]")
+    slip_frames: int = Field(
+        0, ge=0, le=10_000,
+        description="extra snapshots per predicted slip duration pi sqrt(m_b/k) while the top wall slips "
+                    "(v_w >= slips.end_factor V_s), for movies; 0 = none; forks use 30 unless set [-]")
 
 
 class SlipsConfig(_Section):

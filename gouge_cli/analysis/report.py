@@ -255,6 +255,8 @@ class RunReader:
         out = {key: grp[key][...] for key in grp.keys()}
         out["time"] = float(grp.attrs["time"])
         out["step"] = int(grp.attrs["step"])
+        if "pressure" in grp and "origin" in grp["pressure"].attrs:
+            out["grid"] = {k: np.asarray(grp["pressure"].attrs[k], float) for k in ("origin", "spacing")}
         return out
 
 
