@@ -303,8 +303,10 @@ def find_config(name: str | Path) -> Path:
         for candidate in (root / f"{name}.yaml", root / "thesis" / f"{name}.yaml", root / f"{name}"):
             if candidate.is_file():
                 return candidate
-    raise ConfigError(f"config file {str(path)!r} does not exist (nor configs/{name}.yaml, "
-                      f"configs/thesis/{name}.yaml)")
+    shipped = [c for root in roots for c in root.rglob(f"{path.stem}.yaml")]
+    hint = f"; did you mean {shipped[0]} (or the scene name {path.stem!r})?" if shipped else \
+        f"; scene names are looked up in {' and '.join(str(r) for r in dict.fromkeys(roots))} (and thesis/)"
+    raise ConfigError(f"config file {str(path)!r} does not exist in {Path.cwd()}{hint}")
 
 
 def load_config(path: str | Path, overrides: list[str] | dict | None = None) -> Config:
