@@ -39,6 +39,8 @@ def register(app: typer.Typer) -> None:
         fmt: str = typer.Option("vtkhdf", "--format", help="file format (vtkhdf: VTK HDF5, ParaView 5.12+)"),
         out: Optional[Path] = typer.Option(None, "--out", help="output file (one branch only; default "
                                            "RUN/export/<run>.vtkhdf or RUN/export/slip_NNN_<branch>.vtkhdf)"),
+        split: bool = typer.Option(False, "--split", help="one temporal PolyData file per block (grains, "
+                                   "contacts, walls, pressure_grid) instead of one collection"),
     ):
         """Write a run's (or fork branch's) snapshots as one time-dependent VTKHDF file for ParaView:
         grains, contacts (normal and tangential force), walls, pressure grid; time in t0 since loading began."""
@@ -53,9 +55,9 @@ def register(app: typer.Typer) -> None:
             if out is not None and len(targets) > 1:
                 fail(f"--out names one file, but --fork {fork} has {len(targets)} branches; give one branch")
             for target in targets:
-                result = export_run(target, out)
+                result = export_run(target, out, split=split)
                 counts = ", ".join(f"{k} {v}" for k, v in result.blocks.items())
-                console.print(f"{result.path}: {result.times.size} steps, t = {result.times[0]:.6g} .. "
+                console.print(f"{', '.join(map(str, result.paths))}: {result.times.size} steps, t = {result.times[0]:.6g} .. "
                               f"{result.times[-1]:.6g} t0 since loading began (last step: {counts} points)",
                               highlight=False)
         except AnalysisError as exc:

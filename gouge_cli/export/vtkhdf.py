@@ -27,6 +27,12 @@ ImageData grid: the pressure grid stretches with the layer (its z origin and spa
 from snapshot to snapshot), while a temporal VTKHDF ImageData has one origin and spacing for
 all steps; the quads carry the true geometry of each step, and the per-step origin and spacing
 are also the ``origin``/``spacing`` attributes of the run file's pressure datasets.
+
+With ``split`` each block is written as its own temporal PolyData file instead (same arrays and
+steps), for readers without temporal collections. Checked with VTK 9.7's vtkHDFReader: the
+collection's time steps are served to a pipeline (ParaView's time slider) and by ``SetStep``;
+a time request made after an explicit ``UpdateInformation`` on the reader itself returns step 0
+for temporal collections (also for files written by VTK's own vtkHDFWriter), not for PolyData.
 """
 
 from __future__ import annotations
@@ -233,11 +239,14 @@ class ExportResult:
     times: np.ndarray
     blocks: dict          # block name -> number of points in the last step
     source: Path
+    paths: list           # every file written (one, or one per block with split)
 
 
-def export_run(run_dir: Path | str, out: Path | str | None = None) -> ExportResult:
+def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool = False) -> ExportResult:
     """Write every snapshot of a run (or fork branch) directory to ``out`` (default
-    ``RUN/export/<run or branch>.vtkhdf``, for a fork ``PARENT/export/slip_NNN_<branch>.vtkhdf``)."""
+    ``RUN/export/<run or branch>.vtkhdf``, for a fork ``PARENT/export/slip_NNN_<branch>.vtkhdf``).
+    ``split``: one temporal PolyData file per block instead (``<out stem>_<block>.vtkhdf``), for
+    readers without temporal collections."""
     with RunReader(run_dir) as reader:
         info = reader.info
         names = reader.snapshot_names()
@@ -270,9 +279,18 @@ def export_run(run_dir: Path | str, out: Path | str | None = None) -> ExportResu
         source = info.h5_path
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp")
     times = np.asarray(times)
-    with h5py.File(tmp, "w", track_order=True) as h5:
+    last = {k: int(v[-1].points.shape[0]) for k, v in blocks.items()}
+    if split:
+        paths = []
+        for name, pieces in blocks.items():
+            path = out.with_name(f"{out.stem}_{name}.vtkhdf")
+            _atomic(path, lambda h5, pieces=pieces: write_block(h5.create_group("VTKHDF", track_order=True),
+                                                                pieces, times), info, source)
+            paths.append(path)
+        return ExportResult(paths[0], times, last, source, paths)
+
+    def collection(h5):
         root = h5.create_group("VTKHDF", track_order=True)
         root.attrs["Version"] = VERSION
         root.attrs.create("Type", np.bytes_("PartitionedDataSetCollection"))
@@ -282,6 +300,16 @@ def export_run(run_dir: Path | str, out: Path | str | None = None) -> ExportResu
             write_block(block, pieces, times)
             block.attrs["Index"] = index
             assembly[name] = h5py.SoftLink(f"/VTKHDF/{name}")
+
+    _atomic(out, collection, info, source)
+    return ExportResult(out, times, last, source, [out])
+
+
+def _atomic(path: Path, fill, info, source: Path) -> None:
+    """Write ``fill(h5)`` plus the /gouge metadata group to a temporary file, then rename it."""
+    tmp = path.with_name(f".{path.name}.tmp")
+    with h5py.File(tmp, "w", track_order=True) as h5:
+        fill(h5)
         meta = h5.create_group("gouge", track_order=True)
         meta.attrs["source"] = str(source)
         meta.attrs["time_origin"] = TIME_ORIGIN
@@ -291,5 +319,4 @@ def export_run(run_dir: Path | str, out: Path | str | None = None) -> ExportResu
         meta.attrs["body_codes"] = json.dumps(BODY_CODES)
         meta.attrs["width"] = info.width
         meta.attrs["sigma"] = info.sigma
-    tmp.replace(out)
-    return ExportResult(out, times, {k: int(v[-1].points.shape[0]) for k, v in blocks.items()}, source)
+    tmp.replace(path)
