@@ -268,7 +268,7 @@ def open_run(path: Path | str, allow_running: bool = False) -> RunReader:
 # --------------------------------------------------------------------------- catalog
 
 CATALOG_COLUMNS = (
-    "number", "onset_time", "end_time", "duration", "slip", "static_strength", "stress_drop",
+    "number", "onset_time", "onset_since_loading", "end_time", "duration", "slip", "static_strength", "stress_drop",
     "peak_velocity", "mean_velocity", "peak_velocity_over_Vs", "mean_velocity_over_Vs",
     "recurrence", "porosity_change", "n_subevents", "deborah", "pressure_min", "pressure_max",
     "checkpoint",
@@ -376,6 +376,8 @@ def _nan_ext(a, fn) -> float:
 def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[dict]:
     """One row per slip with :data:`CATALOG_COLUMNS`.
 
+    onset_time: the stored clock (since compaction began); onset_since_loading: the same
+    onset in t0 since loading began (the time origin of every command and figure);
     static_strength: tau/sigma before the onset; stress_drop: drop of tau/sigma;
     velocities [v0] and over V_s; recurrence: onset minus the previous onset [t0]
     (NaN for the first); deborah: mean of the Deborah-number series over the slip
@@ -388,6 +390,7 @@ def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[
     fluid_names = ("deborah", "pressure_min", "pressure_max")
     has_fluid_series = any(reader.has(n) for n in fluid_names)
     rows, previous = [], None
+    origin = reader.time_offset()
     for entry in catalog:
         onset = float(entry["onset_time"])
         deborah = p_min = p_max = _NAN
@@ -401,6 +404,7 @@ def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[
         rows.append({
             "number": int(entry["number"]),
             "onset_time": onset,
+            "onset_since_loading": onset - origin,
             "end_time": float(entry["end_time"]),
             "duration": float(entry["duration"]),
             "slip": float(entry["slip"]),

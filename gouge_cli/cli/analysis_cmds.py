@@ -50,7 +50,7 @@ def _table(title: str, columns: list[tuple[str, str]], rows: list[dict]):
     return table
 
 
-_CATALOG = [("number", "#"), ("onset_time", "onset t/t0"), ("duration", "duration/t0"),
+_CATALOG = [("number", "#"), ("onset_since_loading", "onset t/t0 (since loading)"), ("duration", "duration/t0"),
             ("static_strength", "τs/σ"), ("stress_drop", "Δτ/σ"), ("peak_velocity_over_Vs", "vpeak/Vs"),
             ("mean_velocity_over_Vs", "vmean/Vs"), ("slip", "slip/d"), ("recurrence", "recurrence/t0"),
             ("n_subevents", "sub"), ("deborah", "De")]
