@@ -186,6 +186,14 @@ def _empty_like(piece: Piece) -> Piece:
                  {k: empty(v) for k, v in piece.point_data.items()}, {k: empty(v) for k, v in piece.cell_data.items()})
 
 
+def _put(group: h5py.Group, name: str, data: np.ndarray) -> None:
+    """A dataset, gzip-compressed when it is large (the reader decompresses chunked datasets)."""
+    data = np.asarray(data)
+    big = data.size > 4096
+    group.create_dataset(name, data=data, compression="gzip" if big else None, compression_opts=4 if big else None,
+                         shuffle=big)
+
+
 def write_block(group: h5py.Group, pieces: list[Piece], times: np.ndarray) -> None:
     """A temporal VTKHDF PolyData in ``group``: one piece (one partition) per time step,
     arrays concatenated over the steps and addressed through ``Steps``."""
@@ -194,26 +202,24 @@ def write_block(group: h5py.Group, pieces: list[Piece], times: np.ndarray) -> No
     n = len(pieces)
     npts = np.array([p.points.shape[0] for p in pieces], np.int64)
     group.create_dataset("NumberOfPoints", data=npts)
-    group.create_dataset("Points", data=np.concatenate([p.points for p in pieces]).astype(float))
+    _put(group, "Points", np.concatenate([p.points for p in pieces]).astype(float))
     cells = np.zeros((n, 4), np.int64)
     conn = np.zeros((n, 4), np.int64)
     for k, topo in enumerate(TOPOLOGIES):
-        mine = pieces
-        ncell = np.array([p.n_cells if p.topology == topo else 0 for p in mine], np.int64)
-        nconn = np.array([p.connectivity.size if p.topology == topo else 0 for p in mine], np.int64)
+        ncell = np.array([p.n_cells if p.topology == topo else 0 for p in pieces], np.int64)
+        nconn = np.array([p.connectivity.size if p.topology == topo else 0 for p in pieces], np.int64)
         cells[:, k], conn[:, k] = ncell, nconn
         g = group.create_group(topo, track_order=True)
         g.create_dataset("NumberOfCells", data=ncell)
         g.create_dataset("NumberOfConnectivityIds", data=nconn)
-        g.create_dataset("Offsets", data=np.concatenate(
-            [p.offsets if p.topology == topo else np.zeros(1, np.int64) for p in mine]).astype(np.int64))
-        g.create_dataset("Connectivity", data=np.concatenate(
-            [p.connectivity if p.topology == topo else np.zeros(0, np.int64) for p in mine]).astype(np.int64))
+        _put(g, "Offsets", np.concatenate(
+            [p.offsets if p.topology == topo else np.zeros(1, np.int64) for p in pieces]).astype(np.int64))
+        _put(g, "Connectivity", np.concatenate(
+            [p.connectivity if p.topology == topo else np.zeros(0, np.int64) for p in pieces]).astype(np.int64))
     for kind, attr in (("PointData", "point_data"), ("CellData", "cell_data")):
         g = group.create_group(kind, track_order=True)
         for name in getattr(pieces[0], attr):
-            g.create_dataset(name, data=np.concatenate([getattr(p, attr)[name] for p in pieces]),
-                             compression="gzip", compression_opts=1)
+            _put(g, name, np.concatenate([getattr(p, attr)[name] for p in pieces]))
     steps = group.create_group("Steps", track_order=True)
     steps.attrs["NSteps"] = n
     steps.create_dataset("Values", data=np.asarray(times, float))
