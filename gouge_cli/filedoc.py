@@ -15,6 +15,8 @@ t_load = time - load_start_clock, where load_start_clock = time[0] - load_time[0
 from __future__ import annotations
 
 import json
+import math
+from pathlib import Path
 
 import h5py
 
@@ -134,6 +136,24 @@ CHECKPOINT_ATTRS = {
     "version": RUN_ATTRS["version"],
     "checksum": ("-", "SHA-256 over every dataset's name, dtype, shape and bytes"),
 }
+
+
+def json_safe(obj):
+    """Copy of ``obj`` that json.dumps writes as valid JSON: NaN/inf become null, paths and
+    numpy scalars/arrays plain values, tuples lists."""
+    if isinstance(obj, dict):
+        return {str(k): json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [json_safe(v) for v in obj]
+    if isinstance(obj, Path):
+        return str(obj)
+    if hasattr(obj, "tolist") and not isinstance(obj, (str, bytes)):
+        obj = obj.tolist()
+        if isinstance(obj, list):
+            return json_safe(obj)
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
 
 
 def describe(obj, unit: str, description: str) -> None:

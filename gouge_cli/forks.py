@@ -20,6 +20,7 @@ import h5py
 from .checkpoint import read_checkpoint
 from .config import Config, ConfigError, build_config
 from .events import lead_time
+from .filedoc import json_safe
 from .output import RunFile
 from .runner import RunDirError, check_run_dir, load_phase
 from .simulation import Simulation
@@ -117,7 +118,7 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         first = recorder.slips[0] if recorder.slips else None
         results.append(BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first))
     summary = pair_summary(run_dir, slip, ck.time, results)
-    (fork_dir / "pair.json").write_text(json.dumps(summary, indent=2, default=str))
+    (fork_dir / "pair.json").write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False))
     return summary
 
 

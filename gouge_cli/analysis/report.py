@@ -33,6 +33,7 @@ import yaml
 
 from .. import __version__
 from ..detector import WallSeries, detect_slips
+from ..filedoc import json_safe
 from .blockslider import BlockSliderFit, fit_block_slider
 from .friction import dynamic_friction, estimate_natural_frequency, mean_dynamic_friction
 from .pairs import PairResult, campaign_summary, classify_pair
@@ -798,7 +799,8 @@ def write_analysis(analysis: RunAnalysis, out_dir: Path | None = None, into_h5: 
     elif pairs_csv.exists():
         pairs_csv.unlink()
     summary = {k: v for k, v in analysis.to_dict().items() if k not in ("catalog", "fits", "pairs")}
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    (out_dir / "summary.json").write_text(json.dumps(json_safe(summary), indent=2, default=_json_default,
+                                                     allow_nan=False))
     written["summary"] = out_dir / "summary.json"
     if into_h5:
         try:
@@ -809,7 +811,7 @@ def write_analysis(analysis: RunAnalysis, out_dir: Path | None = None, into_h5: 
                 grp.attrs["created"] = _time.strftime("%Y-%m-%dT%H:%M:%S%z")
                 grp.attrs["version"] = __version__
                 grp.attrs["notch"] = bool(analysis.notch)
-                grp.attrs["summary"] = json.dumps(summary, default=_json_default)
+                grp.attrs["summary"] = json.dumps(json_safe(summary), default=_json_default, allow_nan=False)
                 _table_to_group(grp.create_group("catalog"), analysis.catalog, CATALOG_COLUMNS)
                 _table_to_group(grp.create_group("fits"), analysis.fits, FIT_COLUMNS)
                 if analysis.pairs:

@@ -96,6 +96,7 @@ def restart(
     import json
 
     from ..checkpoint import CheckpointError
+    from ..filedoc import json_safe
     from ..forks import run_fork
     from ..runner import RunDirError
     from ..simulation import PhysicsError
@@ -111,7 +112,7 @@ def restart(
         fail(str(e))
     except PhysicsError as e:
         fail(f"physics failure: {e}", EXIT_PHYSICS)
-    out.print(json.dumps(summary, indent=2, default=str), highlight=False)
+    out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
 
 
 @app.command()
