@@ -32,7 +32,8 @@ from .kernels import step as K
 
 # name -> (unit, description); units are the dimensionless scales of physics.md section 1
 SERIES = {
-    "time": ("t0", "simulated time since the start of compaction"),
+    "time": ("t0", "simulated clock since the start of compaction (commands and figures report "
+                   "time - (time[0] - load_time[0]): since loading began)"),
     "load_time": ("t0", "time since the driver started"),
     "wall_x": ("d", "top-wall displacement along the fault since the driver started"),
     "wall_z": ("d", "top-wall position across the layer (mean z of its grains)"),
