@@ -138,6 +138,30 @@ CHECKPOINT_ATTRS = {
 }
 
 
+_T0 = ("onset_time", "end_time", "duration", "recurrence", "half_period", "predicted_half_period")
+ANALYSIS_UNITS = dict({k: "t0" for k in _T0}, onset_since_loading="t0", slip="d", peak_velocity="v0",
+                      mean_velocity="v0", amplitude="v0", pressure_min="E", pressure_max="E",
+                      permeability="d^2", notch_frequency="1/t0")
+ANALYSIS_ATTRS = {
+    "created": RUN_ATTRS["created"], "version": RUN_ATTRS["version"],
+    "notch": ("-", "whether mu_d(t) was notch-filtered"),
+    "summary": ("-", "JSON: parameters, statistics over all slips, fit summary, campaign counts"),
+    "columns": ("-", "JSON list of the table's columns, in order"),
+}
+
+
+def document_analysis(group) -> None:
+    """unit/description of the /analysis tables `gouge analyze` writes into run.h5 (one dataset
+    per column; unit '-' for ratios, counts, flags and labels)."""
+    describe(group, "-", "tables written by `gouge analyze` (also RUN/analysis/*.csv)")
+    describe_attributes(group, ANALYSIS_ATTRS)
+    for table, g in group.items():
+        describe(g, "-", f"the {table} table, one row per {'pair' if table == 'pairs' else 'slip'}")
+        describe_attributes(g, ANALYSIS_ATTRS)
+        for name, ds in g.items():
+            describe(ds, ANALYSIS_UNITS.get(name, "-"), f"column {name} of RUN/analysis/{table}.csv")
+
+
 def json_safe(obj):
     """Copy of ``obj`` that json.dumps writes as valid JSON: NaN/inf become null, paths and
     numpy scalars/arrays plain values, tuples lists."""
@@ -180,12 +204,11 @@ def document_run_file(h5: h5py.File) -> None:
     h5.attrs["time_origin"] = TIME_ORIGIN
     h5.attrs["body_codes"] = json.dumps(BODY_CODES)
     describe_attributes(h5, RUN_ATTRS)
-    for name in ("series", "snapshots", "slips", "analysis"):
+    for name, text in (("series", "time series, one row per series_interval"),
+                       ("snapshots", "grain snapshots, one group per step (12-digit name)"),
+                       ("slips", "slip catalog, one group per slip (3-digit number)")):
         if name in h5 and "unit" not in h5[name].attrs:
-            describe(h5[name], "-", {"series": "time series, one row per series_interval",
-                                     "snapshots": "grain snapshots, one group per step (12-digit name)",
-                                     "slips": "slip catalog, one group per slip (3-digit number)",
-                                     "analysis": "tables written by `gouge analyze`"}[name])
+            describe(h5[name], "-", text)
     for snap in (h5["snapshots"].values() if "snapshots" in h5 else []):
         for key, ds in snap.items():
             if "unit" not in ds.attrs:
@@ -194,11 +217,8 @@ def document_run_file(h5: h5py.File) -> None:
     for slip in (h5["slips"].values() if "slips" in h5 else []):
         document_slip(slip)
 
-    def fill(name, obj):
-        if isinstance(obj, h5py.Dataset) and "unit" not in obj.attrs:
-            describe(obj, "-", "see the columns of the `gouge analyze` tables")
-
-    h5.visititems(fill)
+    if "analysis" in h5:
+        document_analysis(h5["analysis"])
 
 
 def document_slip(group) -> None:

@@ -33,7 +33,7 @@ import yaml
 
 from .. import __version__
 from ..detector import WallSeries, detect_slips
-from ..filedoc import json_safe
+from ..filedoc import document_analysis, json_safe
 from .blockslider import BlockSliderFit, fit_block_slider
 from .friction import dynamic_friction, estimate_natural_frequency, mean_dynamic_friction
 from .pairs import PairResult, campaign_summary, classify_pair
@@ -816,6 +816,7 @@ def write_analysis(analysis: RunAnalysis, out_dir: Path | None = None, into_h5: 
                 _table_to_group(grp.create_group("fits"), analysis.fits, FIT_COLUMNS)
                 if analysis.pairs:
                     _table_to_group(grp.create_group("pairs"), analysis.pair_rows, PAIR_COLUMNS)
+                document_analysis(grp)
         except OSError as exc:
             raise AnalysisError(f"cannot write /analysis into {info.h5_path}: {exc}") from exc
         written["h5"] = info.h5_path
