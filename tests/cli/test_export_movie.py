@@ -239,8 +239,13 @@ def test_movie_frame_and_encoding(runs):
     meta = next(reader)
     assert tuple(meta["size"]) == FRAME_PX
     assert sum(1 for _ in reader) == 4
+    gif, frames = make_movie(run, 1, None, runs / "m.gif", max_frames=2)      # the fallback format
+    from PIL import Image
+
+    with Image.open(gif) as im:
+        assert gif.suffix == ".gif" and im.n_frames == 2 and im.size == FRAME_PX
     bad = gouge("movie", run, "--slip", 2)
-    assert bad.exit_code == EXIT_BAD_INPUT
+    assert bad.exit_code == EXIT_BAD_INPUT and ("no fork of slip 2" in bad.output or "no slip number 2" in bad.output)
 
 
 def test_slips_json_is_valid_and_counts_from_loading(runs):
