@@ -1,4 +1,4 @@
-"""`gouge export`: a run or fork branch as one time-dependent VTKHDF file (ParaView 5.12+).
+"""`gouge export`: a run or fork branch as one time-dependent VTKHDF file for ParaView.
 
 Layout: a VTKHDF ``PartitionedDataSetCollection`` (format 2.2) with one temporal ``PolyData``
 block per kind of object, every block with the same ``Steps/Values`` (the snapshot times in
