@@ -36,7 +36,7 @@ def register(app: typer.Typer) -> None:
         run_dir: Path = typer.Argument(..., help="run directory"),
         fork: Optional[str] = typer.Option(None, "--fork", help="a fork branch under RUN/forks, e.g. "
                                            "slip_003/perm_1e-05, or slip_003 for all its branches"),
-        fmt: str = typer.Option("vtkhdf", "--format", help="file format (vtkhdf: VTK HDF5, ParaView 5.12+)"),
+        fmt: str = typer.Option("vtkhdf", "--format", help="file format (vtkhdf: VTK HDF5, read by ParaView)"),
         out: Optional[Path] = typer.Option(None, "--out", help="output file (one branch only; default "
                                            "RUN/export/<run>.vtkhdf or RUN/export/slip_NNN_<branch>.vtkhdf)"),
         split: bool = typer.Option(False, "--split", help="one temporal PolyData file per block (grains, "

@@ -150,7 +150,6 @@ def slips(
     from ..forks import slip_catalog
     from ..runner import RunDirError
 
-    from ..filedoc import TIME_ORIGIN
     from .export_cmds import catalog_since_loading
 
     try:
@@ -160,7 +159,7 @@ def slips(
     if as_json:
         print(json.dumps(catalog, allow_nan=False))
         return
-    table = Table(title=f"slips (times in {TIME_ORIGIN.split(';')[0]}: clock - {origin:.6g} t0)")
+    table = Table(title=f"slips; times in t0 since loading began (stored clock - {origin:.6g} t0)")
     cols = (("number", "#"), ("onset_time", "onset [t0]"), ("duration", "duration [t0]"),
             ("static_strength", "static τ/σ"), ("stress_drop", "Δτ/σ"), ("peak_velocity", "peak v [v0]"),
             ("slip", "slip [d]"), ("checkpoint", "checkpoint"))
