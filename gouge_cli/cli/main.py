@@ -160,9 +160,9 @@ def slips(
         print(json.dumps(catalog, allow_nan=False))
         return
     table = Table(title=f"slips; times in t0 since loading began (stored clock - {origin:.6g} t0)")
-    cols = (("number", "#"), ("onset_time", "onset [t0]"), ("duration", "duration [t0]"),
-            ("static_strength", "static τ/σ"), ("stress_drop", "Δτ/σ"), ("peak_velocity", "peak v [v0]"),
-            ("slip", "slip [d]"), ("checkpoint", "checkpoint"))
+    cols = (("number", "#"), ("onset_time", "onset / t0"), ("duration", "duration / t0"),
+            ("static_strength", "static τ/σ"), ("stress_drop", "Δτ/σ"), ("peak_velocity", "peak v / v0"),
+            ("slip", "slip / d"), ("checkpoint", "checkpoint"))
     for _, header in cols:
         table.add_column(header, justify="right")
     for e in catalog:
