@@ -15,6 +15,7 @@ from ..config import ConfigError, build_config, dump_config, load_config
 EXIT_OK, EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_INTERRUPTED = 0, 2, 3, 130
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, context_settings={"help_option_names": ["-h", "--help"]},
+                  rich_markup_mode=None,   # help texts hold units in brackets, e.g. [d^2]: no markup
                   help="gouge: grain-scale stick-slip simulations of (water-saturated) fault gouge.")
 _WIDE = None if sys.stdout.isatty() else 200
 err = Console(stderr=True, soft_wrap=True, width=_WIDE)

@@ -85,6 +85,8 @@ def test_config_command_defaults_schema_version_help(tmp_path):
     for name in ("restart", "movie", "bench"):
         perm = next(p for p in commands[name].params if p.name == "perm")
         assert "[d^2]" in perm.help, name
+    shown = runner.invoke(app, ["restart", "-h"])                 # units survive the help rendering
+    assert shown.exit_code == 0 and "kappa_c [d^2]" in shown.output and "no progress output" in shown.output
 
 
 def test_missing_config_path_suggests_the_shipped_one(tmp_path, monkeypatch):
