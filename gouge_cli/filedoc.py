@@ -210,6 +210,8 @@ def document_run_file(h5: h5py.File) -> None:
         if name in h5 and "unit" not in h5[name].attrs:
             describe(h5[name], "-", text)
     for snap in (h5["snapshots"].values() if "snapshots" in h5 else []):
+        if "attribute_units" in snap.attrs:          # described when written
+            continue
         for key, ds in snap.items():
             if "unit" not in ds.attrs:
                 describe(ds, *SNAPSHOT.get(key, ("-", "undocumented")))

@@ -26,7 +26,7 @@ import numpy as np
 
 from . import __version__
 from .config import Config, dump_config
-from .filedoc import SNAPSHOT, describe, document_run_file, grid_geometry
+from .filedoc import SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, document_run_file, grid_geometry
 from .kernels import measure as M
 from .kernels import step as K
 
@@ -151,6 +151,7 @@ class RunFile:
                 grp.create_dataset(name, data=arr).attrs.update(geometry)
         for name, ds in grp.items():
             describe(ds, *SNAPSHOT[name])
+        describe_attributes(grp, SNAPSHOT_ATTRS)
         self.h5.flush()
 
     def set_attr(self, key: str, value):
