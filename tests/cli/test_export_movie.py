@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -265,3 +266,14 @@ def test_slips_json_is_valid_and_counts_from_loading(runs):
     assert (e["onset_time"], e["end_time"], e["peak_time"]) == pytest.approx((5.0, 9.0, 7.0), abs=1e-9)
     assert e["checkpoint_time"] is None and e["deborah"] is None and e["subevent_time"] == pytest.approx([7.0])
     json.dumps(catalog, allow_nan=False)
+
+
+def test_export_fork_exports_each_branch(runs):
+    run = _fake_fork(runs)
+    result = gouge("export", run, "--fork", "slip_001")
+    assert result.exit_code == 0, result.output
+    written = [line.split(":")[0] for line in result.output.splitlines() if ".vtkhdf" in line]
+    assert len(written) == 2 and all(Path(p).is_file() for p in written)
+    one = gouge("export", run, "--fork", "slip_001/perm_1e-05", "--out", runs / "one.vtkhdf")
+    assert one.exit_code == 0 and (runs / "one.vtkhdf").is_file()
+    assert gouge("export", run, "--fork", "slip_001", "--out", runs / "two.vtkhdf").exit_code == EXIT_BAD_INPUT
