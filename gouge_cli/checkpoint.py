@@ -22,6 +22,7 @@ import yaml
 from . import __version__
 from . import provenance
 from .config import Config, ConfigError, build_config, dump_config
+from .filedoc import document_checkpoint
 
 
 class CheckpointError(ValueError):
@@ -83,6 +84,7 @@ def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
             h5.attrs["version"] = __version__
             h5.attrs["provenance"] = provenance.dumps(checkpoint.provenance or provenance.collect())
             h5.attrs["checksum"] = _digest(groups)
+            document_checkpoint(h5)
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
         os.replace(tmp, path)

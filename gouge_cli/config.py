@@ -30,6 +30,7 @@ def _quantity(dimension: str):
         scales = (info.context or {}).get("scales", Scales())
         return to_dimensionless(value, dimension, scales)
 
+    convert.dimension = dimension       # read by gouge_cli.config_doc (schema, commented defaults)
     return BeforeValidator(convert)
 
 
@@ -148,6 +149,10 @@ class OutputConfig(_Section):
     series_interval: Time = Field(10.0, gt=0, description="time-series cadence [t0]")
     snapshot_interval: Time = Field(1e4, gt=0, description="grain-snapshot cadence [t0]")
     checkpoint_interval: Time = Field(2e4, gt=0, description="cadence of checkpoints/latest.h5 for resume [t0]")
+    slip_frames: int = Field(
+        0, ge=0, le=10_000,
+        description="extra snapshots per predicted slip duration pi sqrt(m_b/k) while the top wall slips "
+                    "(v_w >= slips.end_factor V_s), for movies; 0 = none; forks use 30 unless set [-]")
 
 
 class SlipsConfig(_Section):
@@ -298,8 +303,10 @@ def find_config(name: str | Path) -> Path:
         for candidate in (root / f"{name}.yaml", root / "thesis" / f"{name}.yaml", root / f"{name}"):
             if candidate.is_file():
                 return candidate
-    raise ConfigError(f"config file {str(path)!r} does not exist (nor configs/{name}.yaml, "
-                      f"configs/thesis/{name}.yaml)")
+    shipped = [c for root in roots for c in root.rglob(f"{path.stem}.yaml")]
+    hint = f"; did you mean {shipped[0]} (or the scene name {path.stem!r})?" if shipped else \
+        f"; scene names are looked up in {' and '.join(str(r) for r in dict.fromkeys(roots))} (and thesis/)"
+    raise ConfigError(f"config file {str(path)!r} does not exist in {Path.cwd()}{hint}")
 
 
 def load_config(path: str | Path, overrides: list[str] | dict | None = None) -> Config:

@@ -22,6 +22,7 @@ import numpy as np
 from .checkpoint import Checkpoint, snapshot_of, write_checkpoint
 from .config import Config
 from .detector import Slip, SlipDetector
+from .filedoc import document_slip
 from .kernels.step import W_VX
 
 
@@ -141,4 +142,5 @@ class SlipRecorder:
                 group.attrs[key] = value
             group.create_dataset("subevent_time", data=np.array([s["time"] for s in subevents], float))
             group.create_dataset("subevent_velocity", data=np.array([s["velocity"] for s in subevents], float))
+            document_slip(group)
             self.run_file.h5.flush()

@@ -23,6 +23,7 @@ from . import provenance
 from .checkpoint import read_checkpoint
 from .config import Config, ConfigError, build_config
 from .events import lead_time
+from .filedoc import json_safe
 from .output import RunFile
 from .runner import RunDirError, check_run_dir, load_phase
 from .simulation import Simulation
@@ -47,8 +48,13 @@ def branch_name(perm: float | None) -> str:
     return "drained" if perm is None else f"perm_{perm:g}"
 
 
-def branch_config(base: Config, perm: float | None) -> Config:
+FORK_SLIP_FRAMES = 30     # snapshots per predicted slip duration while a fork slips (output.slip_frames)
+
+
+def branch_config(base: Config, perm: float | None, overrides: dict | None = None) -> Config:
     data = base.to_dict()
+    for section, values in (overrides or {}).items():
+        data[section] = dict(data[section], **values)
     if perm is None:
         data["fluid"] = None
     else:
@@ -92,7 +98,9 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         target = fork_dir / branch_name(perm) / "run.h5"
         if target.exists() and not force:
             raise RunDirError(f"{target} exists; pass --force to run this fork again")
-    configs = {branch_name(p): branch_config(ck.config, p) for p in branches}
+    frames = {} if any(o.split("=")[0].strip() == "output.slip_frames" for o in overrides or []) \
+        else {"output": {"slip_frames": ck.config.output.slip_frames or FORK_SLIP_FRAMES}}
+    configs = {branch_name(p): branch_config(ck.config, p, frames) for p in branches}
     stop_after_slip = duration is None
     if duration is None:
         span = float(entry["end_time"]) - ck.time
@@ -119,7 +127,7 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         results.append(BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first))
     summary = pair_summary(run_dir, slip, ck.time, results)
     summary["library_differences_from_parent"] = risks
-    (fork_dir / "pair.json").write_text(json.dumps(summary, indent=2, default=str))
+    (fork_dir / "pair.json").write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False))
     return summary
 
 

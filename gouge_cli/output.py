@@ -8,8 +8,11 @@ Layout of ``run.h5``::
                  final_state_hash (16 hex digits of the state when the run stopped)
     /series/<q>  (T,) float64, resizable; attrs unit, description
     /snapshots/<step>/{x,z,radius,vx,vz,spin,body, contact_i, contact_j, contact_fx, contact_fz}
-                 attrs time, step; optional pressure/porosity fields when the scene has fluid;
-                 grains in their original (packing) order, contact_i/j in those numbers
+                 attrs time, load_time, step; optional pressure/porosity [nx, nz] fields when the
+                 scene has fluid (attrs origin, spacing, axis_order); grains in their original
+                 (packing) order, contact_i/j in those numbers
+    Every dataset has unit and description attributes; attribute_units (JSON) documents the
+    attributes of each group (gouge_cli.filedoc).
 
 Rows are buffered and flushed every ``flush_rows`` rows or on close, so a crash loses at
 most the rows since the last flush and never corrupts earlier ones.
@@ -26,12 +29,14 @@ import numpy as np
 
 from . import __version__, provenance
 from .config import Config, dump_config
+from .filedoc import SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, document_run_file, grid_geometry
 from .kernels import measure as M
 from .kernels import step as K
 
 # name -> (unit, description); units are the dimensionless scales of physics.md section 1
 SERIES = {
-    "time": ("t0", "simulated time since the start of compaction"),
+    "time": ("t0", "simulated clock since the start of compaction (commands and figures report "
+                   "time - (time[0] - load_time[0]): since loading began)"),
     "load_time": ("t0", "time since the driver started"),
     "wall_x": ("d", "top-wall displacement along the fault since the driver started"),
     "wall_z": ("d", "top-wall position across the layer (mean z of its grains)"),
@@ -125,8 +130,11 @@ class RunFile:
 
     def snapshot(self, sim):
         s = sim.state
+        if f"{s.step:012d}" in self.h5["snapshots"]:      # a dense (slip) and a regular snapshot coincide
+            return
         grp = self.h5["snapshots"].create_group(f"{s.step:012d}")
         grp.attrs["time"] = s.time
+        grp.attrs["load_time"] = float(s.clock[K.C_DRIVE_TIME])
         grp.attrs["step"] = s.step
         for name in ("x", "z", "radius", "vx", "vz", "spin", "body"):     # in original grain order
             grp.create_dataset(name, data=s.by_id(getattr(s, name)), compression="gzip", compression_opts=1)
@@ -142,10 +150,14 @@ class RunFile:
         cj[:m] = s.id[cj[:m]]
         for name, arr in (("contact_i", ci), ("contact_j", cj), ("contact_fx", cfx), ("contact_fz", cfz)):
             grp.create_dataset(name, data=arr[:m], compression="gzip", compression_opts=1)
-        grp["contact_fx"].attrs["description"] = "elastic contact force on grain j by grain i [E d^2] (no dashpot part)"
         if sim.fluid is not None:
-            for name, arr in sim.fluid.snapshot_fields().items():
-                grp.create_dataset(name, data=arr)
+            f = sim.fluid
+            geometry = grid_geometry(f.state[f.kernels.S_Z_BOT], f.dx, f.dz)
+            for name, arr in f.snapshot_fields().items():
+                grp.create_dataset(name, data=arr).attrs.update(geometry)
+        for name, ds in grp.items():
+            describe(ds, *SNAPSHOT[name])
+        describe_attributes(grp, SNAPSHOT_ATTRS)
         self.h5.flush()
 
     def set_attr(self, key: str, value):
@@ -162,6 +174,7 @@ class RunFile:
                     self.h5.attrs["deborah_mean"] = float(np.nanmean(deborah))
                     self.h5.attrs["deborah_max"] = float(np.nanmax(deborah))
             self.h5.attrs["status"] = status
+            document_run_file(self.h5)
             self.h5.close()
 
 

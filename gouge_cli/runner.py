@@ -3,6 +3,7 @@ outputs, slip checkpoints, periodic checkpoints and clean stops."""
 
 from __future__ import annotations
 
+import math
 import shutil
 import sys
 import time
@@ -16,6 +17,7 @@ from .checkpoint import CheckpointError, read_checkpoint, snapshot_of, write_che
 from .config import Config, dump_config
 from .events import SlipRecorder
 from .guards import guard_callbacks
+from .kernels.step import W_VX
 from .output import RunFile
 from .progress import ProgressReport
 from .simulation import Every, PhysicsError, Simulation
@@ -94,7 +96,7 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
             writer.flush()
             write_checkpoint(ck_dir / "latest.h5", snapshot_of(s, {"slip_recorder": recorder.state_dict()}))
 
-    callbacks = guard_callbacks(sim) + [
+    callbacks = guard_callbacks(sim) + slip_frame_callbacks(sim, writer, recorder) + [
                  Every(sim.steps_for(config.output.series_interval), record),
                  Every(sim.steps_for(config.output.snapshot_interval), writer.snapshot),
                  Every(recorder.ring_every, recorder.keep),
@@ -114,6 +116,22 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
         if progress:
             progress.close()
     return status, recorder
+
+
+def slip_frame_callbacks(sim: Simulation, writer: RunFile, recorder: SlipRecorder) -> list[Every]:
+    """Dense snapshots while the top wall slips: output.slip_frames per predicted slip duration
+    pi sqrt(m_b/k) (thesis Eq. 3), written whenever v_w >= slips.end_factor V_s; none if 0."""
+    frames = sim.config.output.slip_frames
+    if not frames or sim.wall_mass_per_length <= 0:
+        return []
+    period = math.pi * math.sqrt(sim.wall_mass_per_length / sim.config.loading.spring_constant)
+    writer.set_attr("snapshot_dense_interval", period / frames)
+
+    def dense(s: Simulation):
+        if s.state.wall[W_VX] >= recorder.lo:
+            writer.snapshot(s)
+
+    return [Every(sim.steps_for(period / frames), dense)]
 
 
 def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | None = None,

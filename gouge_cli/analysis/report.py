@@ -33,6 +33,7 @@ import yaml
 
 from .. import __version__
 from ..detector import WallSeries, detect_slips
+from ..filedoc import document_analysis, json_safe
 from .blockslider import BlockSliderFit, fit_block_slider
 from .friction import dynamic_friction, estimate_natural_frequency, mean_dynamic_friction
 from .pairs import PairResult, campaign_summary, classify_pair
@@ -255,6 +256,8 @@ class RunReader:
         out = {key: grp[key][...] for key in grp.keys()}
         out["time"] = float(grp.attrs["time"])
         out["step"] = int(grp.attrs["step"])
+        if "pressure" in grp and "origin" in grp["pressure"].attrs:
+            out["grid"] = {k: np.asarray(grp["pressure"].attrs[k], float) for k in ("origin", "spacing")}
         return out
 
 
@@ -266,7 +269,7 @@ def open_run(path: Path | str, allow_running: bool = False) -> RunReader:
 # --------------------------------------------------------------------------- catalog
 
 CATALOG_COLUMNS = (
-    "number", "onset_time", "end_time", "duration", "slip", "static_strength", "stress_drop",
+    "number", "onset_time", "onset_since_loading", "end_time", "duration", "slip", "static_strength", "stress_drop",
     "peak_velocity", "mean_velocity", "peak_velocity_over_Vs", "mean_velocity_over_Vs",
     "recurrence", "porosity_change", "n_subevents", "deborah", "pressure_min", "pressure_max",
     "checkpoint",
@@ -374,6 +377,8 @@ def _nan_ext(a, fn) -> float:
 def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[dict]:
     """One row per slip with :data:`CATALOG_COLUMNS`.
 
+    onset_time: the stored clock (since compaction began); onset_since_loading: the same
+    onset in t0 since loading began (the time origin of every command and figure);
     static_strength: tau/sigma before the onset; stress_drop: drop of tau/sigma;
     velocities [v0] and over V_s; recurrence: onset minus the previous onset [t0]
     (NaN for the first); deborah: mean of the Deborah-number series over the slip
@@ -386,6 +391,7 @@ def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[
     fluid_names = ("deborah", "pressure_min", "pressure_max")
     has_fluid_series = any(reader.has(n) for n in fluid_names)
     rows, previous = [], None
+    origin = reader.time_offset()
     for entry in catalog:
         onset = float(entry["onset_time"])
         deborah = p_min = p_max = _NAN
@@ -399,6 +405,7 @@ def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[
         rows.append({
             "number": int(entry["number"]),
             "onset_time": onset,
+            "onset_since_loading": onset - origin,
             "end_time": float(entry["end_time"]),
             "duration": float(entry["duration"]),
             "slip": float(entry["slip"]),
@@ -792,7 +799,8 @@ def write_analysis(analysis: RunAnalysis, out_dir: Path | None = None, into_h5: 
     elif pairs_csv.exists():
         pairs_csv.unlink()
     summary = {k: v for k, v in analysis.to_dict().items() if k not in ("catalog", "fits", "pairs")}
-    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    (out_dir / "summary.json").write_text(json.dumps(json_safe(summary), indent=2, default=_json_default,
+                                                     allow_nan=False))
     written["summary"] = out_dir / "summary.json"
     if into_h5:
         try:
@@ -803,11 +811,12 @@ def write_analysis(analysis: RunAnalysis, out_dir: Path | None = None, into_h5: 
                 grp.attrs["created"] = _time.strftime("%Y-%m-%dT%H:%M:%S%z")
                 grp.attrs["version"] = __version__
                 grp.attrs["notch"] = bool(analysis.notch)
-                grp.attrs["summary"] = json.dumps(summary, default=_json_default)
+                grp.attrs["summary"] = json.dumps(json_safe(summary), default=_json_default, allow_nan=False)
                 _table_to_group(grp.create_group("catalog"), analysis.catalog, CATALOG_COLUMNS)
                 _table_to_group(grp.create_group("fits"), analysis.fits, FIT_COLUMNS)
                 if analysis.pairs:
                     _table_to_group(grp.create_group("pairs"), analysis.pair_rows, PAIR_COLUMNS)
+                document_analysis(grp)
         except OSError as exc:
             raise AnalysisError(f"cannot write /analysis into {info.h5_path}: {exc}") from exc
         written["h5"] = info.h5_path

@@ -26,17 +26,9 @@ def _fmt(value, digits: int = 4) -> str:
 
 def _clean(obj):
     """JSON-safe copy: NaN/inf become null, paths and numpy scalars plain values."""
-    if isinstance(obj, dict):
-        return {str(k): _clean(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_clean(v) for v in obj]
-    if isinstance(obj, Path):
-        return str(obj)
-    if hasattr(obj, "item") and not isinstance(obj, (str, bytes)):
-        obj = obj.item()
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
+    from ..filedoc import json_safe
+
+    return json_safe(obj)
 
 
 def _table(title: str, columns: list[tuple[str, str]], rows: list[dict]):
@@ -50,7 +42,7 @@ def _table(title: str, columns: list[tuple[str, str]], rows: list[dict]):
     return table
 
 
-_CATALOG = [("number", "#"), ("onset_time", "onset t/t0"), ("duration", "duration/t0"),
+_CATALOG = [("number", "#"), ("onset_since_loading", "onset t/t0 (since loading)"), ("duration", "duration/t0"),
             ("static_strength", "τs/σ"), ("stress_drop", "Δτ/σ"), ("peak_velocity_over_Vs", "vpeak/Vs"),
             ("mean_velocity_over_Vs", "vmean/Vs"), ("slip", "slip/d"), ("recurrence", "recurrence/t0"),
             ("n_subevents", "sub"), ("deborah", "De")]

@@ -14,11 +14,26 @@ from ..config import ConfigError, build_config, dump_config, load_config
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_INTERRUPTED = 0, 2, 3, 130
 
-app = typer.Typer(add_completion=False, no_args_is_help=True,
+app = typer.Typer(add_completion=False, no_args_is_help=True, context_settings={"help_option_names": ["-h", "--help"]},
+                  rich_markup_mode=None,   # help texts hold units in brackets, e.g. [d^2]: no markup
                   help="gouge: grain-scale stick-slip simulations of (water-saturated) fault gouge.")
 _WIDE = None if sys.stdout.isatty() else 200
 err = Console(stderr=True, soft_wrap=True, width=_WIDE)
 out = Console(soft_wrap=True, width=_WIDE)
+
+
+def _version(value: bool):
+    if value:
+        from .. import __version__
+
+        print(f"gouge {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="print the version and exit")):
+    """gouge: grain-scale stick-slip simulations of (water-saturated) fault gouge."""
 
 
 def fail(message: str, code: int = EXIT_BAD_INPUT):
@@ -76,12 +91,13 @@ def restart(
     until_slip_ends: bool = typer.Option(True, "--until-slip-ends/--full",
                                          help="stop each branch when its first slip ends (default)"),
     force: bool = typer.Option(False, "--force", help="run an existing fork again"),
-    quiet: bool = typer.Option(False, "--quiet"),
+    quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
 ):
     """Fork drained and undrained branches from the packing kept just before slip N."""
     import json
 
     from ..checkpoint import CheckpointError
+    from ..filedoc import json_safe
     from ..forks import run_fork
     from ..runner import RunDirError
     from ..simulation import PhysicsError
@@ -97,13 +113,13 @@ def restart(
         fail(str(e))
     except PhysicsError as e:
         fail(f"physics failure: {e}", EXIT_PHYSICS)
-    out.print(json.dumps(summary, indent=2, default=str), highlight=False)
+    out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
 
 
 @app.command()
 def resume(
     run_dir: Optional[Path] = typer.Argument(None, help="run directory (default: the latest under runs/)"),
-    quiet: bool = typer.Option(False, "--quiet"),
+    quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
 ):
     """Continue an interrupted run (Ctrl-C, kill -9, power loss) from its latest checkpoint."""
     from ..checkpoint import CheckpointError
@@ -135,20 +151,24 @@ def slips(
     from ..forks import slip_catalog
     from ..runner import RunDirError
 
+    from .export_cmds import catalog_since_loading
+
     try:
-        catalog = slip_catalog(_run_dir(run_dir))
+        catalog, origin = catalog_since_loading(_run_dir(run_dir), slip_catalog)
     except RunDirError as e:
         fail(str(e))
     if as_json:
-        print(json.dumps(catalog, default=str))
+        print(json.dumps(catalog, allow_nan=False))
         return
-    table = Table(title="slips")
-    cols = ("number", "onset_time", "duration", "static_strength", "stress_drop", "peak_velocity", "slip",
-            "checkpoint")
-    for c in cols:
-        table.add_column(c, justify="right")
+    table = Table(title=f"slips; times in t0 since loading began (stored clock - {origin:.6g} t0)")
+    cols = (("number", "#"), ("onset_time", "onset / t0"), ("duration", "duration / t0"),
+            ("static_strength", "static τ/σ"), ("stress_drop", "Δτ/σ"), ("peak_velocity", "peak v / v0"),
+            ("slip", "slip / d"), ("checkpoint", "checkpoint"))
+    for _, header in cols:
+        table.add_column(header, justify="right")
     for e in catalog:
-        table.add_row(*[f"{e[c]:.5g}" if isinstance(e[c], float) else str(e[c]) for c in cols])
+        table.add_row(*["–" if e[c] is None else f"{e[c]:.5g}" if isinstance(e[c], float) else str(e[c])
+                        for c, _ in cols])
     out.print(table)
 
 
@@ -156,11 +176,19 @@ def slips(
 def show_config(
     config: Optional[Path] = typer.Argument(None, help="YAML config to validate and print resolved"),
     set_: List[str] = typer.Option([], "--set", help="override key=value"),
-    defaults: bool = typer.Option(False, "--defaults", help="print the default config"),
+    defaults: bool = typer.Option(False, "--defaults", help="print every key with its default, unit, range and "
+                                  "meaning (commented YAML)"),
+    schema: Optional[Path] = typer.Option(None, "--schema", help="write the JSON Schema of a config to this file "
+                                          "('-' for stdout), for editors"),
 ):
     """Validate a config and print it fully resolved (dimensionless), or print the defaults."""
     from ..timestep import choose_dt, stability_bound
 
+    if schema is not None or (defaults and config is None and not set_):
+        from .export_cmds import print_config_doc
+
+        print_config_doc(schema)
+        return
     try:
         cfg = build_config({}, set_) if (defaults or config is None) else load_config(config, set_)
         bound = stability_bound(cfg)
@@ -185,7 +213,7 @@ def bench(
     lammps_max: int = typer.Option(40000, help="largest N timed in LAMMPS (its set-up of 160,000 grains "
                                    "takes about 20 minutes)"),
     perm: float = typer.Option(1e-5, "--perm", help="also time the undrained 10,000-grain scene (implicit "
-                               "fluid, this kappa_c) and report the fluid share of a step; 0 to skip"),
+                               "fluid, this kappa_c [d^2]) and report the fluid share of a step; 0 to skip"),
     profile: bool = typer.Option(True, help="time each part of a step"),
     cache: Path = typer.Option(Path("runs/bench/cache"), help="folder for pre-sheared states ('' for none)"),
     json_out: Path = typer.Option(Path("runs/bench/bench.json"), "--json", help="where to write the JSON results"),
@@ -271,6 +299,8 @@ from .analysis_cmds import register as _register_analysis
 _register_analysis(app)
 from .accuracy_cmds import register as _register_accuracy
 _register_accuracy(app)
+from .export_cmds import register as _register_export
+_register_export(app)
 
 
 def main():

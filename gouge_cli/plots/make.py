@@ -99,7 +99,8 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
                             snap = u.snapshot(name)
                             written.append(snapshot_figure(
                                 snap, u.info.width, out / f"{tag}_snapshot_{branch}.png",
-                                title=f"slip {slip}, {branch}", sigma=u.info.sigma,
+                                title=f"slip {slip}, {branch} ({snap['time'] - t_peak:+.4g} t₀ from peak velocity)",
+                                sigma=u.info.sigma,
                                 time_offset=u.time_offset()))
     if len(pairs) >= 2:
         written.append(campaign_figure(pairs, out / "campaign.png", title=run_dir.name))

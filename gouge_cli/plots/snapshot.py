@@ -60,6 +60,66 @@ def _wall_planes(snap: dict) -> tuple[float, float]:
     return zb, zt
 
 
+def pressure_grid(snap: dict, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Cell edges (xe (nx+1,), ze (nz+1,)) of the snapshot's pressure grid [d]: from the stored
+    origin/spacing (``snap['grid']``, see :meth:`RunReader.snapshot`), else the wall planes."""
+    nx, nz = np.shape(snap["pressure"])
+    grid = snap.get("grid")
+    if grid is not None:
+        (x0, z0), (dx, dz) = grid["origin"], grid["spacing"]
+        return x0 + dx * np.arange(nx + 1), z0 + dz * np.arange(nz + 1)
+    zb, zt = _wall_planes(snap)
+    return np.linspace(0.0, width, nx + 1), np.linspace(zb, zt, nz + 1)
+
+
+def draw_pressure(ax, snap: dict, width: float, scale: float, vmax: float):
+    """Pore pressure P/scale as a cell mesh with a symmetric colour scale [-vmax, vmax]; returns it."""
+    xe, ze = pressure_grid(snap, width)
+    p = np.asarray(snap["pressure"], float) / scale
+    return ax.pcolormesh(xe, ze, p.T, cmap="RdBu_r", norm=TwoSlopeNorm(0.0, -vmax, vmax), shading="flat", zorder=0)
+
+
+def draw_discs(ax, snap: dict, width: float, free_alpha: float = 1.0):
+    """Grains as discs (wall grains coloured), with periodic images of those touching a side."""
+    x, z, r, body = np.mod(snap["x"], width), snap["z"], snap["radius"], snap["body"].astype(int)
+    near_left = x < r
+    near_right = x > width - r
+    xs = np.concatenate([x, x[near_left] + width, x[near_right] - width])
+    zs = np.concatenate([z, z[near_left], z[near_right]])
+    rs = np.concatenate([r, r[near_left], r[near_right]])
+    bs = np.concatenate([body, body[near_left], body[near_right]])
+    face = np.empty((bs.size, 4))
+    face[:] = plt.matplotlib.colors.to_rgba(FREE_FACE, free_alpha)
+    face[bs == 1] = plt.matplotlib.colors.to_rgba(BOTTOM_WALL)
+    face[bs == 2] = plt.matplotlib.colors.to_rgba(TOP_WALL)
+    discs = EllipseCollection(2 * rs, 2 * rs, np.zeros_like(rs), units="xy", offsets=np.column_stack([xs, zs]),
+                              offset_transform=ax.transData, facecolors=face,
+                              edgecolors=FREE_EDGE, linewidths=0.3, zorder=2)
+    ax.add_collection(discs)
+
+
+def chain_segments(snap: dict, width: float) -> tuple[np.ndarray, np.ndarray]:
+    """Force-chain segments (m', 2, 2) between contacting centres and their force magnitudes
+    (m',) [E d^2]; a contact across the periodic side is drawn as its two wrapped halves."""
+    ci, cj = snap.get("contact_i"), snap.get("contact_j")
+    if ci is None or np.size(ci) == 0:
+        return np.zeros((0, 2, 2)), np.zeros(0)
+    x, z = np.mod(snap["x"], width), snap["z"]
+    f = np.hypot(snap["contact_fx"], snap["contact_fz"])
+    xi, zi, xj, zj = x[ci], z[ci], x[cj], z[cj]
+    dx = xj - xi
+    shift = -width * np.round(dx / width)
+    wrapped = shift != 0
+    seg = [np.stack([np.column_stack([xi, zi]), np.column_stack([xi + dx + shift, zj])], axis=1)]
+    weights = [f]
+    if np.any(wrapped):   # the other half of a contact across the periodic side
+        w = wrapped
+        seg.append(np.stack([np.column_stack([xj[w], zj[w]]),
+                             np.column_stack([xj[w] - dx[w] - shift[w], zi[w]])], axis=1))
+        weights.append(f[w])
+    return np.concatenate(seg), np.concatenate(weights)
+
+
 def snapshot_figure(snap: dict, width: float, path: Path, title: str = "", sigma: float | None = None,
                     time_offset: float = 0.0) -> Path:
     """Draw one snapshot (dict of arrays from :meth:`RunReader.snapshot`) to ``path``.
@@ -67,8 +127,7 @@ def snapshot_figure(snap: dict, width: float, path: Path, title: str = "", sigma
     ``sigma`` scales the pressure to P/sigma (else P in E). Returns the path; the pixel size
     is ``snapshot_figsize(...) * DPI``.
     """
-    x, z, r, body = snap["x"], snap["z"], snap["radius"], snap["body"].astype(int)
-    x = np.mod(x, width)
+    x, r = snap["x"], snap["radius"]
     z_min, z_max = _extent(snap, width)
     pressure = snap.get("pressure")
     has_p = pressure is not None and np.size(pressure) > 0
@@ -85,59 +144,24 @@ def snapshot_figure(snap: dict, width: float, path: Path, title: str = "", sigma
 
     # pressure field underneath
     if has_p:
-        p = np.asarray(pressure, float)
         scale = sigma if sigma else 1.0
-        p = p / scale
-        nx, nz = p.shape
-        zb, zt = _wall_planes(snap)
-        xe = np.linspace(0.0, width, nx + 1)
-        ze = np.linspace(zb, zt, nz + 1)
-        vmax = float(np.nanmax(np.abs(p))) or 1e-12
-        mesh = ax.pcolormesh(xe, ze, p.T, cmap="RdBu_r", norm=TwoSlopeNorm(0.0, -vmax, vmax),
-                             shading="flat", zorder=0)
+        vmax = float(np.nanmax(np.abs(np.asarray(pressure, float) / scale))) or 1e-12
+        mesh = draw_pressure(ax, snap, width, scale, vmax)
         cax = fig.add_axes([1 - right + 0.25 / w_in, bottom, 0.22 / w_in, 1 - bottom - top])
         cb = fig.colorbar(mesh, cax=cax)
         cb.set_label(LABEL["pressure"] if sigma else "P / E", fontsize=9)
         cb.ax.tick_params(labelsize=8)
-        ax.axhline(zb, color="0.3", lw=0.5, ls="--", zorder=1)
-        ax.axhline(zt, color="0.3", lw=0.5, ls="--", zorder=1)
+        _, ze = pressure_grid(snap, width)
+        for zp in (ze[0], ze[-1]):
+            ax.axhline(zp, color="0.3", lw=0.5, ls="--", zorder=1)
 
-    # discs, with periodic images of those touching a side
-    near_left = x < r
-    near_right = x > width - r
-    xs = np.concatenate([x, x[near_left] + width, x[near_right] - width])
-    zs = np.concatenate([z, z[near_left], z[near_right]])
-    rs = np.concatenate([r, r[near_left], r[near_right]])
-    bs = np.concatenate([body, body[near_left], body[near_right]])
-    face = np.empty((bs.size, 4))
-    free_rgba = plt.matplotlib.colors.to_rgba(FREE_FACE, 0.25 if has_p else 1.0)
-    face[:] = free_rgba
-    face[bs == 1] = plt.matplotlib.colors.to_rgba(BOTTOM_WALL)
-    face[bs == 2] = plt.matplotlib.colors.to_rgba(TOP_WALL)
-    discs = EllipseCollection(2 * rs, 2 * rs, np.zeros_like(rs), units="xy", offsets=np.column_stack([xs, zs]),
-                              offset_transform=ax.transData, facecolors=face,
-                              edgecolors=FREE_EDGE, linewidths=0.3, zorder=2)
-    ax.add_collection(discs)
+    draw_discs(ax, snap, width, 0.25 if has_p else 1.0)
 
     # force chains
-    ci, cj = snap.get("contact_i"), snap.get("contact_j")
-    n_contacts = 0 if ci is None else int(np.size(ci))
+    segments, force = chain_segments(snap, width)
+    n_contacts = 0 if snap.get("contact_i") is None else int(np.size(snap["contact_i"]))
     if n_contacts:
-        f = np.hypot(snap["contact_fx"], snap["contact_fz"])
-        fmax = float(f.max()) or 1.0
-        xi, zi, xj, zj = x[ci], z[ci], x[cj], z[cj]
-        dx = xj - xi
-        shift = -width * np.round(dx / width)
-        wrapped = shift != 0
-        seg = [np.stack([np.column_stack([xi, zi]), np.column_stack([xi + dx + shift, zj])], axis=1)]
-        weights = [f]
-        if np.any(wrapped):   # the other half of a contact across the periodic side
-            w = wrapped
-            seg.append(np.stack([np.column_stack([xj[w], zj[w]]),
-                                 np.column_stack([xj[w] - dx[w] - shift[w], zi[w]])], axis=1))
-            weights.append(f[w])
-        segments = np.concatenate(seg)
-        force = np.concatenate(weights)
+        fmax = float(force.max()) or 1.0
         # widest line about 0.6 grain diameter at the figure scale, at most 4 pt
         box_w, box_h = (1 - left - right) * w_in, (1 - bottom - top) * h_in
         pt_per_d = 72.0 * min(box_w / width, box_h / (z_max - z_min))
@@ -173,4 +197,5 @@ def snapshot_pixels(width: float, snap: dict) -> tuple[int, int]:
     return int(round(w * DPI)), int(round(h * DPI))
 
 
-__all__ = ["snapshot_figure", "snapshot_figsize", "snapshot_pixels"]
+__all__ = ["chain_segments", "draw_discs", "draw_pressure", "pressure_grid", "snapshot_figure", "snapshot_figsize",
+           "snapshot_pixels"]

@@ -59,6 +59,11 @@ def test_analyze_writes_tables(forked_run):
     with h5py.File(forked_run / "run.h5", "r") as h5:
         n_slips = len(h5["slips"])
         assert h5["analysis/catalog/number"].shape == (n_slips,)
+        assert h5["analysis/catalog/onset_since_loading"].attrs["unit"] == "t0"
+        undescribed = []
+        h5.visititems(lambda name, obj: undescribed.append(name)
+                      if isinstance(obj, h5py.Dataset) and "unit" not in obj.attrs else None)
+        assert not undescribed, undescribed[:5]                  # every dataset has its unit, /analysis too
     assert n_slips >= 2
     header, rows = _rows(forked_run / "analysis" / "catalog.csv")
     assert header == list(CATALOG_COLUMNS) and len(rows) == n_slips

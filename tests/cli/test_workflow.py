@@ -115,6 +115,14 @@ def test_drained_fork_retraces_the_original(finished_run):
         assert np.array_equal(original[name][idx], fork[name][1:]), name
     entry = next(e for e in slip_catalog(finished_run) if e["number"] == 2)
     assert drained["first_slip"]["onset_time"] == entry["onset_time"]
+    # the fork wrote dense snapshots while its wall slipped (output.slip_frames, 30 by default)
+    with h5py.File(finished_run / "forks" / "slip_002" / "drained" / "run.h5", "r") as h5:
+        interval, dt = h5.attrs["snapshot_dense_interval"], h5.attrs["dt"]
+        lo = yaml.safe_load(h5.attrs["config"])["slips"]["end_factor"] * SCENE["loading"]["velocity"]
+        snaps = [h5["snapshots"][n] for n in sorted(h5["snapshots"])]
+        sliding = [g for g in snaps if g["vx"][g["body"][...] == 2].mean() >= lo]
+        gaps = np.diff([g.attrs["time"] for g in sliding])
+        assert len(sliding) >= 3 and gaps.min() >= interval - dt
     again = gouge("restart", finished_run, "--slip", 2, "--perm", "1e-5")
     assert again.exit_code == EXIT_BAD_INPUT and "--force" in again.output
 
