@@ -266,6 +266,8 @@ from .analysis_cmds import register as _register_analysis
 _register_analysis(app)
 from .accuracy_cmds import register as _register_accuracy
 _register_accuracy(app)
+from .campaign_cmds import register as _register_campaign
+_register_campaign(app)
 
 
 def main():
