@@ -34,8 +34,7 @@ def phase_diagram_figure(cells: list[dict], x: str, y: str | None, path: Path, t
         grid = np.full((len(ys), len(xs)), np.nan)
         for c in cells:
             grid[ys.index(c["y"]), xs.index(c["x"])] = c[key]
-        cmap = plt.get_cmap("viridis").copy()
-        cmap.set_bad("0.85")
+        cmap = plt.get_cmap("viridis").with_extremes(bad="0.85")
         image = ax.imshow(np.ma.masked_invalid(grid), origin="lower", cmap=cmap, vmin=0, vmax=1, aspect="auto")
         for c in cells:
             i, j = ys.index(c["y"]), xs.index(c["x"])

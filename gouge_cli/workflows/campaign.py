@@ -375,7 +375,8 @@ def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = Fa
     for c in conflicts:
         _wipe(s, c)
     s.root.mkdir(parents=True, exist_ok=True)
-    shutil.copyfile(spec_path, s.root / "campaign.yaml")
+    if not (s.root / "campaign.yaml").is_file() or (s.root / "campaign.yaml").read_bytes() != spec_path.read_bytes():
+        shutil.copyfile(spec_path, s.root / "campaign.yaml")
     for point in s.points:
         if not (s.point_dir(point.name) / "point.yaml").is_file() or any(
                 c.piece.point == point.name and c.piece.kind == "run" for c in conflicts):

@@ -89,7 +89,8 @@ def slurm_cluster(opts: ClusterOptions):
     env = worker_env(opts.threads_per_task)
     kwargs = dict(cores=processes * opts.tasks_per_worker, processes=processes, memory=opts.slurm_memory,
                   walltime=opts.slurm_walltime, queue=opts.slurm_queue, account=opts.slurm_account,
-                  job_cpu=opts.slurm_cores, job_extra_directives=list(opts.slurm_extra),
+                  job_cpu=opts.slurm_cores, job_mem=opts.slurm_memory.upper().removesuffix("B"),
+                  job_extra_directives=list(opts.slurm_extra),
                   job_script_prologue=[f"export {k}={v}" for k, v in env.items()],
                   worker_extra_args=["--lifetime", _lifetime(opts.slurm_walltime), "--lifetime-stagger", "2m"])
     return SLURMCluster(**kwargs)
