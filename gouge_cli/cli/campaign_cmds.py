@@ -1,7 +1,8 @@
 """`gouge campaign`: thin wrapper over gouge_cli.workflows.campaign (registered from cli/main.py).
 
 Exit codes: 0 every piece done, 2 bad spec / changed settings without --force / bad cluster
-option, 3 some piece failed (physics failure or a worker lost too often; see --status).
+option, 3 some piece failed (physics failure or a worker lost too often; see --status),
+130 interrupted (run it again to resume).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import typer
 
 
 def register(app: typer.Typer):
-    from .main import EXIT_BAD_INPUT, EXIT_PHYSICS, fail, out
+    from .main import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_PHYSICS, fail, out
 
     @app.command()
     def campaign(
@@ -55,6 +56,9 @@ def register(app: typer.Typer):
                                   log=lambda m: out.print(m, highlight=False))
         except (ConfigError, CampaignConflict, ExecutorError) as e:
             fail(str(e), EXIT_BAD_INPUT)
+        except KeyboardInterrupt:
+            out.print("interrupted: run the same command again to resume (finished pieces are kept)")
+            raise typer.Exit(EXIT_INTERRUPTED)
         for line in status_lines(report.survey):
             out.print(line, highlight=False)
         for name, path in report.outputs.items():
