@@ -106,6 +106,24 @@ def _lifetime(walltime: str) -> str:
     return f"{max(60, seconds - 300)}s"
 
 
+def _worker_threads() -> tuple[int, int]:
+    import numba
+
+    return numba.config.NUMBA_NUM_THREADS, machine_cores()
+
+
+def oversubscribed(client) -> list[str]:
+    """Workers of an existing cluster whose task threads x numba threads exceed their cores (start
+    them as ``NUMBA_NUM_THREADS=T dask worker ADDRESS --nthreads 1 --nworkers CORES/T``)."""
+    tasks = client.nthreads()
+    lines = []
+    for address, (numba_threads, cores) in client.run(_worker_threads).items():
+        if tasks.get(address, 1) * numba_threads > cores:
+            lines.append(f"worker {address} runs {tasks.get(address, 1)} tasks x {numba_threads} numba threads on "
+                         f"{cores} cores; start it with NUMBA_NUM_THREADS set (see `gouge campaign --help`)")
+    return lines
+
+
 @contextlib.contextmanager
 def open_client(opts: ClusterOptions):
     """A ``distributed.Client`` for ``opts``; the cluster it started is closed on exit."""
@@ -118,6 +136,8 @@ def open_client(opts: ClusterOptions):
         except OSError as exc:
             raise ExecutorError(f"--scheduler {opts.scheduler}: cannot connect ({exc})") from None
         with client:
+            for line in oversubscribed(client):
+                print(f"warning: {line}", flush=True)
             yield client
         return
     cluster = slurm_cluster(opts) if opts.slurm else local_cluster(opts)

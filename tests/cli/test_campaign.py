@@ -203,6 +203,13 @@ def test_table_and_phase_diagram(campaign):
     assert any(line.startswith("phase cell permeability=0.001") for line in campaign["log"])
 
 
+def test_local_workers_have_one_numba_thread_per_task(client):
+    from gouge_cli.workflows.executors import oversubscribed
+
+    assert set(client.run(lambda: os.environ["NUMBA_NUM_THREADS"]).values()) == {"1"}
+    assert oversubscribed(client) == []
+
+
 def test_rerun_does_nothing_and_status_says_done(campaign, client):
     root = campaign["root"]
     before = {p: p.stat().st_mtime_ns for p in root.rglob("*") if p.is_file()}
@@ -231,6 +238,7 @@ def test_changed_spec_adds_points_and_refuses_changed_settings(campaign, folder)
         bool(list(campaign["root"].glob("*/forks/slip_*")))
 
 
+@pytest.mark.filterwarnings("ignore:Port 8787")
 def test_slurm_job_script_has_the_requested_resources():
     opts = ClusterOptions(threads_per_task=2, slurm=True, slurm_cores=8, slurm_memory="16GB",
                           slurm_walltime="02:00:00", slurm_queue="short", slurm_account="geo").check()
