@@ -27,8 +27,9 @@ def register(app: typer.Typer):
                                              help="tasks at a time per worker process (they share its GIL)"),
         workers: Optional[int] = typer.Option(None, "--workers",
                                               help="local worker processes (default: cores // threads)"),
-        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="use an existing Dask scheduler, tcp://HOST:PORT"),
-        slurm: bool = typer.Option(False, "--slurm", help="start workers as SLURM jobs (pip install 'gouge[cluster]')"),
+        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="use an existing Dask scheduler, tcp://HOST:PORT (start its workers as "
+                                                       "NUMBA_NUM_THREADS=T dask worker ADDRESS --nthreads 1)"),
+        slurm: bool = typer.Option(False, "--slurm", help="start workers as SLURM jobs (needs dask-jobqueue: the 'cluster' extra of gouge)"),
         slurm_cores: int = typer.Option(16, "--slurm-cores", help="cores per SLURM job"),
         slurm_memory: str = typer.Option("32GB", "--slurm-memory", help="memory per SLURM job"),
         slurm_walltime: str = typer.Option("24:00:00", "--slurm-walltime", help="walltime per SLURM job"),

@@ -484,7 +484,8 @@ def write_results(s: Survey, log=print) -> dict:
         x, y = phase_axes(s.spec)
         cells = phase_cells(pair_rows, x, y)
         out["phase_csv"] = write_table(cells, [], s.root / "phase_diagram.csv", columns=list(PHASE_COLUMNS))
-        out["phase_diagram"] = phase_diagram_figure(cells, x, y, figs / "phase_diagram.png", s.spec.name)
+        if cells:
+            out["phase_diagram"] = phase_diagram_figure(cells, x, y, figs / "phase_diagram.png", s.spec.name)
         out["pair_histograms"] = pair_histograms(pairs_by_perm, figs)
         for c in cells:
             log(f"phase cell {x}={c['x']:g}" + (f", {y}={c['y']:g}" if y else "") +

@@ -120,7 +120,7 @@ def oversubscribed(client) -> list[str]:
     for address, (numba_threads, cores) in client.run(_worker_threads).items():
         if tasks.get(address, 1) * numba_threads > cores:
             lines.append(f"worker {address} runs {tasks.get(address, 1)} tasks x {numba_threads} numba threads on "
-                         f"{cores} cores; start it with NUMBA_NUM_THREADS set (see `gouge campaign --help`)")
+                         f"{cores} cores; start it as NUMBA_NUM_THREADS=T dask worker ADDRESS --nthreads 1 --nworkers CORES/T")
     return lines
 
 

@@ -251,3 +251,16 @@ def test_slurm_job_script_has_the_requested_resources():
                  "#SBATCH -A geo", "export NUMBA_NUM_THREADS=2"):
         assert line in script, line
     assert "--nworkers 4" in script and "--nthreads 1" in script and "--lifetime 6900s" in script
+
+
+def test_existing_scheduler_runs_a_campaign(campaign, client, folder):
+    spec = folder / "short.yaml"
+    spec.write_text(yaml.safe_dump({"name": "short", "base": "tiny.yaml", "set": {"run.duration": 3000},
+                                    "sweep": {"points": [{"loading.normal_stress": 3.0e-4}]}}))
+    result = gouge("campaign", spec, "--scheduler", client.scheduler.address)
+    assert result.exit_code == 0, result.output
+    assert "1 points, 1 pieces known: 1 done" in result.output
+    run_dir = next((folder / "campaigns" / "short").glob("*/run.h5")).parent
+    with h5py.File(run_dir / "run.h5", "r") as h5:
+        assert h5.attrs["status"] == "finished"
+    assert read_ledger(run_dir / "ledger" / "run.json")["pid"] in client.run(os.getpid).values()
