@@ -70,8 +70,8 @@ def _axis_value(row: dict, key: str | None):
 def phase_cells(pair_rows: list[dict], x: str, y: str | None) -> list[dict]:
     """Fractions of complex (-C) and of Type II pairs per (x, y) cell (thesis future work A).
 
-    n_pairs counts the classified pairs (a slip in both branches); n_unclassified the pairs where
-    a branch did not slip in its window. Fractions are over n_pairs (NaN when 0)."""
+    n_pairs counts the classified pairs (a slip in both branches; ties included); n_unclassified
+    the pairs where a branch did not slip in its window. Fractions are over n_pairs (NaN when 0)."""
     xs = sorted({_axis_value(r, x) for r in pair_rows})
     ys = sorted({_axis_value(r, y) for r in pair_rows}) if y else [None]
     cells = []
