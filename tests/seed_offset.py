@@ -1,8 +1,8 @@
 """``GOUGE_TEST_SEED_OFFSET=N``: every packing the suite builds uses seed + N.
 
 Applied through one wrapper of ``build_packing`` (scene dicts, shipped configs and defaults
-alike): in the test process by conftest, and in the gouge processes that tests start through
-:func:`gouge_command`, so ``GOUGE_TEST_SEED_OFFSET=7 make test`` shows that no test depends on
+alike): in the test process by conftest, in the gouge processes that tests start through
+:func:`gouge_command`, and in Dask workers (a worker preload, :func:`preload_workers`), so ``GOUGE_TEST_SEED_OFFSET=7 make test`` shows that no test depends on
 the trajectory of the seed it happens to use.
 """
 
@@ -38,3 +38,14 @@ def gouge_command() -> list[str]:
     return [sys.executable, "-c",
             f"import sys; sys.path.insert(0, {here!r}); import seed_offset; seed_offset.install(); "
             "sys.argv[0] = 'gouge'; from gouge_cli.cli.main import app; app()"]
+
+
+def dask_setup(worker) -> None:
+    """Dask worker preload hook (set by conftest when OFFSET != 0): the same shift in workers."""
+    install()
+
+
+def preload_workers() -> None:
+    """Make Dask workers started from now on (LocalCluster processes) preload this module."""
+    if OFFSET:
+        os.environ["DASK_DISTRIBUTED__WORKER__PRELOAD"] = f"[{str(Path(__file__).resolve())!r}]"

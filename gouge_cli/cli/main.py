@@ -301,6 +301,8 @@ from .accuracy_cmds import register as _register_accuracy
 _register_accuracy(app)
 from .export_cmds import register as _register_export
 _register_export(app)
+from .campaign_cmds import register as _register_campaign
+_register_campaign(app)
 
 
 def main():

@@ -1,0 +1,69 @@
+"""`gouge campaign`: thin wrapper over gouge_cli.workflows.campaign (registered from cli/main.py).
+
+Exit codes: 0 every piece done, 2 bad spec / changed settings without --force / bad cluster
+option, 3 some piece failed (physics failure or a worker lost too often; see --status),
+130 interrupted (run it again to resume).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+
+def register(app: typer.Typer):
+    from .main import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_PHYSICS, fail, out
+
+    @app.command()
+    def campaign(
+        spec: Path = typer.Argument(..., help="campaign file (YAML: name, base, set, sweep, action, study, phase)"),
+        status: bool = typer.Option(False, "--status", help="show what is done, running, failed and left; run nothing"),
+        force: bool = typer.Option(False, "--force", help="run again the pieces whose settings changed (old results deleted)"),
+        retry_failed: bool = typer.Option(False, "--retry-failed", help="run failed pieces again"),
+        threads: int = typer.Option(1, "--threads", help="numba threads per task"),
+        tasks_per_worker: int = typer.Option(1, "--tasks-per-worker",
+                                             help="tasks at a time per worker process (they share its GIL)"),
+        workers: Optional[int] = typer.Option(None, "--workers",
+                                              help="local worker processes (default: cores // threads)"),
+        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="use an existing Dask scheduler, tcp://HOST:PORT (start its workers as "
+                                                       "NUMBA_NUM_THREADS=T dask worker ADDRESS --nthreads 1)"),
+        slurm: bool = typer.Option(False, "--slurm", help="start workers as SLURM jobs (needs dask-jobqueue: the 'cluster' extra of gouge)"),
+        slurm_cores: int = typer.Option(16, "--slurm-cores", help="cores per SLURM job"),
+        slurm_memory: str = typer.Option("32GB", "--slurm-memory", help="memory per SLURM job"),
+        slurm_walltime: str = typer.Option("24:00:00", "--slurm-walltime", help="walltime per SLURM job"),
+        slurm_queue: Optional[str] = typer.Option(None, "--slurm-queue", help="SLURM partition"),
+        slurm_account: Optional[str] = typer.Option(None, "--slurm-account", help="SLURM account"),
+        slurm_jobs: int = typer.Option(1, "--slurm-jobs", help="SLURM jobs to start"),
+        slurm_extra: List[str] = typer.Option([], "--slurm-directive", help="extra #SBATCH directive; repeatable"),
+        retries: int = typer.Option(3, "--retries", help="Dask retries of a piece that raised"),
+    ):
+        """Run a parameter sweep (runs, or studies = run + forks of every slip) on Dask; idempotent."""
+        from ..config import ConfigError
+        from ..workflows.campaign import CampaignConflict, run_campaign, status_lines, survey
+        from ..workflows.campaign_spec import load_spec
+        from ..workflows.executors import ClusterOptions, ExecutorError
+
+        try:
+            if status:
+                for line in status_lines(survey(load_spec(spec), spec)):
+                    out.print(line, highlight=False)
+                return
+            opts = ClusterOptions(threads, tasks_per_worker, workers, scheduler, slurm, slurm_cores, slurm_memory,
+                                  slurm_walltime, slurm_queue, slurm_account, slurm_jobs, list(slurm_extra),
+                                  retries).check()
+            report = run_campaign(spec, cluster=opts, force=force, retry_failed=retry_failed,
+                                  log=lambda m: out.print(m, highlight=False))
+        except (ConfigError, CampaignConflict, ExecutorError) as e:
+            fail(str(e), EXIT_BAD_INPUT)
+        except KeyboardInterrupt:
+            out.print("interrupted: run the same command again to resume (finished pieces are kept)")
+            raise typer.Exit(EXIT_INTERRUPTED)
+        for line in status_lines(report.survey):
+            out.print(line, highlight=False)
+        for name, path in report.outputs.items():
+            out.print(f"{name}: {path}", highlight=False)
+        out.print(f"{report.submitted} pieces run in {report.wall_seconds:.1f} s", highlight=False)
+        if report.survey.by_state("failed"):
+            raise typer.Exit(EXIT_PHYSICS)
