@@ -21,7 +21,9 @@ from .checkpoint import read_checkpoint
 from .config import Config, ConfigError, build_config
 from .events import lead_time
 from .output import RunFile
-from .runner import RunDirError, check_run_dir, load_phase
+from .preflight import check_config
+from .rundir import RunDirError, RunLock, check_run_dir
+from .runner import load_phase
 from .simulation import Simulation
 
 
@@ -67,8 +69,14 @@ class BranchResult:
 
 def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
              duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
-    """Fork the drained branch and one undrained branch per permeability from slip `slip`."""
+    """Fork the drained branch and one undrained branch per permeability from slip `slip`
+    (no permeability: the drained branch alone). The run directory is locked meanwhile."""
     run_dir = check_run_dir(run_dir)
+    with RunLock(run_dir, f"gouge restart --slip {slip}"):
+        return _run_fork(run_dir, slip, perms, overrides, duration, force, live, quiet)
+
+
+def _run_fork(run_dir, slip, perms, overrides, duration, force, live, quiet) -> dict:
     catalog = slip_catalog(run_dir)
     numbers = [int(e["number"]) for e in catalog if e.get("checkpoint")]
     if slip not in numbers:
@@ -86,6 +94,8 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         if target.exists() and not force:
             raise RunDirError(f"{target} exists; pass --force to run this fork again")
     configs = {branch_name(p): branch_config(ck.config, p) for p in branches}
+    for config in configs.values():
+        check_config(config)
     stop_after_slip = duration is None
     if duration is None:
         span = float(entry["end_time"]) - ck.time
