@@ -172,10 +172,16 @@ def _new_run(config: Config, out_dir: Path, live, quiet, label) -> RunResult:
     """Write config.yaml and a fresh run.h5 into out_dir (locked by the caller) and drive it."""
     (out_dir / "config.yaml").write_text(dump_config(config))
     sim = Simulation(config)
-    writer = RunFile(out_dir / "run.h5", config, sim.dt,
+    return _drive(sim, _fresh_run_file(sim, out_dir), out_dir, live=live, quiet=quiet, label=label)
+
+
+def _fresh_run_file(sim: Simulation, out_dir: Path) -> RunFile:
+    """A new run.h5 (attributes only), flushed to disk at once."""
+    writer = RunFile(out_dir / "run.h5", sim.config, sim.dt,
                      extra_attrs={"n_grains": sim.state.n, "width": sim.state.width,
                                   "wall_mass_per_length": sim.wall_mass_per_length})
-    return _drive(sim, writer, out_dir, live=live, quiet=quiet, label=label)
+    writer.flush()
+    return writer
 
 
 def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | None = None,
@@ -206,15 +212,17 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
             config = load_config(run_dir / "config.yaml")
             return _new_run(config, run_dir, live, quiet, f"resume {config.name}")
         ck = read_checkpoint(latest)
-        with h5py.File(run_dir / "run.h5", "r") as h5:
-            status = str(h5.attrs["status"])
-        if status == "finished":
-            raise RunDirError(f"{run_dir} already finished; nothing to resume")
         sim = Simulation(ck.config, arrays=ck.state, fluid_arrays=ck.fluid)
-        rec_state = ck.extra.get("slip_recorder", {})
-        writer = RunFile(run_dir / "run.h5", ck.config, sim.dt, mode="a")
-        writer.truncate_after(ck.time, ck.step, int(rec_state.get("count", 0)))
-        writer.set_attr("status", "running")
+        if sim.phase == K.COMPACTION:       # run.h5 holds nothing but its attributes yet: written anew
+            writer = _fresh_run_file(sim, run_dir)
+        else:
+            with h5py.File(run_dir / "run.h5", "r") as h5:
+                if str(h5.attrs["status"]) == "finished":
+                    raise RunDirError(f"{run_dir} already finished; nothing to resume")
+            rec_state = ck.extra.get("slip_recorder", {})
+            writer = RunFile(run_dir / "run.h5", ck.config, sim.dt, mode="a")
+            writer.truncate_after(ck.time, ck.step, int(rec_state.get("count", 0)))
+            writer.set_attr("status", "running")
         return _drive(sim, writer, run_dir, live=live, quiet=quiet, label=f"resume {ck.config.name}",
                       resume_from=ck)
 

@@ -291,8 +291,12 @@ class Simulation:
         t0, step0 = start if start is not None else (self.state.time, self.state.step)
         self.compaction_start = (t0, step0)
         row = self.observe()
+        first = True
         while True:
-            self.advance(chunk - (self.state.step - step0) % chunk)
+            done = self.state.step - step0
+            if not (first and done > 0 and done % chunk == 0):     # resumed on a check: check it first
+                self.advance(chunk - done % chunk)
+            first = False
             self.check()
             row = self.observe()
             elapsed = self.state.time - t0
