@@ -14,6 +14,8 @@ Messages are one line, at most MAX_MESSAGE characters per line and MAX_LINES lin
 from __future__ import annotations
 
 import errno
+import os
+import re
 
 EXIT_OK, EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_INTERRUPTED = 0, 2, 3, 130
 MAX_MESSAGE = 400       # characters per line of a message
@@ -69,6 +71,16 @@ def describe_os_error(exc: OSError, where: str | None = None) -> tuple[str, int]
     return f"{path}: {clip(reason, 200)}", EXIT_BAD_INPUT
 
 
+def hdf5_os_error(exc: RuntimeError, where: str | None = None) -> OSError | None:
+    """The OSError inside an HDF5 RuntimeError ("file write failed ... errno = 28 ..."), or None."""
+    match = re.search(r"errno = (\d+)", str(exc))
+    if not match:
+        return None
+    name = re.search(r"filename = '([^']*)'", str(exc))
+    code = int(match.group(1))
+    return OSError(code, os.strerror(code), name.group(1) if name else where)
+
+
 def exit_code_of(exc: BaseException) -> int:
     if isinstance(exc, KeyboardInterrupt):
         return EXIT_INTERRUPTED
@@ -76,4 +88,6 @@ def exit_code_of(exc: BaseException) -> int:
         return EXIT_PHYSICS
     if isinstance(exc, OSError):
         return describe_os_error(exc)[1]
+    if isinstance(exc, RuntimeError) and hdf5_os_error(exc) is not None:
+        return describe_os_error(hdf5_os_error(exc))[1]
     return EXIT_BAD_INPUT

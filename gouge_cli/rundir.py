@@ -12,6 +12,7 @@ directory, a regular file, or a run whose lock is held is refused.
 
 from __future__ import annotations
 
+import errno
 import fcntl
 import os
 import shutil
@@ -124,6 +125,19 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
         lock.release()
         raise
     return lock
+
+
+SPACE_MARGIN = 4_000_000     # bytes kept free beyond the next checkpoints
+
+
+def ensure_space(run_dir: Path, need: float):
+    """OSError(ENOSPC) naming run_dir when fewer than `need` + SPACE_MARGIN bytes are free on
+    its file system: raised before a write, so the run stops cleanly (files closed, the last
+    checkpoint intact) instead of HDF5 failing half-way through one."""
+    free = shutil.disk_usage(run_dir).free
+    if free < need + SPACE_MARGIN:
+        raise OSError(errno.ENOSPC, f"No space left on device ({free / 1e6:.1f} MB free, the next checkpoints need "
+                      f"about {(need + SPACE_MARGIN) / 1e6:.1f} MB)", str(run_dir))
 
 
 def check_run_dir(run_dir: Path) -> Path:

@@ -12,13 +12,14 @@ import h5py
 
 from .checkpoint import CheckpointError, read_checkpoint, remove_stale_temps, snapshot_of, write_checkpoint
 from .config import Config, dump_config, load_config
+from .errors import hdf5_os_error
 from .events import SlipRecorder
 from .guards import guard_callbacks
 from .kernels import step as K
 from .output import RunFile
 from .preflight import check_config
 from .progress import ProgressReport
-from .rundir import RunDirError, RunLock, check_run_dir, latest_run, prepare_run_dir
+from .rundir import RunDirError, RunLock, check_run_dir, ensure_space, latest_run, prepare_run_dir
 from .simulation import Every, PhysicsError, Simulation
 
 
@@ -55,7 +56,10 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     t_begin = sim.state.time
     stop = {"now": False}
 
+    need = 2.0 * (config.slips.ring + 2) * _state_bytes(sim)
+
     def record(s: Simulation):
+        ensure_space(out_dir, need)
         row = s.observe()
         writer.append(row)
         slip = recorder.observe(row)
@@ -94,6 +98,12 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     return status, recorder
 
 
+def _state_bytes(sim: Simulation) -> int:
+    """Bytes of one checkpointed state (grains, contacts, fluid grid)."""
+    fluid = sim.fluid.arrays() if sim.fluid is not None else {}
+    return sum(a.nbytes for a in sim.state.arrays().values()) + sum(a.nbytes for a in fluid.values())
+
+
 def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False,
                      start: tuple[float, int] | None = None):
     """Simulation.compact with checkpoints/latest.h5 written every output.checkpoint_interval of
@@ -104,7 +114,10 @@ def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False,
     chunk = sim.steps_for(100.0)
     every = max(1, int(round(config.output.checkpoint_interval / 100.0)))
 
+    need = 2.0 * _state_bytes(sim)
+
     def save(s: Simulation):
+        ensure_space(out_dir, need)
         write_checkpoint(latest, snapshot_of(s, {"phase": "compaction", "compaction_start": list(s.compaction_start)}))
 
     progress = None if quiet else ProgressReport("compaction", config.compaction.max_time, sim.state.n, live=live)
@@ -161,6 +174,15 @@ def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=
     except PhysicsError as err:
         writer.close(f"failed: {err}")
         raise
+    except (OSError, RuntimeError) as err:      # e.g. the disk is full (rundir.ensure_space): stop cleanly
+        cause = hdf5_os_error(err, str(writer.path)) if not isinstance(err, OSError) else err
+        if cause is None:
+            raise
+        try:
+            writer.close(f"failed: {cause.strerror or cause}")
+        except (OSError, RuntimeError):
+            pass
+        raise cause from None
     writer.close(status)
     wall = time.perf_counter() - t_start
     steps = sim.state.step - steps0

@@ -13,7 +13,7 @@ from rich.markup import escape
 
 from ..config import build_config, dump_config, load_config
 from ..errors import (EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_PHYSICS, InputError, PhysicsFailure,
-                      bounded, describe_os_error)
+                      bounded, describe_os_error, hdf5_os_error)
 
 __all__ = ["app", "main", "EXIT_OK", "EXIT_BAD_INPUT", "EXIT_PHYSICS", "EXIT_INTERRUPTED"]
 
@@ -41,9 +41,13 @@ def guarded(command):
             fail(str(e))
         except PhysicsFailure as e:
             fail(f"physics failure: {e}", EXIT_PHYSICS)
-        except OSError as e:
+        except (OSError, RuntimeError) as e:
             where = next((kwargs[k] for k in ("run_dir", "out_dir", "config", "run_dirs") if kwargs.get(k)), None)
-            fail(*describe_os_error(e, str(where) if where is not None else None))
+            where = str(where) if where is not None else None
+            cause = e if isinstance(e, OSError) else hdf5_os_error(e, where)
+            if cause is None:
+                raise
+            fail(*describe_os_error(cause, where))
         except KeyboardInterrupt:
             fail("interrupted", EXIT_INTERRUPTED)
 
