@@ -15,21 +15,20 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import h5py
 
 from .checkpoint import read_checkpoint
 from .config import Config, ConfigError, build_config
 from .events import lead_time
 from .output import RunFile
 from .preflight import check_config
-from .rundir import RunDirError, RunLock, check_run_dir
+from .rundir import RunDirError, RunLock, check_run_dir, open_run_file
 from .runner import load_phase
 from .simulation import Simulation
 
 
 def slip_catalog(run_dir: Path) -> list[dict]:
     """The run's slip catalog (one dict of attributes per slip, in order)."""
-    with h5py.File(Path(run_dir) / "run.h5", "r") as h5:
+    with open_run_file(Path(run_dir) / "run.h5") as h5:
         if "slips" not in h5:
             return []
         out = []

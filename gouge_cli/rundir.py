@@ -86,6 +86,16 @@ def refuse_if_in_progress(run_dir: Path, command: str):
                           "finished or stopped")
 
 
+def open_run_file(path: Path, mode: str = "r") -> h5py.File:
+    """h5py.File, with the path named in the OSError of a damaged, truncated or locked file."""
+    try:
+        return h5py.File(path, mode)
+    except OSError as err:
+        if err.filename:
+            raise
+        raise OSError(err.errno, str(err).splitlines()[0] if str(err) else "cannot open", str(path)) from None
+
+
 def is_gouge_run(run_dir: Path) -> bool:
     """True for a directory a gouge run made: it has the lock file, or a run.h5 with gouge's attributes."""
     run_dir = Path(run_dir)

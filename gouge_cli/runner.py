@@ -8,7 +8,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import h5py
 
 from .checkpoint import CheckpointError, read_checkpoint, remove_stale_temps, snapshot_of, write_checkpoint
 from .config import Config, dump_config, load_config
@@ -19,7 +18,8 @@ from .kernels import step as K
 from .output import RunFile
 from .preflight import check_config
 from .progress import ProgressReport
-from .rundir import RunDirError, RunLock, check_run_dir, ensure_space, latest_run, prepare_run_dir
+from .rundir import (RunDirError, RunLock, check_run_dir, ensure_space, latest_run, open_run_file,
+                     prepare_run_dir)
 from .simulation import Every, PhysicsError, Simulation
 
 
@@ -238,7 +238,7 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
         if sim.phase == K.COMPACTION:       # run.h5 holds nothing but its attributes yet: written anew
             writer = _fresh_run_file(sim, run_dir)
         else:
-            with h5py.File(run_dir / "run.h5", "r") as h5:
+            with open_run_file(run_dir / "run.h5") as h5:
                 if str(h5.attrs["status"]) == "finished":
                     raise RunDirError(f"{run_dir} already finished; nothing to resume")
             rec_state = ck.extra.get("slip_recorder", {})
