@@ -3,8 +3,11 @@ outputs, slip checkpoints, periodic checkpoints and clean stops."""
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -83,10 +86,13 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
                  Every(sim.steps_for(config.output.checkpoint_interval), latest)]
     status = "finished"
     try:
-        if sim.state.time < end_time:
-            sim.run(end_time - sim.state.time, callbacks, should_stop=lambda: stop["now"])
-        latest(sim)
-    except KeyboardInterrupt:
+        with _deferred_interrupt() as interrupted:
+            if sim.state.time < end_time:
+                sim.run(end_time - sim.state.time, callbacks, should_stop=lambda: stop["now"] or interrupted())
+            if interrupted():
+                status = "interrupted"
+            latest(sim)
+    except KeyboardInterrupt:       # a second Ctrl-C, or one outside the step loop
         status = "interrupted"
         latest(sim)
     except PhysicsError as err:
@@ -96,6 +102,30 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
         if progress:
             progress.close()
     return status, recorder
+
+
+@contextmanager
+def _deferred_interrupt():
+    """Ctrl-C (SIGINT) sets a flag that the step loop reads between chunks, after every
+    callback of the current step has run, so that the checkpoint written on stopping lines up
+    with the series (an interrupt inside a callback could lose a row). A second Ctrl-C
+    interrupts at once. Yields a function telling whether Ctrl-C was pressed."""
+    flag = {"set": False}
+    if threading.current_thread() is not threading.main_thread():
+        yield lambda: False
+        return
+    previous = signal.getsignal(signal.SIGINT)
+    previous = signal.default_int_handler if previous is None else previous
+
+    def handler(signum, frame):
+        flag["set"] = True
+        signal.signal(signal.SIGINT, previous)
+
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield lambda: flag["set"]
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _state_bytes(sim: Simulation) -> int:
@@ -212,7 +242,7 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
     checkpoints/}. The config is checked whole (preflight) and the directory locked before
     anything is written. Ctrl-C stops cleanly (status 'interrupted', outputs flushed)."""
     out_dir = Path(out_dir)
-    pre = check_config(config, config.numerics.threads or 1)
+    pre = check_config(config, Simulation._choose_threads(config.numerics.threads, config.packing.n_grains))
     if pre.note:
         print(pre.note, file=sys.stderr, flush=True)
     with prepare_run_dir(out_dir, force):

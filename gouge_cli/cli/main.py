@@ -172,11 +172,12 @@ def show_config(
 ):
     """Validate a config and print it fully resolved (dimensionless), or print the defaults."""
     from ..preflight import check_config
+    from ..simulation import Simulation
     from ..timestep import stability_bound
 
     cfg = build_config({}, set_) if (defaults or config is None) else load_config(config, set_)
     bound = stability_bound(cfg)
-    pre = check_config(cfg, cfg.numerics.threads or 1)
+    pre = check_config(cfg, Simulation._choose_threads(cfg.numerics.threads, cfg.packing.n_grains))
     out.print(dump_config(cfg), highlight=False, end="")
     out.print(f"# time step {pre.dt:.6g} t0 (stability bound {bound.bound:.6g} t0, {bound.mode} mode)",
               highlight=False)

@@ -104,8 +104,8 @@ def kill_and_resume(reference, out: Path, kind: str, rng: random.Random) -> dict
     scene_file, ref, span = reference
     proc = _start(scene_file, out)
     _wait_for(out / "run.h5", proc)
-    delay = {"compaction": rng.uniform(0.0, 0.1), "write": rng.uniform(0.0, 0.8),
-             "random": rng.uniform(0.0, 0.85)}[kind] * span
+    delay = {"compaction": rng.uniform(0.0, 0.1), "write": rng.uniform(0.0, 0.8), "random": rng.uniform(0.0, 0.85),
+             "ctrl-c": rng.uniform(0.0, 0.85)}[kind] * span
     time.sleep(delay)
     tmp_seen = False
     if kind == "write":
@@ -118,9 +118,9 @@ def kill_and_resume(reference, out: Path, kind: str, rng: random.Random) -> dict
                     break
             except FileNotFoundError:
                 pass
-    proc.send_signal(signal.SIGKILL)
+    proc.send_signal(signal.SIGINT if kind == "ctrl-c" else signal.SIGKILL)
     proc.wait()
-    assert proc.returncode in (0, -signal.SIGKILL), proc.stderr.read().decode()
+    assert proc.returncode in (0, -signal.SIGKILL, 130), proc.stderr.read().decode()
     with h5py.File(out / "run.h5", "r") as h5:
         if h5.attrs["status"] == "finished":     # ended (or was killed while exiting) first: not a trial
             assert_identical(ref, out)
@@ -150,6 +150,13 @@ def test_kill_9_then_resume_is_bitwise(reference, tmp_path):
     hits = trials(reference, tmp_path, ["compaction", "write", "random"], 17)
     assert len(hits) == 3
     assert hits[0]["phase"] in ("compaction", "none")      # killed before loading began
+
+
+@pytest.mark.validation
+def test_ctrl_c_then_resume_is_bitwise(reference, tmp_path):
+    """Ctrl-C (SIGINT) at random moments, compaction included: exit 130, then resume."""
+    hits = trials(reference, tmp_path, ["ctrl-c"] * 4, 99)
+    assert len(hits) == 4
 
 
 @pytest.mark.validation
