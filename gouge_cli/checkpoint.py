@@ -1,11 +1,14 @@
 """Checkpoints: every evolving array plus the config and callback state, written atomically.
 
 A checkpoint is an HDF5 file: datasets ``state/<name>`` (see State.EVOLVING) and, with fluid,
-``fluid/<name>``; attributes ``config`` (YAML of the validated config), ``extra`` (JSON:
-detector state, slip number, parent run, ...), ``provenance`` (JSON, see
-:mod:`gouge_cli.provenance`) and ``checksum`` (SHA-256 over every dataset's name, dtype, shape
-and bytes). It is written to a temporary file in the same directory and
-renamed over the target, so a crash never leaves a half-written checkpoint behind.
+``fluid/<name>``; states attached to it (the slip recorder's pre-slip ring, see events.py) under
+``attached/<key>/{state,fluid}/<name>`` with their own ``extra`` attribute; attributes
+``config`` (YAML of the validated config), ``extra`` (JSON: detector state, slip number, parent
+run, ...), ``provenance`` (JSON, see :mod:`gouge_cli.provenance`) and ``checksum`` (SHA-256 over
+every dataset's name, dtype, shape and bytes). It is written to a temporary file in the same
+directory and renamed over the target, so a crash never leaves a half-written checkpoint behind; a
+temporary file left by a killed writer (``.NAME.tmpPID`` of a process no longer alive) is
+removed by the next write of that checkpoint.
 """
 
 from __future__ import annotations
@@ -23,9 +26,10 @@ from . import __version__
 from . import provenance
 from .config import Config, ConfigError, build_config, dump_config
 from .filedoc import document_checkpoint
+from .errors import InputError
 
 
-class CheckpointError(ValueError):
+class CheckpointError(InputError):
     """A checkpoint that cannot be used (missing, truncated, corrupt)."""
 
 
@@ -37,6 +41,7 @@ class Checkpoint:
     extra: dict
     path: Path | None = None
     provenance: dict = field(default_factory=dict)
+    attached: dict = field(default_factory=dict)     # key -> Checkpoint (same config), e.g. the slip ring
 
     @property
     def time(self) -> float:
@@ -60,25 +65,58 @@ def _digest(groups: dict[str, dict[str, np.ndarray]]) -> str:
     return provenance.state_digest(groups)
 
 
-def snapshot_of(sim, extra: dict | None = None) -> Checkpoint:
+def snapshot_of(sim, extra: dict | None = None, attached: dict | None = None) -> Checkpoint:
     """In-memory copy of the simulation's evolving state (cheap enough to keep a few)."""
     fluid = sim.fluid.arrays() if sim.fluid is not None else {}
     return Checkpoint(sim.config, sim.state.arrays(), fluid, dict(extra or {}),
-                      provenance=provenance.collect(sim.threads))
+                      provenance=provenance.collect(sim.threads), attached=dict(attached or {}))
+
+
+def _groups(checkpoint: Checkpoint) -> dict[str, dict[str, np.ndarray]]:
+    """HDF5 group path -> arrays, the attached states included."""
+    groups = {"state": checkpoint.state, "fluid": checkpoint.fluid}
+    for key, child in checkpoint.attached.items():
+        groups[f"attached/{key}/state"] = child.state
+        groups[f"attached/{key}/fluid"] = child.fluid
+    return groups
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_temps(path: Path) -> list[Path]:
+    """Remove ``.NAME.tmpPID`` files next to `path` left by writers that are no longer alive."""
+    removed = []
+    for tmp in Path(path).parent.glob(f".{Path(path).name}.tmp*"):
+        pid = tmp.name.rsplit(".tmp", 1)[1]
+        if pid.isdigit() and int(pid) != os.getpid() and not _pid_alive(int(pid)):
+            tmp.unlink(missing_ok=True)
+            removed.append(tmp)
+    return removed
 
 
 def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
     """Write atomically; returns the file size in bytes."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(path)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
-    groups = {"state": checkpoint.state, "fluid": checkpoint.fluid}
+    groups = _groups(checkpoint)
     try:
         with h5py.File(tmp, "w") as h5:
             for group, arrays in groups.items():
                 g = h5.create_group(group)
                 for name, arr in arrays.items():
                     g.create_dataset(name, data=arr)
+            for key, child in checkpoint.attached.items():
+                h5[f"attached/{key}"].attrs["extra"] = json.dumps(child.extra, default=_plain)
             h5.attrs["config"] = dump_config(checkpoint.config)
             h5.attrs["extra"] = json.dumps(checkpoint.extra, default=_plain)
             h5.attrs["version"] = __version__
@@ -102,12 +140,19 @@ def read_checkpoint(path: Path, overrides: list[str] | dict | None = None) -> Ch
     try:
         with h5py.File(path, "r") as h5:
             groups = {g: {name: ds[...] for name, ds in h5[g].items()} for g in ("state", "fluid") if g in h5}
+            keys = sorted(h5["attached"]) if "attached" in h5 else []
+            child_extra = {}
+            for key in keys:
+                for part in ("state", "fluid"):
+                    g = h5[f"attached/{key}/{part}"]
+                    groups[f"attached/{key}/{part}"] = {name: ds[...] for name, ds in g.items()}
+                child_extra[key] = json.loads(h5[f"attached/{key}"].attrs["extra"])
             config_text = h5.attrs["config"]
             extra = json.loads(h5.attrs["extra"])
             checksum = h5.attrs["checksum"]
             stored = provenance.loads(h5.attrs.get("provenance"))
-    except (OSError, KeyError, ValueError) as err:
-        raise CheckpointError(f"checkpoint {path} is unreadable or truncated ({err})") from None
+    except (OSError, KeyError, ValueError, RuntimeError) as err:
+        raise CheckpointError(f"checkpoint {path} is unreadable or truncated ({str(err)[:200]})") from None
     groups.setdefault("fluid", {})
     if _digest(groups) != checksum:
         raise CheckpointError(f"checkpoint {path} is corrupt: its checksum does not match its contents")
@@ -115,4 +160,6 @@ def read_checkpoint(path: Path, overrides: list[str] | dict | None = None) -> Ch
         config = build_config(yaml.safe_load(config_text), overrides)
     except ConfigError as err:
         raise ConfigError(f"{err}") from None
-    return Checkpoint(config, groups["state"], groups["fluid"], extra, path, stored)
+    attached = {key: Checkpoint(config, groups[f"attached/{key}/state"], groups[f"attached/{key}/fluid"],
+                                child_extra[key], provenance=stored) for key in keys}
+    return Checkpoint(config, groups["state"], groups["fluid"], extra, path, provenance=stored, attached=attached)

@@ -14,12 +14,16 @@ from pathlib import Path
 from typing import Annotated, Any, Literal, Optional
 
 import yaml
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 
+from .errors import InputError, bounded, clip
 from .units import Scales, to_dimensionless
 
+MAX_DEPTH = 8           # nesting of a config file (sections are 2 deep)
+MAX_FILE_BYTES = 1_000_000
 
-class ConfigError(ValueError):
+
+class ConfigError(InputError):
     """A config that cannot be run; the message is meant for the user."""
 
 
@@ -46,7 +50,10 @@ Compressibility = Annotated[float, _quantity("compressibility")]
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    # strict: a boolean is not a number, "0.5" is not a float (SI strings go through _quantity);
+    # no inf/nan anywhere (no field documents an infinite value)
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True, strict=True,
+                              allow_inf_nan=False)
 
 
 class ScalesConfig(_Section):
@@ -112,13 +119,19 @@ class CompactionConfig(_Section):
         1e-2, gt=0, description="settled when |v_z| of the top wall < tol * v_ref, v_ref = sigma/sqrt(E rho) [-]"
     )
 
+    @model_validator(mode="after")
+    def _times(self):
+        if self.min_time > self.max_time:
+            raise ValueError(f"min_time ({self.min_time:g}) must be <= max_time ({self.max_time:g})")
+        return self
+
 
 class LoadingConfig(_Section):
     """Top wall: constant normal stress, pulled by a spring at constant velocity (per unit length)."""
 
     normal_stress: Stress = Field(3e-4, gt=0, le=0.1, description="sigma [E] (thesis 'Normal Force')")
     spring_constant: StiffnessPerLength = Field(5e-7, gt=0, le=1.0, description="k per unit wall length [E/d]")
-    velocity: Velocity = Field(1e-5, ge=0, le=0.1, description="loading velocity V_s [v0]")
+    velocity: Velocity = Field(1e-5, gt=0, le=0.1, description="loading velocity V_s [v0]")
     wall_mass: Optional[MassPerLength] = Field(
         None, gt=0, description="top-wall mass per unit length m_b [rho d^2]; default: its grains' mass"
     )
@@ -196,7 +209,8 @@ class FluidConfig(_Section):
 class Config(_Section):
     """A whole run. Written, fully resolved, next to every output."""
 
-    name: str = Field("run", pattern=r"^[A-Za-z0-9_.-]+$", description="run name; output under runs/<name>/")
+    name: str = Field("run", pattern=r"^[A-Za-z0-9_.-]+$", max_length=100,
+                      description="run name, a plain file name (no '/', not '.' or '..'); output under runs/<name>/")
     seed: int = Field(1, ge=0, description="random seed of the packing")
     scales: ScalesConfig = ScalesConfig()
     material: MaterialConfig = MaterialConfig()
@@ -208,6 +222,13 @@ class Config(_Section):
     output: OutputConfig = OutputConfig()
     slips: SlipsConfig = SlipsConfig()
     fluid: Optional[FluidConfig] = Field(None, description="absent or 'none' for a dry scene")
+
+    @field_validator("name")
+    @classmethod
+    def _plain_name(cls, name: str) -> str:
+        if name.strip(".") == "":
+            raise ValueError("must be a plain name (letters, digits, '_', '-', '.'), not '.' or '..'")
+        return name
 
     @model_validator(mode="before")
     @classmethod
@@ -231,27 +252,80 @@ def _as_written(data: dict, loc: tuple):
     return node
 
 
-def _format_errors(err: ValidationError, data: dict) -> str:
+def _format_errors(err: ValidationError, data: dict, prefix: tuple = ()) -> str:
     lines = []
     for e in err.errors():
-        key = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        loc = prefix + tuple(e["loc"])
+        key = ".".join(str(p) for p in loc) or "(top level)"
         if e["type"] == "extra_forbidden":
-            lines.append(f"{key}: unknown key (check the spelling; see `gouge config --defaults`)")
+            lines.append(f"{clip(key, 120)}: unknown key (check the spelling; see `gouge config --defaults`)")
             continue
         value = e.get("input")
-        written = _as_written(data, e["loc"])
-        shown = f"{written!r} (= {value!r} dimensionless)" if isinstance(written, str) and written != value \
-            else repr(value)
-        msg = e["msg"].removeprefix("Value error, ")
-        lines.append(f"{key} = {shown}: {msg}")
-    return "invalid config:\n  " + "\n  ".join(lines)
+        written = _as_written(data, loc)
+        shown = f"{clip(repr(written), 80)} (= {clip(repr(value), 80)} dimensionless)" \
+            if isinstance(written, str) and written != value else clip(repr(value), 80)
+        msg = clip(e["msg"].removeprefix("Value error, "), 300)
+        lines.append(f"{clip(key, 120)} = {shown}: {msg}")
+    return bounded("invalid config:\n  " + "\n  ".join(lines))
+
+
+class _StrictLoader(yaml.SafeLoader):
+    """safe_load that refuses duplicate keys, anchors/aliases (no 'billion laughs') and deep nesting."""
+
+    def __init__(self, stream):
+        super().__init__(stream)
+        self._depth = 0
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent) or getattr(self.peek_event(), "anchor", None):
+            mark = self.peek_event().start_mark
+            raise ConfigError(f"line {mark.line + 1}: YAML anchors and aliases (&, *) are not allowed in a config")
+        self._depth += 1
+        try:
+            if self._depth > MAX_DEPTH:
+                mark = self.peek_event().start_mark
+                raise ConfigError(f"line {mark.line + 1}: nested more than {MAX_DEPTH} levels deep")
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=True)
+            if not isinstance(key, str):
+                raise ConfigError(f"line {key_node.start_mark.line + 1}: key {clip(repr(key), 40)} is not a "
+                                  "name (keys are section and field names)")
+            if key in seen:
+                raise ConfigError(f"line {key_node.start_mark.line + 1}: duplicate key {clip(key, 80)!r} "
+                                  "(each key may appear once per section)")
+            seen.add(key)
+        return super().construct_mapping(node, deep)
+
+
+def parse_yaml(text: str, what: str):
+    """YAML text -> Python data with the rules of _StrictLoader; ConfigError naming `what`."""
+    try:
+        return yaml.load(text, Loader=_StrictLoader)
+    except ConfigError as err:
+        raise ConfigError(f"{what}: {err}") from None
+    except yaml.YAMLError as err:
+        raise ConfigError(bounded(f"{what}: not valid YAML: {clip(err, 300)}")) from None
 
 
 def _parse_value(text: str) -> Any:
     try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError:
+        return yaml.load(text, Loader=_StrictLoader)
+    except (yaml.YAMLError, ConfigError):
         return text
+
+
+def _override_key(key: str, item: str) -> list[str]:
+    parts = key.split(".")
+    if not key or any(not part for part in parts):
+        raise ConfigError(f"override {clip(repr(item), 80)}: the key before '=' must be a dotted name such as "
+                          "loading.velocity")
+    return parts
 
 
 def apply_overrides(data: dict, overrides: list[str] | dict) -> dict:
@@ -262,20 +336,22 @@ def apply_overrides(data: dict, overrides: list[str] | dict) -> dict:
         parsed = []
         for item in overrides:
             if "=" not in item:
-                raise ConfigError(f"override {item!r} is not of the form key.sub=value")
+                raise ConfigError(f"override {clip(repr(item), 80)} is not of the form key.sub=value")
             key, value = item.split("=", 1)
-            parsed.append((key.strip(), _parse_value(value.strip())))
+            parsed.append((key.strip(), _parse_value(value.strip()), item))
         items = parsed
-    for key, value in items:
-        parts = key.split(".")
+    else:
+        items = [(k, v, f"{k}={v}") for k, v in items]
+    for key, value, item in items:
+        parts = _override_key(key, item)
         node = data
-        for part in parts[:-1]:
+        for depth, part in enumerate(parts[:-1]):
             child = node.get(part)
             if child is None or isinstance(child, str):
                 child = {}
                 node[part] = child
             elif not isinstance(child, dict):
-                raise ConfigError(f"override {key!r}: {part!r} is not a section")
+                raise ConfigError(f"override {clip(repr(key), 80)}: {'.'.join(parts[:depth + 1])} is not a section")
             node = child
         node[parts[-1]] = value
     return data
@@ -288,6 +364,9 @@ def build_config(data: dict | None, overrides: list[str] | dict | None = None) -
         data = apply_overrides(data, overrides)
     try:
         scales = ScalesConfig.model_validate(data.get("scales") or {}).scales()
+    except ValidationError as err:
+        raise ConfigError(_format_errors(err, data, ("scales",))) from None
+    try:
         return Config.model_validate(data, context={"scales": scales})
     except ValidationError as err:
         raise ConfigError(_format_errors(err, data)) from None
@@ -310,13 +389,24 @@ def find_config(name: str | Path) -> Path:
 
 
 def load_config(path: str | Path, overrides: list[str] | dict | None = None) -> Config:
+    """Read a config file (UTF-8 YAML mapping; see _StrictLoader) and validate it with overrides."""
     path = find_config(path)
     try:
-        data = yaml.safe_load(path.read_text()) or {}
-    except yaml.YAMLError as err:
-        raise ConfigError(f"{path}: not valid YAML: {err}") from None
+        raw = path.read_bytes()
+    except OSError as err:
+        raise ConfigError(f"{path}: cannot be read ({err.strerror or err})") from None
+    if len(raw) > MAX_FILE_BYTES:
+        raise ConfigError(f"{path}: {len(raw)} bytes; a config is a short text file (at most {MAX_FILE_BYTES})")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as err:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {err.start}); a config is a YAML text file") from None
+    data = parse_yaml(text, str(path))
+    if data is None:
+        raise ConfigError(f"{path}: the file is empty; give at least one section (see `gouge config --defaults`)")
     if not isinstance(data, dict):
-        raise ConfigError(f"{path}: the top level must be a mapping of sections")
+        raise ConfigError(f"{path}: the top level must be a mapping of sections (name: ..., packing: ...), "
+                          f"not {type(data).__name__} {clip(repr(data), 60)}")
     data.setdefault("name", path.stem)
     return build_config(data, overrides)
 

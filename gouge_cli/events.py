@@ -44,7 +44,8 @@ def make_detector(config: Config) -> SlipDetector:
 class SlipRecorder:
     """Time-series callback: detect slips, persist the pre-slip checkpoint, write the catalog."""
 
-    def __init__(self, config: Config, sim, run_file, checkpoint_dir: Path | None, state: dict | None = None):
+    def __init__(self, config: Config, sim, run_file, checkpoint_dir: Path | None, state: dict | None = None,
+                 attached: dict | None = None):
         self.config = config
         self.run_file = run_file
         self.checkpoint_dir = checkpoint_dir
@@ -64,12 +65,31 @@ class SlipRecorder:
         self.peak_band = 0.25 * config.slips.lead_stress
         self.pending: Checkpoint | None = None
         self.slips: list[dict] = []
-        self._deborah: list[float] = []
+        self._deborah: list[float] = [float(v) for v in state.get("deborah", [])]
+        ring = [ck for key, ck in sorted((attached or {}).items()) if key.startswith("ring_")]
+        self.ring.extend(ring)
+        if "pending" in (attached or {}):
+            self.pending = attached["pending"]
+        elif state.get("pending_in_ring") is not None:
+            self.pending = ring[int(state["pending_in_ring"])]
 
     def state_dict(self) -> dict:
         return {"detector": self.detector.state_dict(), "count": self.count,
                 "last_quiet": self.last_quiet, "above": self.above,
                 "peak_tau": self.peak_tau, "peak_time": self.peak_time}
+
+    def full_state(self) -> tuple[dict, dict]:
+        """(state dict, attached checkpoints) for latest.h5: everything a resume needs to go on
+        exactly as this recorder would (the kept ring, the pending pre-slip state, the Deborah
+        samples of a slip in progress); the inverse of the constructor's `state`, `attached`."""
+        state = self.state_dict()
+        state["deborah"] = list(self._deborah)
+        attached = {f"ring_{i:03d}": ck for i, ck in enumerate(self.ring)}
+        in_ring = [i for i, ck in enumerate(self.ring) if ck is self.pending]
+        state["pending_in_ring"] = in_ring[0] if in_ring else None
+        if self.pending is not None and not in_ring:
+            attached["pending"] = self.pending
+        return state, attached
 
     def keep(self, sim):
         """Ring callback (every lead/4): keep the state if the wall is quiet (v < end threshold),

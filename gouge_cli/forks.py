@@ -17,7 +17,6 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import h5py
 
 from . import provenance
 from .checkpoint import read_checkpoint
@@ -25,13 +24,15 @@ from .config import Config, ConfigError, build_config
 from .events import lead_time
 from .filedoc import json_safe
 from .output import RunFile
-from .runner import RunDirError, check_run_dir, load_phase
+from .preflight import check_config
+from .rundir import RunDirError, RunLock, check_run_dir, open_run_file
+from .runner import load_phase
 from .simulation import Simulation
 
 
 def slip_catalog(run_dir: Path) -> list[dict]:
     """The run's slip catalog (one dict of attributes per slip, in order)."""
-    with h5py.File(Path(run_dir) / "run.h5", "r") as h5:
+    with open_run_file(Path(run_dir) / "run.h5") as h5:
         if "slips" not in h5:
             return []
         out = []
@@ -76,8 +77,14 @@ class BranchResult:
 
 def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
              duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
-    """Fork the drained branch and one undrained branch per permeability from slip `slip`."""
+    """Fork the drained branch and one undrained branch per permeability from slip `slip`
+    (no permeability: the drained branch alone). The run directory is locked meanwhile."""
     run_dir = check_run_dir(run_dir)
+    with RunLock(run_dir, f"gouge restart --slip {slip}"):
+        return _run_fork(run_dir, slip, perms, overrides, duration, force, live, quiet)
+
+
+def _run_fork(run_dir, slip, perms, overrides, duration, force, live, quiet) -> dict:
     catalog = slip_catalog(run_dir)
     numbers = [int(e["number"]) for e in catalog if e.get("checkpoint")]
     if slip not in numbers:
@@ -101,6 +108,8 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     frames = {} if any(o.split("=")[0].strip() == "output.slip_frames" for o in overrides or []) \
         else {"output": {"slip_frames": ck.config.output.slip_frames or FORK_SLIP_FRAMES}}
     configs = {branch_name(p): branch_config(ck.config, p, frames) for p in branches}
+    for config in configs.values():
+        check_config(config)
     stop_after_slip = duration is None
     if duration is None:
         span = float(entry["end_time"]) - ck.time
@@ -116,7 +125,7 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
             "fork_slip": slip,
             "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
             "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
-            "end_time": ck.time + duration})
+            "end_time": ck.time + duration}, threads=sim.threads)
         writer.append(sim.observe())
         step0 = sim.state.step
         status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,

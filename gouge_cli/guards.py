@@ -77,10 +77,27 @@ class Scan:
                    float(row["contact_energy"]))
 
 
+def _suspects(sim: Simulation) -> str:
+    """Parameters near their own stability limit at this step (preflight), named first."""
+    from .preflight import damped_step_bound, min_wall_mass
+
+    cfg, dt = sim.config, float(sim.params[K.DT])
+    out = []
+    if cfg.material.damping > 0 and dt > 0.5 * damped_step_bound(cfg):
+        out.append(f"lower material.damping (now {cfg.material.damping:g} 1/t0; the dashpot is stable up to "
+                   f"dt = {damped_step_bound(cfg):.3g} t0)")
+    if cfg.loading.wall_mass is not None and cfg.loading.wall_mass < 4.0 * min_wall_mass(cfg, dt):
+        out.append(f"raise loading.wall_mass (now {cfg.loading.wall_mass:g}, stable from {min_wall_mass(cfg, dt):.3g} "
+                   "rho d^2)")
+    if cfg.material.density != 1.0 and cfg.numerics.dt is not None:
+        out.append(f"raise material.density (now {cfg.material.density:g}: lighter grains need a smaller numerics.dt)")
+    return f"{'; '.join(out)}; or " if out else ""
+
+
 def _dt_hint(sim: Simulation) -> str:
     n = sim.config.numerics
     knob = f"numerics.dt (now {n.dt:g} t0)" if n.dt is not None else f"numerics.dt_safety (now {n.dt_safety:g})"
-    return f"lower {knob}; the step is {sim.params[K.DT]:.4g} t0"
+    return f"{_suspects(sim)}lower {knob}; the step is {sim.params[K.DT]:.4g} t0"
 
 
 def _fluid_hint(sim: Simulation) -> str:
@@ -89,7 +106,7 @@ def _fluid_hint(sim: Simulation) -> str:
     f = sim.config.fluid
     return (f"; with pore fluid, also lower fluid.step (now {f.step:g} t0, the lag of the drag) or raise "
             f"fluid.cell_size (now {f.cell_size:g} d: on small cells a nearly undrained coupling can "
-            "create energy)")
+            f"create energy); the coupling stiffens as fluid.permeability (now {f.permeability:g} d^2) falls")
 
 
 class NonFiniteGuard:
@@ -121,8 +138,9 @@ class OverlapGuard:
             raise PhysicsError(
                 f"runaway overlap: grains {i} and {j} overlap by {scan.overlap:.3g} of the smaller radius "
                 f"(limit {self.limit:g})",
-                "grains are too soft for the load or the step too large: lower loading.normal_stress "
-                f"(now {sim.config.loading.normal_stress:g} E) or loading.velocity, or {_dt_hint(sim)}"
+                f"{_suspects(sim)}grains are too soft for the load or the step too large: lower "
+                f"loading.normal_stress (now {sim.config.loading.normal_stress:g} E) or loading.velocity, or "
+                f"{_dt_hint(sim).removeprefix(_suspects(sim))}"
                 f"{_fluid_hint(sim)}", scan.time)
 
 
@@ -147,6 +165,19 @@ class KineticEnergyGuard:
         self.work = 0.0             # load-point work bound W since the first check
         self.last = None            # (time, |stretch|) of the previous check
         self.references = [deque(maxlen=self.KEEP) for _ in range(self.LEVELS)]
+
+    def state_dict(self) -> dict:
+        """The energy history (JSON-able; floats round-trip exactly), for latest.h5."""
+        return {"checks": self.checks, "work": self.work, "last": list(self.last) if self.last else None,
+                "references": [[list(r) for r in level] for level in self.references]}
+
+    def load_state_dict(self, state: dict):
+        self.checks = int(state["checks"])
+        self.work = float(state["work"])
+        self.last = tuple(state["last"]) if state["last"] is not None else None
+        for level, saved in zip(self.references, state["references"]):
+            level.clear()
+            level.extend(tuple(r) for r in saved)
 
     @staticmethod
     def _load(sim: Simulation) -> tuple[float, float, float]:
@@ -226,6 +257,14 @@ class Guards:
         scan = Scan.of(sim)
         for guard in (self.nonfinite, self.energy, self.overlap, self.fluid):
             guard(sim, scan)
+
+    def state_dict(self) -> dict:
+        """What a resume needs (only the energy guard keeps a history)."""
+        return {"energy": self.energy.state_dict()}
+
+    def load_state_dict(self, state: dict):
+        if "energy" in state:
+            self.energy.load_state_dict(state["energy"])
 
 
 def guard_callbacks(sim: Simulation, interval: float | None = None, **limits) -> list[Every]:

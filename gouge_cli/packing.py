@@ -21,10 +21,10 @@ from .kernels.reorder import STRIP
 from .state import BOTTOM, FREE, TOP, State
 
 
-def build_packing(config: Config) -> State:
-    """Loose start of the scene; same config and seed give the same arrays bit for bit."""
+def packing_layout(config: Config) -> tuple[float, int, int, int]:
+    """(width [d], grains per wall, free grains, lattice columns); ConfigError if the grains
+    do not fill at least one row of the width."""
     p = config.packing
-    rng = np.random.default_rng(config.seed)
     width = p.resolved_width()
     n_wall = max(3, int(round(width / p.wall_spacing)))
     n_free = p.n_grains - 2 * n_wall
@@ -35,6 +35,14 @@ def build_packing(config: Config) -> State:
             f"({n_wall} grains per wall); use more grains (at least {2 * n_wall + max(n_columns, 3)}) "
             "or a smaller packing.width"
         )
+    return width, n_wall, n_free, n_columns
+
+
+def build_packing(config: Config) -> State:
+    """Loose start of the scene; same config and seed give the same arrays bit for bit."""
+    p = config.packing
+    rng = np.random.default_rng(config.seed)
+    width, n_wall, n_free, n_columns = packing_layout(config)
     n_rows = math.ceil(n_free / n_columns)
     jitter = 0.45 * (p.initial_spacing - p.diameter_max)
 

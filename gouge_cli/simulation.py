@@ -16,6 +16,7 @@ import numba
 import numpy as np
 
 from .config import Config
+from .errors import PhysicsFailure
 from .kernels import measure as M
 from .kernels import step as K
 from .packing import build_packing
@@ -45,7 +46,7 @@ def build_params(config: Config, dt: float, width: float, wall_mass: float) -> n
     return p
 
 
-class PhysicsError(RuntimeError):
+class PhysicsError(PhysicsFailure):
     """The physics went wrong (NaN, runaway overlap, unstable fluid step); names cause and fix."""
 
     def __init__(self, cause: str, fix: str, time: float | None = None):
@@ -88,6 +89,7 @@ class Simulation:
         self.threads = self._choose_threads(config.numerics.threads, s.n)
         p[K.SORT_EVERY] = self._choose_sort_every(config.numerics.sort_every, s.n)
         self.compaction_settled: bool | None = None
+        self.compaction_start: tuple[float, int] | None = None     # (time, step) where compaction began
         self.fluid = None
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(M.N_OBSERVABLES)
@@ -279,15 +281,22 @@ class Simulation:
         OverlapGuard()(self, scan)
 
     # ---- compaction --------------------------------------------------------------------
-    def compact(self, on_chunk: Callable = None) -> dict:
-        """Settle under the normal stress alone until the top wall and grains are still."""
+    def compact(self, on_chunk: Callable = None, start: tuple[float, int] | None = None) -> dict:
+        """Settle under the normal stress alone until the top wall and grains are still.
+        Checked every 100 t0 of steps counted from `start` = (time, step) where compaction
+        began (default: now), so a compaction resumed from any step ends where it would have."""
         cfg = self.config.compaction
         v_tol = cfg.wall_velocity_tol * self.config.loading.normal_stress
         chunk = self.steps_for(100.0)
-        t0 = self.state.time
+        t0, step0 = start if start is not None else (self.state.time, self.state.step)
+        self.compaction_start = (t0, step0)
         row = self.observe()
+        first = True
         while True:
-            self.advance(chunk)
+            done = self.state.step - step0
+            if not (first and done > 0 and done % chunk == 0):     # resumed on a check: check it first
+                self.advance(chunk - done % chunk)
+            first = False
             self.check()
             row = self.observe()
             elapsed = self.state.time - t0

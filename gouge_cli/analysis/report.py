@@ -32,6 +32,7 @@ import numpy as np
 import yaml
 
 from .. import __version__
+from ..errors import InputError
 from ..detector import WallSeries, detect_slips
 from ..filedoc import document_analysis, json_safe
 from .blockslider import BlockSliderFit, fit_block_slider
@@ -50,7 +51,7 @@ __all__ = [
 _NAN = float("nan")
 
 
-class AnalysisError(ValueError):
+class AnalysisError(InputError):
     """A run cannot be analysed as asked; the message says why and what to do."""
 
 
@@ -818,7 +819,11 @@ def write_analysis(analysis: RunAnalysis, out_dir: Path | None = None, into_h5: 
                     _table_to_group(grp.create_group("pairs"), analysis.pair_rows, PAIR_COLUMNS)
                 document_analysis(grp)
         except OSError as exc:
-            raise AnalysisError(f"cannot write /analysis into {info.h5_path}: {exc}") from exc
+            # the tables are in the CSV files already; run.h5 is left as it is (read-only, or open elsewhere)
+            written["h5_skipped"] = (f"/analysis not written into {info.h5_path} "
+                                     f"({str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__}); "
+                                     "the CSV files hold the same tables")
+            return written
         written["h5"] = info.h5_path
     return written
 

@@ -77,7 +77,9 @@ def _print_run(out, analysis, written: dict):
                 out.print(f"  slip {row['slip']} {escape(row['branch'])}: {escape(row['note'])}", highlight=False)
     for reason in analysis.skipped:
         out.print(f"[yellow]skipped fork:[/] {escape(reason)}", highlight=False)
-    out.print("wrote " + ", ".join(escape(str(p)) for p in written.values()), highlight=False)
+    out.print("wrote " + ", ".join(escape(str(p)) for k, p in written.items() if k != "h5_skipped"), highlight=False)
+    if "h5_skipped" in written:
+        out.print(f"note: {escape(written['h5_skipped'])}", highlight=False)
 
 
 def _print_campaign(out, summary: dict, n_runs: int):
@@ -106,6 +108,7 @@ def register(app: typer.Typer) -> None:
         Writes RUN/analysis/{catalog,fits,pairs}.csv and summary.json, and /analysis in run.h5.
         """
         from ..analysis.report import AnalysisError, analyze_run, campaign, write_analysis
+        from ..errors import describe_os_error
         from .main import EXIT_BAD_INPUT, err, fail, out
 
         done, failed = [], []
@@ -113,7 +116,8 @@ def register(app: typer.Typer) -> None:
             try:
                 analysis = analyze_run(run_dir, notch=notch)
                 written = write_analysis(analysis)
-            except AnalysisError as exc:
+            except (AnalysisError, OSError) as exc:
+                exc = exc if isinstance(exc, AnalysisError) else describe_os_error(exc, str(run_dir))[0]
                 failed.append(str(exc))
                 if not as_json:
                     from rich.markup import escape
@@ -146,14 +150,9 @@ def register(app: typer.Typer) -> None:
         notch: bool = typer.Option(True, "--notch/--no-notch", help="notch-filter μ_d(t)"),
     ):
         """PNG figures: run overview, grain snapshot, slip N with its fit, μ_d(t), drained vs undrained."""
-        from ..analysis.report import AnalysisError
-        from .main import fail, out
+        from ..plots import make_figures
+        from .main import guarded, out
 
-        try:
-            from ..plots import make_figures
-
-            files = make_figures(run_dir, slip=slip, out_dir=out_dir, notch=notch)
-        except AnalysisError as exc:
-            fail(str(exc))
+        files = guarded(make_figures)(run_dir=run_dir, slip=slip, out_dir=out_dir, notch=notch)
         for path in files:
             out.print(str(path), highlight=False)

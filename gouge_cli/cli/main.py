@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 from typing import List, Optional
@@ -10,9 +11,11 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from ..config import ConfigError, build_config, dump_config, load_config
+from ..config import build_config, dump_config, load_config
+from ..errors import (EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_PHYSICS, InputError, PhysicsFailure,
+                      bounded, describe_os_error, hdf5_os_error)
 
-EXIT_OK, EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_INTERRUPTED = 0, 2, 3, 130
+__all__ = ["app", "main", "EXIT_OK", "EXIT_BAD_INPUT", "EXIT_PHYSICS", "EXIT_INTERRUPTED"]
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, context_settings={"help_option_names": ["-h", "--help"]},
                   rich_markup_mode=None,   # help texts hold units in brackets, e.g. [d^2]: no markup
@@ -37,8 +40,33 @@ def _main(version: bool = typer.Option(False, "--version", callback=_version, is
 
 
 def fail(message: str, code: int = EXIT_BAD_INPUT):
-    err.print(f"[bold red]error:[/] {escape(message)}", highlight=False)
+    err.print(f"[bold red]error:[/] {escape(bounded(message))}", highlight=False)
     raise typer.Exit(code)
+
+
+def guarded(command):
+    """Run a command with the exit-code mapping of gouge_cli.errors: bad input 2, physics failure
+    or a full disk 3, Ctrl-C 130, each with a short message naming the key or path."""
+
+    @functools.wraps(command)
+    def wrapper(*args, **kwargs):
+        try:
+            return command(*args, **kwargs)
+        except InputError as e:
+            fail(str(e))
+        except PhysicsFailure as e:
+            fail(f"physics failure: {e}", EXIT_PHYSICS)
+        except (OSError, RuntimeError) as e:
+            where = next((kwargs[k] for k in ("run_dir", "out_dir", "config", "run_dirs") if kwargs.get(k)), None)
+            where = str(where) if where is not None else None
+            cause = e if isinstance(e, OSError) else hdf5_os_error(e, where)
+            if cause is None:
+                raise
+            fail(*describe_os_error(cause, where))
+        except KeyboardInterrupt:
+            fail("interrupted", EXIT_INTERRUPTED)
+
+    return wrapper
 
 
 def _set_threads(threads: int):
@@ -49,6 +77,7 @@ def _set_threads(threads: int):
 
 
 @app.command()
+@guarded
 def run(
     config: Path = typer.Argument(..., help="YAML run config"),
     out_dir: Optional[Path] = typer.Option(None, "--out", help="output directory (default runs/<name>)"),
@@ -57,18 +86,12 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
 ):
     """Compact the packing, then shear it under the spring until config.run.duration."""
-    from ..runner import RunDirError, default_run_dir, run_scene
-    from ..simulation import PhysicsError
+    from ..runner import default_run_dir, run_scene
 
-    try:
-        cfg = load_config(config, set_)
-        _set_threads(cfg.numerics.threads)
-        target = out_dir or default_run_dir(cfg)
-        result = run_scene(cfg, target, force=force, quiet=quiet)
-    except (ConfigError, RunDirError) as e:
-        fail(str(e))
-    except PhysicsError as e:
-        fail(f"physics failure: {e}", EXIT_PHYSICS)
+    cfg = load_config(config, set_)
+    _set_threads(cfg.numerics.threads)
+    target = out_dir or default_run_dir(cfg)
+    result = run_scene(cfg, target, force=force, quiet=quiet)
     out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s, "
               f"{result.grain_steps_per_second / 1e6:.2f} M grain-steps/s)", highlight=False)
     if result.status == "interrupted":
@@ -76,12 +99,13 @@ def run(
 
 
 def _run_dir(run_dir: Optional[Path]) -> Path:
-    from ..runner import check_run_dir, latest_run
+    from ..rundir import check_run_dir, latest_run
 
     return check_run_dir(run_dir) if run_dir else latest_run()
 
 
 @app.command()
+@guarded
 def restart(
     run_dir: Optional[Path] = typer.Argument(None, help="run directory (default: the latest under runs/)"),
     slip: int = typer.Option(..., "--slip", help="slip number (see `gouge slips RUN`)"),
@@ -93,45 +117,32 @@ def restart(
     force: bool = typer.Option(False, "--force", help="run an existing fork again"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
 ):
-    """Fork drained and undrained branches from the packing kept just before slip N."""
+    """Fork drained and undrained branches from the packing kept just before slip N (no --perm:
+    the drained branch alone)."""
     import json
 
-    from ..checkpoint import CheckpointError
     from ..filedoc import json_safe
     from ..forks import run_fork
-    from ..runner import RunDirError
-    from ..simulation import PhysicsError
 
-    try:
-        target = _run_dir(run_dir)
-        if not perm:
-            fail("give at least one --perm K (kappa_c in d^2, e.g. --perm 1e-5)")
-        if duration is None and not until_slip_ends:
-            fail("--full needs --duration")
-        summary = run_fork(target, slip, perm, set_, duration, force=force, quiet=quiet)
-    except (ConfigError, RunDirError, CheckpointError) as e:
-        fail(str(e))
-    except PhysicsError as e:
-        fail(f"physics failure: {e}", EXIT_PHYSICS)
+    target = _run_dir(run_dir)
+    if duration is None and not until_slip_ends:
+        fail("--full needs --duration")
+    if duration is not None and not (duration > 0 and duration < float("inf")):
+        fail(f"--duration = {duration:g}: give a positive, finite time [t0]")
+    summary = run_fork(target, slip, perm, set_, duration, force=force, quiet=quiet)
     out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
 
 
 @app.command()
+@guarded
 def resume(
     run_dir: Optional[Path] = typer.Argument(None, help="run directory (default: the latest under runs/)"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
 ):
     """Continue an interrupted run (Ctrl-C, kill -9, power loss) from its latest checkpoint."""
-    from ..checkpoint import CheckpointError
-    from ..runner import RunDirError, resume_run
-    from ..simulation import PhysicsError
+    from ..runner import resume_run
 
-    try:
-        result = resume_run(_run_dir(run_dir), quiet=quiet)
-    except (ConfigError, RunDirError, CheckpointError) as e:
-        fail(str(e))
-    except PhysicsError as e:
-        fail(f"physics failure: {e}", EXIT_PHYSICS)
+    result = resume_run(_run_dir(run_dir), quiet=quiet)
     out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s)",
               highlight=False)
     if result.status == "interrupted":
@@ -139,6 +150,7 @@ def resume(
 
 
 @app.command()
+@guarded
 def slips(
     run_dir: Optional[Path] = typer.Argument(None, help="run directory (default: the latest under runs/)"),
     as_json: bool = typer.Option(False, "--json", help="machine-readable output"),
@@ -149,14 +161,13 @@ def slips(
     from rich.table import Table
 
     from ..forks import slip_catalog
-    from ..runner import RunDirError
+    from ..rundir import refuse_if_in_progress
 
     from .export_cmds import catalog_since_loading
 
-    try:
-        catalog, origin = catalog_since_loading(_run_dir(run_dir), slip_catalog)
-    except RunDirError as e:
-        fail(str(e))
+    target = _run_dir(run_dir)
+    refuse_if_in_progress(target, "slips")
+    catalog, origin = catalog_since_loading(target, slip_catalog)
     if as_json:
         print(json.dumps(catalog, allow_nan=False))
         return
@@ -173,6 +184,7 @@ def slips(
 
 
 @app.command("config")
+@guarded
 def show_config(
     config: Optional[Path] = typer.Argument(None, help="YAML config to validate and print resolved"),
     set_: List[str] = typer.Option([], "--set", help="override key=value"),
@@ -182,22 +194,23 @@ def show_config(
                                           "('-' for stdout), for editors"),
 ):
     """Validate a config and print it fully resolved (dimensionless), or print the defaults."""
-    from ..timestep import choose_dt, stability_bound
+    from ..preflight import check_config
+    from ..simulation import Simulation
+    from ..timestep import stability_bound
 
     if schema is not None or (defaults and config is None and not set_):
         from .export_cmds import print_config_doc
 
         print_config_doc(schema)
         return
-    try:
-        cfg = build_config({}, set_) if (defaults or config is None) else load_config(config, set_)
-        bound = stability_bound(cfg)
-        dt = choose_dt(cfg)
-    except ConfigError as e:
-        fail(str(e))
+    cfg = build_config({}, set_) if (defaults or config is None) else load_config(config, set_)
+    bound = stability_bound(cfg)
+    pre = check_config(cfg, Simulation._choose_threads(cfg.numerics.threads, cfg.packing.n_grains))
     out.print(dump_config(cfg), highlight=False, end="")
-    out.print(f"# time step {dt:.6g} t0 (stability bound {bound.bound:.6g} t0, {bound.mode} mode)",
+    out.print(f"# time step {pre.dt:.6g} t0 (stability bound {bound.bound:.6g} t0, {bound.mode} mode)",
               highlight=False)
+    if pre.note:
+        out.print(f"# {pre.note}", highlight=False)
 
 
 @app.command()

@@ -130,7 +130,7 @@ def test_drained_fork_retraces_the_original(finished_run):
 @pytest.mark.parametrize("args,words", [
     (["--slip", 99, "--perm", "1e-5"], ["no checkpoint for slip 99", "1, 2"]),
     (["--slip", 2, "--perm", "-1e-5"], ["--perm", "positive"]),
-    (["--slip", 2], ["--perm"]),
+    (["--slip", 2, "--perm", "1e-5", "--duration", "-5"], ["--duration"]),
 ])
 def test_restart_bad_input(finished_run, args, words):
     result = gouge("restart", finished_run, *args)

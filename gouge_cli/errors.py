@@ -1,0 +1,93 @@
+"""Exit codes and the one mapping from exceptions to them (used by every `gouge` command).
+
+    0   done
+    2   bad input: a config key, a run directory, a slip number, a damaged, unreadable or
+        read-only file; nothing is run or written (InputError and its subclasses, OSError
+        other than a full disk)
+    3   the run could not go on: physics failure (PhysicsFailure, names the parameter to
+        change) or a full disk (ENOSPC, names the path); the last good checkpoint is kept
+    130 interrupted (outputs flushed)
+
+Messages are one line, at most MAX_MESSAGE characters per line and MAX_LINES lines.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import re
+
+EXIT_OK, EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_INTERRUPTED = 0, 2, 3, 130
+MAX_MESSAGE = 400       # characters per line of a message
+MAX_LINES = 25
+
+
+class InputError(ValueError):
+    """Anything the user can fix in what they gave (exit 2); the message names the key or path."""
+
+
+class PhysicsFailure(RuntimeError):
+    """The run went physically wrong (exit 3); the message names the cause and the fix."""
+
+
+def clip(text: str, limit: int = MAX_MESSAGE) -> str:
+    """`text` cut to `limit` characters (with a note of how much was cut)."""
+    text = str(text)
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text) - limit} more characters)"
+
+
+def bounded(message: str) -> str:
+    """At most MAX_LINES lines of at most MAX_MESSAGE characters each."""
+    lines = str(message).splitlines() or [""]
+    out = [clip(line) for line in lines[:MAX_LINES]]
+    if len(lines) > MAX_LINES:
+        out.append(f"... and {len(lines) - MAX_LINES} more lines")
+    return "\n".join(out)
+
+
+def _first_line(text: str) -> str:
+    return (str(text).strip().splitlines() or [""])[0]
+
+
+def describe_os_error(exc: OSError, where: str | None = None) -> tuple[str, int]:
+    """(one-line message, exit code) for a failed file operation. `where`: the run directory
+    or file the command was working on, named when the error itself carries no path."""
+    path = exc.filename or where or "a file"
+    code = exc.errno
+    if code == errno.ENOSPC or "No space left on device" in str(exc):
+        return (f"no space left on device while writing {path}; free some space and `gouge resume` "
+                "(the last good checkpoint is kept)", EXIT_PHYSICS)
+    if code in (errno.EACCES, errno.EPERM, errno.EROFS):
+        return f"permission denied: {path} cannot be written or read (read-only directory or file?)", EXIT_BAD_INPUT
+    if code == errno.EISDIR:
+        return f"{path} is a directory, expected a file", EXIT_BAD_INPUT
+    if code in (errno.ENOTDIR, errno.EEXIST):
+        return f"{path}: {exc.strerror or _first_line(exc)} (a file is in the way)", EXIT_BAD_INPUT
+    reason = exc.strerror or _first_line(exc)
+    if exc.errno is None:       # h5py/HDF5: damaged, truncated or locked file
+        return f"{path}: damaged, truncated or unreadable HDF5 data ({clip(reason, 200)})", EXIT_BAD_INPUT
+    return f"{path}: {clip(reason, 200)}", EXIT_BAD_INPUT
+
+
+def hdf5_os_error(exc: RuntimeError, where: str | None = None) -> OSError | None:
+    """The OSError inside an HDF5 RuntimeError ("file write failed ... errno = 28 ..."), or None."""
+    match = re.search(r"errno = (\d+)", str(exc))
+    if not match:
+        return None
+    name = re.search(r"filename = '([^']*)'", str(exc))
+    code = int(match.group(1))
+    return OSError(code, os.strerror(code), name.group(1) if name else where)
+
+
+def exit_code_of(exc: BaseException) -> int:
+    if isinstance(exc, KeyboardInterrupt):
+        return EXIT_INTERRUPTED
+    if isinstance(exc, PhysicsFailure):
+        return EXIT_PHYSICS
+    if isinstance(exc, OSError):
+        return describe_os_error(exc)[1]
+    if isinstance(exc, RuntimeError) and hdf5_os_error(exc) is not None:
+        return describe_os_error(hdf5_os_error(exc))[1]
+    return EXIT_BAD_INPUT
