@@ -240,4 +240,11 @@ def document_checkpoint(h5: h5py.File) -> None:
     for group in ("state", "fluid"):
         for name, ds in (h5[group].items() if group in h5 else []):
             describe(ds, *CHECKPOINT.get(f"{group}/{name}", ("-", "undocumented")))
+    for key, child in (h5["attached"].items() if "attached" in h5 else []):
+        # a state kept with this one (the slip recorder's pre-slip ring): same layout
+        describe(child, "-", f"attached state {key} (the slip recorder's ring of pre-slip states)")
+        describe_attributes(child, {"extra": ("-", "callback state of the attached state (JSON)")})
+        for group in ("state", "fluid"):
+            for name, ds in (child[group].items() if group in child else []):
+                describe(ds, *CHECKPOINT.get(f"{group}/{name}", ("-", "undocumented")))
     describe_attributes(h5, CHECKPOINT_ATTRS)

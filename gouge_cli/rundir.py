@@ -7,7 +7,8 @@ A process that writes into it (run, resume, restart) holds an exclusive ``fcntl.
 lock when the process dies (even by kill -9), so a lock file whose lock is free is stale and is
 simply taken over. ``gouge run --out DIR`` uses DIR if it is missing or empty, or if it is a gouge
 run (``--force`` then removes only the entries of OWNED, never anything else); any other
-directory, a regular file, or a run whose lock is held is refused.
+directory, a regular file, or a run whose lock is held is refused. A campaign point directory's
+``point.yaml`` and ``ledger/`` (CAMPAIGN_ENTRIES) count as empty.
 """
 
 from __future__ import annotations
@@ -24,6 +25,9 @@ from .errors import InputError
 
 LOCK_NAME = ".gouge.lock"
 OWNED = ("run.h5", "config.yaml", "checkpoints", "forks", "figures", "analysis")
+# a campaign point directory (gouge campaign) holds its state point and ledger beside the run:
+# they make no directory foreign, count as no run, and are never removed by --force
+CAMPAIGN_ENTRIES = ("point.yaml", "ledger")
 
 
 class RunDirError(InputError):
@@ -114,7 +118,7 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
     if out_dir.exists() and not out_dir.is_dir():
         raise RunDirError(f"--out {out_dir} is a file, not a directory; choose a directory for the run")
     out_dir.mkdir(parents=True, exist_ok=True)
-    entries = sorted(p.name for p in out_dir.iterdir())
+    entries = sorted(p.name for p in out_dir.iterdir() if p.name not in CAMPAIGN_ENTRIES)
     if entries and not is_gouge_run(out_dir):
         shown = ", ".join(entries[:5]) + (", ..." if len(entries) > 5 else "")
         raise RunDirError(f"{out_dir} is not empty and is not a gouge run directory (it holds {shown}); "
