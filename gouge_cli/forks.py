@@ -3,13 +3,13 @@
 Both branches start from the identical checkpoint (grains, walls, contact history, clock).
 The drained branch is the dry model: with unchanged parameters it retraces the original
 run bit for bit. Each undrained branch adds the pore fluid with kappa_c = K, starting from
-P = 0 on that packing. Outputs: ``RUN/forks/slip_NNN/{drained,perm_K}/run.h5`` and
-``RUN/forks/slip_NNN/pair.json`` (first slip of each branch, and undrained/drained ratios).
+P = 0 on that packing. Outputs: ``RUN/forks/slip_NNN/{drained,perm_K}/run.h5``. The pair
+verdict (``pair.json``) is written by :mod:`gouge_cli.workflows.pairs` from these files with the
+one pair definition of :mod:`gouge_cli.analysis.pairs`.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from dataclasses import dataclass
@@ -65,19 +65,66 @@ class BranchResult:
     first_slip: dict | None
 
 
-def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
-             duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
-    """Fork the drained branch and one undrained branch per permeability from slip `slip`."""
-    run_dir = check_run_dir(run_dir)
+def fork_entry(run_dir: Path, slip: int) -> dict:
+    """The catalog entry of slip ``slip``; :class:`RunDirError` naming the slips with checkpoints."""
     catalog = slip_catalog(run_dir)
     numbers = [int(e["number"]) for e in catalog if e.get("checkpoint")]
     if slip not in numbers:
         listed = ", ".join(str(n) for n in numbers) or "none yet"
         raise RunDirError(f"{run_dir} has no checkpoint for slip {slip}; slips with checkpoints: {listed}")
+    return next(e for e in catalog if int(e["number"]) == slip)
+
+
+def check_perms(perms) -> None:
     for perm in perms:
-        if not (perm > 0 and math.isfinite(perm)):
+        if not (perm is None or (perm > 0 and math.isfinite(perm))):
             raise ConfigError(f"--perm = {perm:g}: the permeability prefactor kappa_c must be a positive number [d^2]")
-    entry = next(e for e in catalog if int(e["number"]) == slip)
+
+
+def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | None = None,
+               overrides: list[str] | None = None, live=None, quiet: bool = False) -> BranchResult:
+    """Run one branch (drained: ``perm=None``) of slip ``slip`` into ``RUN/forks/slip_NNN/<branch>``.
+
+    ``duration`` [t0] from the checkpoint; None: until the branch's first slip ends (at most
+    5 x (end - checkpoint time) + 2 leads). Overwrites an existing branch directory.
+    """
+    run_dir = Path(run_dir)
+    entry = fork_entry(run_dir, slip)
+    ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
+    config = branch_config(ck.config, perm)
+    name = branch_name(perm)
+    stop_after_slip = duration is None
+    if duration is None:
+        span = float(entry["end_time"]) - ck.time
+        duration = 5.0 * span + 2.0 * lead_time(ck.config)
+    out_dir = run_dir / "forks" / f"slip_{slip:03d}" / name
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    sim = Simulation(config, arrays=ck.state)
+    writer = RunFile(out_dir / "run.h5", config, sim.dt, extra_attrs={
+        "parent_run": str(run_dir), "parent_checkpoint": str(entry["checkpoint"]), "fork_slip": slip,
+        "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
+        "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
+        "end_time": ck.time + duration})
+    writer.append(sim.observe())
+    step0 = sim.state.step
+    status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
+                                  label=f"slip {slip} {name}", checkpoints=False,
+                                  stop_after_slip=stop_after_slip)
+    writer.close(status)
+    first = recorder.slips[0] if recorder.slips else None
+    return BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first)
+
+
+def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
+             duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
+    """Fork the drained branch and one undrained branch per permeability from slip `slip`.
+
+    Returns ``{"run", "slip", "start_time", "branches": {name: {status, dir, wall_seconds, steps,
+    first_slip}}}`` (first_slip: the detector's record of the branch's first slip)."""
+    run_dir = check_run_dir(run_dir)
+    entry = fork_entry(run_dir, slip)
+    check_perms(perms)
     ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
     fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
     branches = [None] + list(perms)
@@ -85,33 +132,8 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         target = fork_dir / branch_name(perm) / "run.h5"
         if target.exists() and not force:
             raise RunDirError(f"{target} exists; pass --force to run this fork again")
-    configs = {branch_name(p): branch_config(ck.config, p) for p in branches}
-    stop_after_slip = duration is None
-    if duration is None:
-        span = float(entry["end_time"]) - ck.time
-        duration = 5.0 * span + 2.0 * lead_time(ck.config)
-    results = []
-    for name, config in configs.items():
-        out_dir = fork_dir / name
-        out_dir.mkdir(parents=True, exist_ok=True)
-        t0 = time.perf_counter()
-        sim = Simulation(config, arrays=ck.state)
-        writer = RunFile(out_dir / "run.h5", config, sim.dt, extra_attrs={
-            "parent_run": str(run_dir), "parent_checkpoint": str(entry["checkpoint"]), "fork_slip": slip,
-            "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
-            "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
-            "end_time": ck.time + duration})
-        writer.append(sim.observe())
-        step0 = sim.state.step
-        status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
-                                      label=f"slip {slip} {name}", checkpoints=False,
-                                      stop_after_slip=stop_after_slip)
-        writer.close(status)
-        first = recorder.slips[0] if recorder.slips else None
-        results.append(BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first))
-    summary = pair_summary(run_dir, slip, ck.time, results)
-    (fork_dir / "pair.json").write_text(json.dumps(summary, indent=2, default=str))
-    return summary
+    results = [run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet) for perm in branches]
+    return pair_summary(run_dir, slip, ck.time, results)
 
 
 def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[BranchResult]) -> dict:
@@ -121,12 +143,4 @@ def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[Bran
         branches[r.name] = {"status": r.status, "dir": str(r.out_dir), "wall_seconds": round(r.wall_seconds, 3),
                             "steps": r.steps,
                             "first_slip": {k: r.first_slip[k] for k in keys} if r.first_slip else None}
-    drained = branches["drained"]["first_slip"]
-    for name, b in branches.items():
-        if name == "drained" or not (drained and b["first_slip"]):
-            continue
-        u = b["first_slip"]
-        b["ratio_to_drained"] = {k: (u[k] / drained[k] if drained[k] else None)
-                                 for k in ("peak_velocity", "stress_drop", "duration")}
-        b["stronger_than_drained"] = u["static_strength"] > drained["static_strength"]
     return {"run": str(run_dir), "slip": slip, "start_time": start_time, "branches": branches}

@@ -76,15 +76,19 @@ def restart(
     until_slip_ends: bool = typer.Option(True, "--until-slip-ends/--full",
                                          help="stop each branch when its first slip ends (default)"),
     force: bool = typer.Option(False, "--force", help="run an existing fork again"),
+    main: str = typer.Option("first", "--main", help="compared event of each branch in pair.json: first "
+                             "(the forked slip) or largest"),
     quiet: bool = typer.Option(False, "--quiet"),
 ):
-    """Fork drained and undrained branches from the packing kept just before slip N."""
+    """Fork drained and undrained branches from the packing kept just before slip N; writes pair.json."""
     import json
 
+    from ..analysis.report import AnalysisError
     from ..checkpoint import CheckpointError
     from ..forks import run_fork
     from ..runner import RunDirError
     from ..simulation import PhysicsError
+    from ..workflows.pairs import write_pair_json
 
     try:
         target = _run_dir(run_dir)
@@ -92,8 +96,11 @@ def restart(
             fail("give at least one --perm K (kappa_c in d^2, e.g. --perm 1e-5)")
         if duration is None and not until_slip_ends:
             fail("--full needs --duration")
+        if main not in ("first", "largest"):
+            fail(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
         summary = run_fork(target, slip, perm, set_, duration, force=force, quiet=quiet)
-    except (ConfigError, RunDirError, CheckpointError) as e:
+        summary["pair"] = write_pair_json(target / "forks" / f"slip_{slip:03d}", main)
+    except (ConfigError, RunDirError, CheckpointError, AnalysisError) as e:
         fail(str(e))
     except PhysicsError as e:
         fail(f"physics failure: {e}", EXIT_PHYSICS)

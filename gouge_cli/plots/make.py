@@ -29,7 +29,7 @@ def _nearest_snapshot(reader: RunReader, t: float) -> str | None:
 
 
 def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | str | None = None,
-                 notch: bool = True) -> list[Path]:
+                 notch: bool = True, main: str = "first") -> list[Path]:
     """Draw the figures of one run into ``out_dir`` (default ``RUN/figures``); returns the files.
 
     Always: ``overview.png`` (four panels, slips shaded) and ``snapshot_<step>.png`` (the run's
@@ -39,6 +39,8 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
     ``slip_NNN_pair_B.png`` (drained black, undrained blue, pore pressure),
     ``slip_NNN_friction_B.png`` (R/sigma, Eq. 6) and ``slip_NNN_snapshot_B.png`` (the branch's
     snapshot nearest its peak velocity, pressure shaded) when the branch wrote snapshots.
+    Pairs are classified by :func:`~gouge_cli.analysis.report.classify_fork` (``main``: the compared
+    events), so titles and shading say what pairs.csv and pair.json say.
     Raises :class:`~gouge_cli.analysis.report.AnalysisError` subclasses for bad input.
     """
     run_dir = Path(run_dir)
@@ -67,7 +69,7 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
             written.append(friction_figure(fr, reader.info.V_s, out / f"{tag}_friction.png",
                                            title=f"{reader.info.run_dir.name}, slip {slip}: "
                                                  f"{'μ_d(t), Eq. 7' if fr.drained else 'R/σ, Eq. 6'}"))
-    pairs, _ = run_pairs(run_dir)
+    pairs, _ = run_pairs(run_dir, main=main)
     if entry is not None:
         fork = run_dir / "forks" / f"slip_{slip:03d}"
         drained_dir, undrained_dirs = fork_branches(fork)

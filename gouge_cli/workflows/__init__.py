@@ -1,0 +1,1 @@
+"""Orchestration over runs, forks and analysis (owns no physics): pair.json, `gouge study`."""
