@@ -273,6 +273,8 @@ from .analysis_cmds import register as _register_analysis
 _register_analysis(app)
 from .accuracy_cmds import register as _register_accuracy
 _register_accuracy(app)
+from .study_cmds import register as _register_study
+_register_study(app)
 
 
 def main():
