@@ -116,3 +116,16 @@ def test_parse_slips_and_window():
         parse_slips("5-3")
     entry = {"end_time": 1000.0, "duration": 100.0}
     assert study_window(entry, 400.0, 3e-4, 1e-6, 1e-4) == pytest.approx(600 + 200 + 0.02 * 3e-4 / 1e-10)
+
+
+def test_order_flag_marks_errors_that_do_not_fall():
+    from gouge_cli.accuracy import fit_order, order_flag
+
+    assert order_flag([0.4, 0.2, 0.1], [1.6e-3, 4e-4, 1e-4]) == ""                 # clean second order
+    flag = order_flag([0.8, 0.4, 0.2, 0.1], [2.9e-3, 2.8e-3, 6.2e-4, 4.4e-4][::-1])
+    assert "do not fall" in flag
+    # the README's demo ladder, wall velocity: 0.018, 0.028, 0.011, 6.5e-3 at dt_safety 0.8 .. 0.1
+    assert "do not fall" in order_flag([0.8, 0.4, 0.2, 0.1], [0.018, 0.028, 0.011, 6.5e-3])
+    assert math.isfinite(fit_order([0.8, 0.4, 0.2, 0.1], [0.018, 0.028, 0.011, 6.5e-3]))   # a number all the same
+    assert "R^2" in order_flag([1.0, 0.5, 0.25, 0.125], [1.0, 0.99, 0.98, 1e-3])
+    assert order_flag([0.4], [1e-3]) == "fewer than 2 errors"
