@@ -31,9 +31,9 @@ def register(app: typer.Typer) -> None:
         from ..config import ConfigError
         from ..runner import RunDirError
         from ..simulation import PhysicsError
-        from ..workflows.study import parse_slips, run_study
+        from ..workflows.study import StudyInterrupted, parse_slips, run_study
         from .analysis_cmds import _table
-        from .main import EXIT_PHYSICS, fail, out
+        from .main import EXIT_INTERRUPTED, EXIT_PHYSICS, fail, out
 
         try:
             wanted = parse_slips(slips)
@@ -49,6 +49,8 @@ def register(app: typer.Typer) -> None:
             fail(str(e))
         except PhysicsError as e:
             fail(f"physics failure: {e}", EXIT_PHYSICS)
+        except StudyInterrupted as e:
+            fail(str(e), EXIT_INTERRUPTED)
         cols = [(c, c) for c in STUDY_COLUMNS if c not in ("note", "criteria")]
         out.print(_table(f"study of {result.run_dir} ({len(result.rows)} pairs)", cols, result.rows))
         side = [{"quantity": a, "this study": b, "thesis": c} for a, b, c in summary_lines(result.summary)]

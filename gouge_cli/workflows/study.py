@@ -38,7 +38,7 @@ from ..forks import branch_name, check_perms, run_branch, slip_catalog
 from ..runner import RunDirError, check_run_dir, default_run_dir, resume_run, run_scene
 from .pairs import branch_status, clean_json, write_pair_json
 
-__all__ = ["EXTRA_STRENGTH", "StudyResult", "parse_slips", "study_window", "branch_task", "plan_branches",
+__all__ = ["EXTRA_STRENGTH", "StudyInterrupted", "StudyResult", "parse_slips", "study_window", "branch_task", "plan_branches",
            "run_study"]
 
 #: Each branch runs on after the drained slip's end for 2 slip durations plus the time the spring
@@ -94,6 +94,10 @@ def branch_task(run_dir: str, slip: int, perm: float | None, duration: float) ->
             "wall_seconds": time.perf_counter() - t0}
 
 
+class StudyInterrupted(RuntimeError):
+    """The loading run was interrupted (Ctrl-C): no branch is started; `gouge study` again resumes it."""
+
+
 @dataclass
 class StudyResult:
     run_dir: Path
@@ -120,10 +124,15 @@ def _loading_run(target: Path, out: Path | None, overrides: list[str] | None, qu
         if status == "finished":
             return run_dir, "done before"
         if (run_dir / "checkpoints" / "latest.h5").is_file():
-            resume_run(run_dir, quiet=quiet)
+            _finished(resume_run(run_dir, quiet=quiet), run_dir)
             return run_dir, f"resumed ({status})"
-    run_scene(cfg, run_dir, force=h5.is_file(), quiet=quiet)
+    _finished(run_scene(cfg, run_dir, force=h5.is_file(), quiet=quiet), run_dir)
     return run_dir, "ran"
+
+
+def _finished(result, run_dir: Path) -> None:
+    if result.status == "interrupted":
+        raise StudyInterrupted(f"the loading run {run_dir} was interrupted; run `gouge study` again to resume it")
 
 
 def plan_branches(run_dir: Path, slips: list[int], perms: list[float]) -> tuple[list[tuple], list[str]]:
