@@ -28,6 +28,16 @@ def _nearest_snapshot(reader: RunReader, t: float) -> str | None:
     return names[int(np.argmin(np.abs(times - t)))]
 
 
+def undrained_friction_figure(u: RunReader, pair, path: Path, notch: bool, drained_mean: float | None) -> Path:
+    """R/sigma = mu_d (1 - P*/sigma) (Eq. 6) over the pair's compared undrained event (thesis Fig. 18)."""
+    main = pair.result.undrained_slip
+    slip = int(pair.row["slip"])
+    fr = slip_friction(u, {"number": slip, "onset_time": main.onset_time, "end_time": main.end_time,
+                           "static_strength": pair.result.undrained_strength}, notch=notch)
+    return friction_figure(fr, u.info.V_s, path, title=f"slip {slip}, {pair.row['branch']}: R/σ = μ_d (1 − P*/σ), Eq. 6",
+                           drained_mean=drained_mean)
+
+
 def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | str | None = None,
                  notch: bool = True, main: str = "first") -> list[Path]:
     """Draw the figures of one run into ``out_dir`` (default ``RUN/figures``); returns the files.
@@ -83,14 +93,8 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
                         written.append(pair_figure(d, u, pair, out / f"{tag}_pair_{branch}.png"))
                         main = pair.result.undrained_slip
                         if main is not None:
-                            fr = slip_friction(u, {"number": slip, "onset_time": main.onset_time,
-                                                   "end_time": main.end_time,
-                                                   "static_strength": pair.result.undrained_strength},
-                                               notch=notch)
-                            written.append(friction_figure(
-                                fr, u.info.V_s, out / f"{tag}_friction_{branch}.png",
-                                title=f"slip {slip}, {branch}: R/σ = μ_d (1 − P*/σ), Eq. 6",
-                                drained_mean=drained_mean))
+                            written.append(undrained_friction_figure(
+                                u, pair, out / f"{tag}_friction_{branch}.png", notch, drained_mean))
                         if u.snapshot_names():
                             if main is not None:
                                 t_peak = main.peak_time

@@ -7,9 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.report import ForkPair, RunReader, read_catalog
+from ..analysis.report import ForkPair, RunReader, find_slip, read_catalog, slip_friction
 from .campaign import _COLORS, campaign_figure
-from .series import overview_figure, pair_figure
+from .make import undrained_friction_figure
+from .series import friction_figure, overview_figure, pair_figure
 from .style import new_figure, save
 
 
@@ -47,16 +48,30 @@ def study_figure(rows: list[dict], path: Path, title: str = "") -> Path:
     return save(fig, path)
 
 
-def study_figures(run_dir: Path, pairs: list[ForkPair], rows: list[dict], out: Path) -> list[Path]:
-    """overview.png (loading run, slips shaded), pair_slip_NNN_<branch>.png per pair (the same
-    figure as `gouge plot`), types.png (campaign) and study.png (:func:`study_figure`)."""
+def study_figures(run_dir: Path, pairs: list[ForkPair], rows: list[dict], out: Path,
+                  notch: bool = True) -> list[Path]:
+    """overview.png (loading run, slips shaded); per pair the figures of `gouge plot`:
+    pair_slip_NNN_<branch>.png (drained vs undrained, thesis Figs. 7-12), friction_slip_NNN.png
+    (drained mu_d(t), Eq. 7, Fig. 17) and friction_slip_NNN_<branch>.png (R/sigma, Eq. 6, Fig. 18);
+    types.png (campaign) and study.png (:func:`study_figure`)."""
     out = Path(out)
     written = []
+    drained_mean = {}
     with RunReader(run_dir) as reader:
-        written.append(overview_figure(reader, read_catalog(reader), out / "overview.png"))
+        catalog = read_catalog(reader)
+        written.append(overview_figure(reader, catalog, out / "overview.png"))
+        for n in sorted({int(p.row["slip"]) for p in pairs}):
+            fr = slip_friction(reader, find_slip(catalog, n), notch=notch)
+            drained_mean[n] = fr.mean_mu_d
+            written.append(friction_figure(fr, reader.info.V_s, out / f"friction_slip_{n:03d}.png",
+                                           title=f"slip {n}, drained: μ_d(t), Eq. 7"))
     for p in pairs:
+        n, branch = int(p.row["slip"]), p.row["branch"]
         with RunReader(p.drained_dir) as d, RunReader(p.undrained_dir) as u:
-            written.append(pair_figure(d, u, p, out / f"pair_slip_{int(p.row['slip']):03d}_{p.row['branch']}.png"))
+            written.append(pair_figure(d, u, p, out / f"pair_slip_{n:03d}_{branch}.png"))
+            if p.result.undrained_slip is not None:
+                written.append(undrained_friction_figure(u, p, out / f"friction_slip_{n:03d}_{branch}.png", notch,
+                                                         drained_mean.get(n)))
     if pairs:
         written.append(campaign_figure(pairs, out / "types.png", title=Path(run_dir).name))
     written.append(study_figure(rows, out / "study.png", title=f"{Path(run_dir).name}: {len(rows)} pairs"))

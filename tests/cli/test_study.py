@@ -83,6 +83,7 @@ def test_study_end_to_end_idempotent_and_consistent(study_run):
                 assert b is None or math.isnan(b)
             else:
                 assert a == pytest.approx(b, rel=1e-12) and a == pytest.approx(float(c), rel=1e-12)
+        assert (run_dir / "study" / "figures" / f"friction_slip_{n:03d}.png").is_file()      # Eq. 7, Fig. 17
         png = Image.open(run_dir / "study" / "figures" / f"pair_slip_{n:03d}_perm_1e-05.png")
         assert f"Type {p['type']}" in png.text["Title"]
         shaded = json.loads(png.text["Description"])
