@@ -82,18 +82,21 @@ def check_perms(perms) -> None:
 
 
 def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | None = None,
-               overrides: list[str] | None = None, live=None, quiet: bool = False) -> BranchResult:
+               overrides: list[str] | None = None, live=None, quiet: bool = False,
+               stop_after_slip: bool | None = None) -> BranchResult:
     """Run one branch (drained: ``perm=None``) of slip ``slip`` into ``RUN/forks/slip_NNN/<branch>``.
 
-    ``duration`` [t0] from the checkpoint; None: until the branch's first slip ends (at most
-    5 x (end - checkpoint time) + 2 leads). Overwrites an existing branch directory.
+    ``duration`` [t0] from the checkpoint; None: 5 x (end - checkpoint time) + 2 leads.
+    ``stop_after_slip``: stop when the branch's first slip ends (default: when ``duration`` is None).
+    Overwrites an existing branch directory.
     """
     run_dir = Path(run_dir)
     entry = fork_entry(run_dir, slip)
     ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
     config = branch_config(ck.config, perm)
     name = branch_name(perm)
-    stop_after_slip = duration is None
+    if stop_after_slip is None:
+        stop_after_slip = duration is None
     if duration is None:
         span = float(entry["end_time"]) - ck.time
         duration = 5.0 * span + 2.0 * lead_time(ck.config)

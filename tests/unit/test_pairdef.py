@@ -115,7 +115,7 @@ def test_parse_slips_and_window():
     with pytest.raises(ValueError):
         parse_slips("5-3")
     entry = {"end_time": 1000.0, "duration": 100.0}
-    assert study_window(entry, 400.0, 3e-4, 1e-6, 1e-4) == pytest.approx(600 + 200 + 0.02 * 3e-4 / 1e-10)
+    assert study_window(entry, 400.0, 3e-4, 1e-6, 1e-4) == pytest.approx(600 + 200 + 0.05 * 3e-4 / 1e-10)
 
 
 def test_order_flag_marks_errors_that_do_not_fall():
