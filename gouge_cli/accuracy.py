@@ -316,6 +316,31 @@ def fit_order(values, errors) -> float:
     return float(np.polyfit(x, y, 1)[0])
 
 
+ORDER_MIN_R2 = 0.8
+
+
+def order_flag(values, errors, min_r2: float = ORDER_MIN_R2) -> str:
+    """Why an observed order (:func:`fit_order`) is meaningless, or "" when it is not.
+
+    Meaningful: at least 2 finite positive errors, each finer setting's error below the next
+    coarser one's (errors fall as the setting is refined), and log(error) on a line in
+    log(setting) with R^2 >= ``min_r2``.
+    """
+    pairs = sorted((v, e) for v, e in zip(values, errors) if v > 0 and e > 0 and math.isfinite(e))
+    if len(pairs) < 2:
+        return "fewer than 2 errors"
+    rising = [f"{fine:.3g} -> {coarse:.3g}" for (_, fine), (_, coarse) in zip(pairs, pairs[1:]) if fine >= coarse]
+    if rising:
+        return "errors do not fall as the setting is refined (" + ", ".join(rising) + ")"
+    x, y = np.log([p[0] for p in pairs]), np.log([p[1] for p in pairs])
+    if len(pairs) > 2:
+        res = y - np.polyval(np.polyfit(x, y, 1), x)
+        r2 = 1.0 - float(np.sum(res ** 2)) / float(np.sum((y - y.mean()) ** 2))
+        if r2 < min_r2:
+            return f"log-log fit R^2 = {r2:.2f} < {min_r2:g}"
+    return ""
+
+
 def order_value(result: LevelResult) -> float:
     """The setting the order is fitted against: dt, the fluid step used, or the cell size."""
     lv = result.level
@@ -344,14 +369,15 @@ def run_scene_ladders(start: Start, levels: list[Level], samples: int = 400, on_
         ref = step_ref if ladder == "fluid.solver" else next((r for r in group if r.level.reference), None)
         for r in group:
             r.errors = level_errors(r, ref) if ref is not None and r is not ref else {}
-    orders = {}
+    orders, flags = {}, {}
     for ladder in ("dt_safety", "cell_size", "fluid.step"):
         group = [r for r in results if r.level.ladder == ladder and not r.level.reference]
         if group:
-            orders[ladder] = {name: fit_order([order_value(r) for r in group], [r.errors.get(name, np.nan)
-                                                                                 for r in group])
-                              for name in SCENE_ERRORS}
-    return {"results": results, "orders": orders}
+            values = [order_value(r) for r in group]
+            errs = {name: [r.errors.get(name, np.nan) for r in group] for name in SCENE_ERRORS}
+            orders[ladder] = {name: fit_order(values, errs[name]) for name in SCENE_ERRORS}
+            flags[ladder] = {name: order_flag(values, errs[name]) for name in SCENE_ERRORS}
+    return {"results": results, "orders": orders, "order_flags": flags}
 
 
 # ---- analytic cases ---------------------------------------------------------------------
@@ -587,12 +613,13 @@ def analytic_ladders(quick: bool = False) -> dict:
     for dt in ((0.4, 0.2, 0.1) if quick else (0.4, 0.2, 0.1, 0.05, 0.025)):
         errs, sec = _timed(block_slider_errors, dt)
         rows.append(AnalyticRow("block on a spring", "dt", dt, sec, errs))
-    orders = {}
+    orders, flags = {}, {}
     for case in dict.fromkeys(r.case for r in rows):
         group = [r for r in rows if r.case == case]
-        orders[case] = {name: fit_order([r.value for r in group], [r.errors[name] for r in group])
-                        for name in group[0].errors}
-    return {"rows": rows, "orders": orders}
+        values = [r.value for r in group]
+        orders[case] = {name: fit_order(values, [r.errors[name] for r in group]) for name in group[0].errors}
+        flags[case] = {name: order_flag(values, [r.errors[name] for r in group]) for name in group[0].errors}
+    return {"rows": rows, "orders": orders, "order_flags": flags}
 
 
 # ---- outputs ----------------------------------------------------------------------------
@@ -709,4 +736,4 @@ def run_accuracy(config: Config | None, out_dir: Path, checkpoint: Path | None =
 
 
 __all__ = ["Start", "Level", "LevelResult", "scene_ladders", "run_scene_ladders", "run_level", "level_errors",
-           "fit_order", "analytic_ladders", "run_accuracy", "prepare_start", "start_from_checkpoint"]
+           "fit_order", "order_flag", "analytic_ladders", "run_accuracy", "prepare_start", "start_from_checkpoint"]

@@ -3,13 +3,13 @@
 Both branches start from the identical checkpoint (grains, walls, contact history, clock).
 The drained branch is the dry model: with unchanged parameters it retraces the original
 run bit for bit. Each undrained branch adds the pore fluid with kappa_c = K, starting from
-P = 0 on that packing. Outputs: ``RUN/forks/slip_NNN/{drained,perm_K}/run.h5`` and
-``RUN/forks/slip_NNN/pair.json`` (first slip of each branch, and undrained/drained ratios).
+P = 0 on that packing. Outputs: ``RUN/forks/slip_NNN/{drained,perm_K}/run.h5``. The pair
+verdict (``pair.json``) is written by :mod:`gouge_cli.workflows.pairs` from these files with the
+one pair definition of :mod:`gouge_cli.analysis.pairs`.
 """
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -17,15 +17,13 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-
 from . import provenance
 from .checkpoint import read_checkpoint
 from .config import Config, ConfigError, build_config
 from .events import lead_time
-from .filedoc import json_safe
 from .output import RunFile
 from .preflight import check_config
-from .rundir import RunDirError, RunLock, check_run_dir, open_run_file
+from .rundir import RunDirError, RunLock, check_run_dir, open_run_file, refuse_if_in_progress
 from .runner import load_phase
 from .simulation import Simulation
 
@@ -75,27 +73,82 @@ class BranchResult:
     first_slip: dict | None
 
 
-def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
-             duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
-    """Fork the drained branch and one undrained branch per permeability from slip `slip`
-    (no permeability: the drained branch alone). The run directory is locked meanwhile."""
-    run_dir = check_run_dir(run_dir)
-    with RunLock(run_dir, f"gouge restart --slip {slip}"):
-        return _run_fork(run_dir, slip, perms, overrides, duration, force, live, quiet)
-
-
-def _run_fork(run_dir, slip, perms, overrides, duration, force, live, quiet) -> dict:
+def fork_entry(run_dir: Path, slip: int) -> dict:
+    """The catalog entry of slip ``slip``; :class:`RunDirError` naming the slips with checkpoints."""
     catalog = slip_catalog(run_dir)
     numbers = [int(e["number"]) for e in catalog if e.get("checkpoint")]
     if slip not in numbers:
         listed = ", ".join(str(n) for n in numbers) or "none yet"
         raise RunDirError(f"{run_dir} has no checkpoint for slip {slip}; slips with checkpoints: {listed}")
+    return next(e for e in catalog if int(e["number"]) == slip)
+
+
+def check_perms(perms) -> None:
     for perm in perms:
-        if not (perm > 0 and math.isfinite(perm)):
+        if not (perm is None or (perm > 0 and math.isfinite(perm))):
             raise ConfigError(f"--perm = {perm:g}: the permeability prefactor kappa_c must be a positive number [d^2]")
-    entry = next(e for e in catalog if int(e["number"]) == slip)
+
+
+def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | None = None,
+               overrides: list[str] | None = None, live=None, quiet: bool = False,
+               stop_after_slip: bool | None = None) -> BranchResult:
+    """Run one branch (drained: ``perm=None``) of slip ``slip`` into ``RUN/forks/slip_NNN/<branch>``.
+
+    ``duration`` [t0] from the checkpoint; None: 5 x (end - checkpoint time) + 2 leads.
+    ``stop_after_slip``: stop when the branch's first slip ends (default: when ``duration`` is None).
+    Overwrites an existing branch directory. The branch directory is locked while it runs (so
+    branches of one run may run in parallel), and the run itself must not be in progress. Dense
+    snapshots while the branch slips: output.slip_frames, FORK_SLIP_FRAMES unless overridden.
+    """
+    run_dir = Path(run_dir)
+    refuse_if_in_progress(run_dir, f"restart --slip {slip}")
+    entry = fork_entry(run_dir, slip)
     ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
-    risks = provenance.bit_risks(ck.provenance)
+    frames = {} if any(o.split("=")[0].strip() == "output.slip_frames" for o in overrides or []) \
+        else {"output": {"slip_frames": ck.config.output.slip_frames or FORK_SLIP_FRAMES}}
+    config = branch_config(ck.config, perm, frames)
+    check_config(config)
+    name = branch_name(perm)
+    if stop_after_slip is None:
+        stop_after_slip = duration is None
+    if duration is None:
+        span = float(entry["end_time"]) - ck.time
+        duration = 5.0 * span + 2.0 * lead_time(ck.config)
+    out_dir = run_dir / "forks" / f"slip_{slip:03d}" / name
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with RunLock(out_dir, f"gouge restart --slip {slip} ({name})"):
+        return _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet)
+
+
+def _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet):
+    t0 = time.perf_counter()
+    sim = Simulation(config, arrays=ck.state)
+    writer = RunFile(out_dir / "run.h5", config, sim.dt, extra_attrs={
+        "parent_run": os.path.relpath(run_dir, out_dir), "parent_checkpoint": str(entry["checkpoint"]),
+        "fork_slip": slip, "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
+        "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
+        "end_time": ck.time + duration}, threads=sim.threads)
+    writer.append(sim.observe())
+    step0 = sim.state.step
+    status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
+                                  label=f"slip {slip} {name}", checkpoints=False,
+                                  stop_after_slip=stop_after_slip)
+    writer.close(status, provenance.sim_hash(sim))
+    first = recorder.slips[0] if recorder.slips else None
+    return BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first)
+
+
+def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
+             duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
+    """Fork the drained branch and one undrained branch per permeability from slip `slip`.
+
+    Returns ``{"run", "slip", "start_time", "branches": {name: {status, dir, wall_seconds, steps,
+    first_slip}}, "library_differences_from_parent"}`` (first_slip: the detector's record of the
+    branch's first slip; paths relative to the fork directory)."""
+    run_dir = check_run_dir(run_dir)
+    entry = fork_entry(run_dir, slip)
+    check_perms(perms)
+    ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
     note = provenance.risk_line(ck.provenance, f"the checkpoint of slip {slip}")
     if note:
         print(note, file=sys.stderr, flush=True)
@@ -105,38 +158,9 @@ def _run_fork(run_dir, slip, perms, overrides, duration, force, live, quiet) -> 
         target = fork_dir / branch_name(perm) / "run.h5"
         if target.exists() and not force:
             raise RunDirError(f"{target} exists; pass --force to run this fork again")
-    frames = {} if any(o.split("=")[0].strip() == "output.slip_frames" for o in overrides or []) \
-        else {"output": {"slip_frames": ck.config.output.slip_frames or FORK_SLIP_FRAMES}}
-    configs = {branch_name(p): branch_config(ck.config, p, frames) for p in branches}
-    for config in configs.values():
-        check_config(config)
-    stop_after_slip = duration is None
-    if duration is None:
-        span = float(entry["end_time"]) - ck.time
-        duration = 5.0 * span + 2.0 * lead_time(ck.config)
-    results = []
-    for name, config in configs.items():
-        out_dir = fork_dir / name
-        out_dir.mkdir(parents=True, exist_ok=True)
-        t0 = time.perf_counter()
-        sim = Simulation(config, arrays=ck.state)
-        writer = RunFile(out_dir / "run.h5", config, sim.dt, extra_attrs={
-            "parent_run": os.path.relpath(run_dir, out_dir), "parent_checkpoint": str(entry["checkpoint"]),
-            "fork_slip": slip,
-            "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
-            "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
-            "end_time": ck.time + duration}, threads=sim.threads)
-        writer.append(sim.observe())
-        step0 = sim.state.step
-        status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
-                                      label=f"slip {slip} {name}", checkpoints=False,
-                                      stop_after_slip=stop_after_slip)
-        writer.close(status, provenance.sim_hash(sim))
-        first = recorder.slips[0] if recorder.slips else None
-        results.append(BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first))
+    results = [run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet) for perm in branches]
     summary = pair_summary(run_dir, slip, ck.time, results)
-    summary["library_differences_from_parent"] = risks
-    (fork_dir / "pair.json").write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False))
+    summary["library_differences_from_parent"] = provenance.bit_risks(ck.provenance)
     return summary
 
 
@@ -147,12 +171,4 @@ def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[Bran
         branches[r.name] = {"status": r.status, "dir": r.out_dir.name, "wall_seconds": round(r.wall_seconds, 3),
                             "steps": r.steps,
                             "first_slip": {k: r.first_slip[k] for k in keys} if r.first_slip else None}
-    drained = branches["drained"]["first_slip"]
-    for name, b in branches.items():
-        if name == "drained" or not (drained and b["first_slip"]):
-            continue
-        u = b["first_slip"]
-        b["ratio_to_drained"] = {k: (u[k] / drained[k] if drained[k] else None)
-                                 for k in ("peak_velocity", "stress_drop", "duration")}
-        b["stronger_than_drained"] = u["static_strength"] > drained["static_strength"]
     return {"run": "../..", "slip": slip, "start_time": start_time, "branches": branches}

@@ -124,6 +124,11 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
         raise RunDirError(f"{out_dir} is not empty and is not a gouge run directory (it holds {shown}); "
                           "nothing was changed: choose a new or empty --out")
     lock = RunLock(out_dir, "gouge run")
+    busy = [who for branch in out_dir.glob("forks/*/*") if (who := holder(branch)) is not None]
+    if busy:
+        lock.release()
+        raise RunDirError(f"{out_dir} has a fork in progress ({busy[0]}); nothing was changed: wait for it or "
+                          "stop it first")
     if [e for e in entries if e != LOCK_NAME] and not force:
         lock.release()
         raise RunDirError(f"{out_dir} already holds a run; choose another --out, another name (--set name=...), "

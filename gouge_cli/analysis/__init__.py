@@ -23,11 +23,12 @@ from .friction import (
     spring_stress,
     wall_acceleration,
 )
-from .pairs import PairResult, campaign_summary, classify_pair, complexity_criteria
+from .pairs import PairDefinition, PairResult, campaign_summary, classify_pair, complexity_criteria
 from ..detector import Slip, SlipDetector, SubEvent, WallSeries, detect_slips, recurrence_intervals
 
 __all__ = [
     "BlockSliderFit",
+    "PairDefinition",
     "PairResult",
     "Slip",
     "SlipDetector",

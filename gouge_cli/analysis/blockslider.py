@@ -9,6 +9,13 @@ during slip neglected, Eq. 3 reads
 
 so a slip lasts half a period, ``pi sqrt(m / k)``, moves ``2 dmu sigma / k``
 and recurs every ``2 dmu sigma / (k V_s)``.
+
+Fit bar (:func:`judge_fit`): a fit counts only with ``R^2 >= FIT_MIN_R2`` (0.5) and a fitted
+half period within a factor ``FIT_PERIOD_FACTOR`` (2) of the slip's own measured duration;
+otherwise ``success`` is False and ``message`` says why (the fitted numbers are kept, but
+nothing downstream uses or draws them). The effective block mass of a slip is
+``m_eff = k (T_fit / pi)^2`` (T_fit: fitted half period): the mass a rigid block would need
+to slip for as long (thesis Section 4.1: constant slip duration is the test of Eq. 3).
 """
 
 from __future__ import annotations
@@ -28,7 +35,13 @@ __all__ = [
     "block_slider_recurrence",
     "block_slider_prediction",
     "simulate_block_slider",
+    "judge_fit",
+    "FIT_MIN_R2",
+    "FIT_PERIOD_FACTOR",
 ]
+
+FIT_MIN_R2 = 0.5
+FIT_PERIOD_FACTOR = 2.0
 
 _NAN = float("nan")
 
@@ -80,6 +93,12 @@ class BlockSliderFit:
     n_points: int
     success: bool
     message: str = ""
+    m_eff: float = float("nan")
+
+    @property
+    def reason(self) -> str:
+        """Why the fit does not count ("" when it does)."""
+        return "" if self.success else (self.message or "failed")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -103,6 +122,8 @@ def fit_block_slider(
     *,
     baseline: float = 0.0,
     pad: int = 0,
+    min_r2: float = FIT_MIN_R2,
+    period_factor: float = FIT_PERIOD_FACTOR,
 ) -> BlockSliderFit:
     """Fit thesis Eq. 3 to the wall velocity of one slip.
 
@@ -112,7 +133,8 @@ def fit_block_slider(
     velocity added to the sine. The initial guess is ``omega = pi / duration``,
     ``t0 = onset``, ``A = peak - baseline``. Reports the fitted half period
     ``pi / omega`` against ``pi sqrt(m_b / k)``, ``delta_mu = A sqrt(k m_b) / sigma``,
-    ``R^2 = 1 - SS_res / SS_tot`` and ``nrms = rms(residual) / A``.
+    ``R^2 = 1 - SS_res / SS_tot``, ``nrms = rms(residual) / A`` and ``m_eff = k (T_fit/pi)^2``;
+    ``success`` is False when the fit fails the bar of :func:`judge_fit`.
     """
     t = np.asarray(t, dtype=float)
     v = np.asarray(v_wall, dtype=float)
@@ -147,11 +169,29 @@ def fit_block_slider(
     nrms = float(np.sqrt(np.mean(res ** 2))) / A if A > 0 else _NAN
     half = math.pi / w if w > 0 else _NAN
     dmu = A * math.sqrt(k * m_b) / sigma if (k and m_b and sigma) else _NAN
+    ok, why = judge_fit(r2, half, duration, min_r2=min_r2, period_factor=period_factor)
     return BlockSliderFit(
         amplitude=A, omega=w, t0=t0, half_period=half, period=2.0 * half,
         predicted_half_period=predicted, half_period_ratio=half / predicted,
-        delta_mu=dmu, r2=r2, nrms=nrms, n_points=int(tt.size), success=True,
+        delta_mu=dmu, r2=r2, nrms=nrms, n_points=int(tt.size), success=ok, message=why,
+        m_eff=k * (half / math.pi) ** 2 if (k and math.isfinite(half)) else _NAN,
     )
+
+
+def judge_fit(r2: float, half_period: float, duration: float, *, min_r2: float = FIT_MIN_R2,
+              period_factor: float = FIT_PERIOD_FACTOR) -> tuple[bool, str]:
+    """The fit bar: ``R^2 >= min_r2`` and ``duration / f <= half_period <= f duration``.
+
+    half_period: fitted pi / omega [t0]; duration: the slip's measured duration [t0].
+    Returns ``(passes, reason)`` with an empty reason when it passes.
+    """
+    if not (r2 >= min_r2):
+        return False, f"R^2 = {r2:.3g} < {min_r2:g}"
+    ratio = half_period / duration if duration > 0 else _NAN
+    if not (1.0 / period_factor <= ratio <= period_factor):
+        return False, (f"fitted half period {half_period:.4g} t0 is {ratio:.3g} x the slip's duration "
+                       f"{duration:.4g} t0 (allowed 1/{period_factor:g} to {period_factor:g})")
+    return True, ""
 
 
 def simulate_block_slider(

@@ -1,32 +1,110 @@
-"""Drained/undrained pair classification (thesis Sections 4.2-4.3, Figs. 8-13).
+"""The one definition of a drained/undrained pair (thesis Sections 4.2-4.3, Figs. 8-13, Table 3).
 
-A *pair* is the same slip run twice from the same packing: drained (dry or
-very permeable) and undrained (low permeability). Both series cover the same
-window (restart before the drained slip until after it). See
-:func:`classify_pair` for the rule.
+A *pair* is the same slip run twice from the same packing: drained (dry) and undrained
+(low permeability). Both series cover the same window (from the checkpoint before the
+slip). Everything that compares the two branches -- ``gouge restart`` (pair.json),
+``gouge analyze`` (pairs.csv), ``gouge plot`` (figure titles and shading) and
+``gouge study`` -- calls :func:`classify_pair` with a :class:`PairDefinition`; nothing else
+decides which events are compared or what type a pair is.
+
+Rule (all thresholds are fields of :class:`PairDefinition`, velocities in units of V_s):
+
+* Events: slips found by :func:`~gouge_cli.detector.detect_slips` with the run's own
+  thresholds (trigger ``start_factor``, extent ``end_factor``). The *compared* event of each
+  branch is its first slip (``main="first"``: the forked slip) or the one with the largest
+  slip distance (``main="largest"``).
+* Slow slip: an undrained branch with no slip at the trigger is searched again with the
+  trigger lowered to ``slow_factor`` (default ``min(2 end_factor, (start_factor+end_factor)/2)``);
+  an event found then is compared as a "slow slip below trigger" (criterion ``slow``).
+  Without one the pair is ``none`` and the note gives the branch's peak velocity.
+* Measures of an event: static strength S = the largest tau/sigma from the series start up
+  to the event's onset sample; stress drop = tau/sigma at onset minus its minimum during the
+  event; peak velocity; duration (between the ``end_factor`` crossings); sub-events.
+* Type: ``I`` if S_u < S_d - strength_tol, ``II`` if S_u > S_d + strength_tol, else ``tie``
+  (strength_tol = 1e-3 in tau/sigma). Suffix ``-C`` if a criterion of
+  :func:`complexity_criteria` fires on the undrained branch, or it is a slow slip.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
 from .blockslider import BlockSliderFit, fit_block_slider
 from ..detector import Slip, WallSeries, detect_slips
 
-__all__ = ["PairResult", "classify_pair", "complexity_criteria", "campaign_summary"]
+__all__ = ["PairDefinition", "PairResult", "classify_pair", "complexity_criteria", "campaign_summary",
+           "compared_event", "static_strength", "SLOW", "CRITERIA"]
 
 _NAN = float("nan")
-CRITERIA = ("subevents", "restart", "creep", "fit")
+CRITERIA = ("subevents", "restart", "creep", "fit", "slow")
 TYPES = ("I", "II", "I-C", "II-C")
 RATIOS = ("peak_velocity_ratio", "stress_drop_ratio", "duration_ratio")
+SLOW = "slow slip below trigger"
+
+
+@dataclass(frozen=True)
+class PairDefinition:
+    """Every threshold of the pair comparison (velocities as multiples of V_s, strengths in tau/sigma).
+
+    main: "first" (the forked slip) or "largest" (largest slip distance) event of each branch.
+    strength_tol: |S_u - S_d| <= strength_tol is a tie.
+    start_factor, end_factor, min_duration, min_slip, merge_gap: the run's slip detector.
+    slow_factor: lowered trigger for a slow undrained slip (None: min(2 end, (start+end)/2)).
+    max_subevents, restart_factor, creep_low_factor, creep_fraction, creep_smooth, min_fit_r2:
+    the '-C' criteria of :func:`complexity_criteria`.
+    """
+
+    main: str = "first"
+    strength_tol: float = 1e-3
+    start_factor: float = 10.0
+    end_factor: float = 2.0
+    min_duration: float = 0.0
+    min_slip: float = 0.0
+    merge_gap: float = 0.0
+    slow_factor: float | None = None
+    max_subevents: int = 1
+    restart_factor: float | None = None
+    creep_low_factor: float = 0.5
+    creep_fraction: float = 0.5
+    creep_smooth: int = 1
+    min_fit_r2: float = 0.8
+
+    def __post_init__(self):
+        if self.main not in ("first", "largest"):
+            raise ValueError(f"main must be 'first' or 'largest', got {self.main!r}")
+
+    @classmethod
+    def for_run(cls, slip_params: dict, **overrides) -> "PairDefinition":
+        """The definition with a run's detector thresholds (``RunInfo.slip_params``) and overrides."""
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in {**slip_params, **overrides}.items() if k in names and v is not None})
+
+    @property
+    def slow_trigger(self) -> float:
+        """Trigger for a slow slip [V_s]."""
+        if self.slow_factor is not None:
+            return self.slow_factor
+        return min(2.0 * self.end_factor, 0.5 * (self.start_factor + self.end_factor))
+
+    def detect(self, s: WallSeries, V_s: float, start_factor: float | None = None) -> list[Slip]:
+        return detect_slips(s.t, s.v_wall, V_s, x_wall=s.x_wall, tau_over_sigma=s.tau_over_sigma,
+                            porosity=s.porosity, start_factor=start_factor or self.start_factor,
+                            end_factor=self.end_factor, min_duration=self.min_duration,
+                            min_slip=self.min_slip, merge_gap=self.merge_gap)
+
+    def to_dict(self) -> dict:
+        return dict(asdict(self), slow_trigger=self.slow_trigger)
 
 
 @dataclass
 class PairResult:
-    """Outcome of :func:`classify_pair`. Ratios are undrained / drained (main slips)."""
+    """Outcome of :func:`classify_pair`. Ratios are undrained / drained (compared events).
+
+    undrained_event: "slip", "slow slip below trigger" or "none"; note: one line for people.
+    """
 
     type: str
     base_type: str
@@ -44,12 +122,19 @@ class PairResult:
     undrained_slips: list[Slip] = field(default_factory=list)
     drained_fit: BlockSliderFit | None = None
     undrained_fit: BlockSliderFit | None = None
+    undrained_event: str = "slip"
+    drained_peak_over_Vs: float = _NAN
+    undrained_peak_over_Vs: float = _NAN
+    n_subevents: int = 0
+    note: str = ""
+    definition: dict = field(default_factory=dict)
 
     def to_dict(self) -> dict:
         return asdict(self)
 
 
-def _main(slips: list[Slip], main: str) -> Slip | None:
+def compared_event(slips: list[Slip], main: str) -> Slip | None:
+    """The event a pair compares: the first slip, or the one with the largest slip distance."""
     if not slips:
         return None
     if main == "first":
@@ -59,8 +144,9 @@ def _main(slips: list[Slip], main: str) -> Slip | None:
     raise ValueError(f"main must be 'largest' or 'first', got {main!r}")
 
 
-def _strength_before(tau: np.ndarray, slip: Slip) -> float:
-    seg = np.asarray(tau[:slip.onset_index + 1], dtype=float)
+def static_strength(tau_over_sigma, slip: Slip) -> float:
+    """Largest tau/sigma from the series start up to and including the slip's onset sample."""
+    seg = np.asarray(tau_over_sigma[:slip.onset_index + 1], dtype=float)
     seg = seg[~np.isnan(seg)]
     return float(seg.max()) if seg.size else _NAN
 
@@ -90,7 +176,7 @@ def complexity_criteria(
     creep_smooth: int = 1,
     min_fit_r2: float = 0.8,
 ) -> tuple[dict[str, bool], dict[str, float]]:
-    """The four '-C' criteria on one (undrained) velocity series.
+    """The '-C' criteria on one (undrained) velocity series.
 
     t, v_wall: shape (n,). Let ``hi = start_factor * V_s``.
     (a) ``subevents``: the main slip has more than ``max_subevents`` sub-events.
@@ -101,7 +187,7 @@ def complexity_criteria(
         ``creep_smooth`` samples) stays in ``[creep_low_factor V_s, hi)`` for
         longer than ``creep_fraction`` times the main slip's duration.
     (d) ``fit``: the block-slider fit of the main slip has ``R^2 < min_fit_r2``
-        (or failed).
+        (or failed the fit bar of :func:`~gouge_cli.analysis.blockslider.fit_block_slider`).
     Returns ``(fired, measures)``; measures holds n_subevents, n_restarts,
     creep_time and fit_r2.
     """
@@ -136,6 +222,12 @@ def complexity_criteria(
     return fired, measures
 
 
+def _peak(v, V_s: float) -> float:
+    v = np.asarray(v, dtype=float)
+    v = v[np.isfinite(v)]
+    return float(v.max()) / V_s if v.size else _NAN
+
+
 def classify_pair(
     drained: WallSeries,
     undrained: WallSeries,
@@ -143,58 +235,42 @@ def classify_pair(
     k: float,
     m_b: float,
     sigma: float,
-    *,
-    strength_tol: float = 1e-4,
-    main: str = "largest",
-    max_subevents: int = 1,
-    restart_factor: float | None = None,
-    creep_low_factor: float = 0.5,
-    creep_fraction: float = 0.5,
-    creep_smooth: int = 1,
-    min_fit_r2: float = 0.8,
-    start_factor: float = 10.0,
-    end_factor: float = 2.0,
-    **detect_kwargs,
+    definition: PairDefinition | None = None,
+    **overrides,
 ) -> PairResult:
-    """Classify one drained/undrained pair (thesis Type I / II, suffix -C).
+    """Classify one drained/undrained pair (thesis Type I / II, suffix -C) by ``definition``.
 
-    Slips are found in both series with :func:`detect_slips` (same thresholds;
-    ``detect_kwargs`` pass through). The *main* slip of each is the one with the
-    largest slip distance (``main="first"``: the first). Static strength = the
-    largest tau/sigma from the series start up to the main slip's onset.
-
-    * Type ``I`` if ``S_u < S_d - strength_tol``, ``II`` if ``S_u > S_d + strength_tol``,
-      otherwise ``tie`` (``S_u``, ``S_d``: undrained, drained static strengths).
-    * Suffix ``-C`` if any criterion of :func:`complexity_criteria` fires on the
-      undrained series: (a) main slip has > ``max_subevents`` (1) sub-events;
-      (b) velocity falls below ``restart_factor V_s`` (default ``start_factor V_s``)
-      and exceeds ``start_factor V_s`` again between the first onset and last end;
-      (c) velocity in ``[creep_low_factor V_s, start_factor V_s)`` = [0.5, 10) V_s
-      for longer than ``creep_fraction`` (0.5) of the main slip duration;
-      (d) block-slider fit ``R^2 < min_fit_r2`` (0.8).
-    * No slip in either series: type ``none``.
-
-    Ratios (undrained / drained) of peak velocity, stress drop and duration of
-    the main slips are returned with the criteria that fired.
+    ``overrides`` replace fields of the definition (e.g. ``strength_tol=1e-3``, ``main="largest"``,
+    or a run's ``start_factor``). See the module docstring for the rule.
     """
-    kw = dict(start_factor=start_factor, end_factor=end_factor, **detect_kwargs)
-
-    def detect(s: WallSeries) -> list[Slip]:
-        return detect_slips(s.t, s.v_wall, V_s, x_wall=s.x_wall,
-                            tau_over_sigma=s.tau_over_sigma, porosity=s.porosity, **kw)
-
-    d_slips, u_slips = detect(drained), detect(undrained)
-    d_main, u_main = _main(d_slips, main), _main(u_slips, main)
+    d = replace(definition or PairDefinition(), **overrides)
+    none_criteria = {c: False for c in CRITERIA}
+    d_slips = d.detect(drained, V_s)
+    u_slips = d.detect(undrained, V_s)
+    event = "slip"
+    if not u_slips:
+        u_slips = d.detect(undrained, V_s, start_factor=d.slow_trigger)
+        event = SLOW if u_slips else "none"
+    d_main, u_main = compared_event(d_slips, d.main), compared_event(u_slips, d.main)
+    d_peak, u_peak = _peak(drained.v_wall, V_s), _peak(undrained.v_wall, V_s)
     if d_main is None or u_main is None:
-        return PairResult("none", "none", False, {c: False for c in CRITERIA}, {},
-                          _NAN, _NAN, _NAN, _NAN, _NAN, _NAN, d_main, u_main, u_slips)
+        if d_main is None:
+            note = f"drained branch did not slip in its window (peak {d_peak:.3g} V_s)"
+        else:
+            note = (f"undrained branch did not move in its window: peak {u_peak:.3g} V_s, below the "
+                    f"slow-slip trigger {d.slow_trigger:g} V_s (slip trigger {d.start_factor:g} V_s)")
+        return PairResult("none", "none", False, none_criteria, {}, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN,
+                          d_main, u_main, u_slips, undrained_event="none" if u_main is None else event,
+                          drained_peak_over_Vs=d_main.peak_velocity / V_s if d_main else d_peak,
+                          undrained_peak_over_Vs=u_main.peak_velocity / V_s if u_main else u_peak,
+                          note=note, definition=d.to_dict())
 
-    s_d = _strength_before(np.asarray(drained.tau_over_sigma), d_main)
-    s_u = _strength_before(np.asarray(undrained.tau_over_sigma), u_main)
+    s_d = static_strength(drained.tau_over_sigma, d_main)
+    s_u = static_strength(undrained.tau_over_sigma, u_main)
     diff = s_u - s_d
-    if diff < -strength_tol:
+    if diff < -d.strength_tol:
         base = "I"
-    elif diff > strength_tol:
+    elif diff > d.strength_tol:
         base = "II"
     else:
         base = "tie"
@@ -203,11 +279,17 @@ def classify_pair(
     u_fit = fit_block_slider(undrained.t, undrained.v_wall, u_main, k, m_b, sigma)
     fired, measures = complexity_criteria(
         undrained.t, undrained.v_wall, u_slips, u_main, u_fit, V_s,
-        start_factor=start_factor, max_subevents=max_subevents,
-        restart_factor=restart_factor, creep_low_factor=creep_low_factor,
-        creep_fraction=creep_fraction, creep_smooth=creep_smooth, min_fit_r2=min_fit_r2,
+        start_factor=d.slow_trigger if event == SLOW else d.start_factor,
+        max_subevents=d.max_subevents, restart_factor=d.restart_factor,
+        creep_low_factor=d.creep_low_factor, creep_fraction=d.creep_fraction,
+        creep_smooth=d.creep_smooth, min_fit_r2=d.min_fit_r2,
     )
+    fired["slow"] = event == SLOW
     is_complex = any(fired.values())
+    note = ""
+    if event == SLOW:
+        note = (f"undrained: {SLOW} (peak {u_main.peak_velocity / V_s:.3g} V_s < trigger "
+                f"{d.start_factor:g} V_s)")
     return PairResult(
         type=base + ("-C" if is_complex else ""),
         base_type=base,
@@ -225,6 +307,12 @@ def classify_pair(
         undrained_slips=u_slips,
         drained_fit=d_fit,
         undrained_fit=u_fit,
+        undrained_event=event,
+        drained_peak_over_Vs=d_main.peak_velocity / V_s,
+        undrained_peak_over_Vs=u_main.peak_velocity / V_s,
+        n_subevents=u_main.n_subevents,
+        note=note,
+        definition=d.to_dict(),
     )
 
 
@@ -242,7 +330,7 @@ def campaign_summary(results: list[PairResult]) -> dict:
     """Counts per type and statistics of the undrained/drained ratios.
 
     Returns ``{"n", "counts": {"I", "II", "I-C", "II-C", "tie", "tie-C", "none"},
-    "n_type_I", "n_type_II", "n_complex", "criteria": {name: count},
+    "n_type_I", "n_type_II", "n_tie", "n_complex", "n_slow", "criteria": {name: count},
     "ratios": {ratio name: {n, mean, median, std, min, max, frac_below_1}}}``
     (ratio statistics over finite values of classified pairs).
     """
@@ -256,7 +344,9 @@ def campaign_summary(results: list[PairResult]) -> dict:
         "counts": counts,
         "n_type_I": counts["I"] + counts["I-C"],
         "n_type_II": counts["II"] + counts["II-C"],
+        "n_tie": counts["tie"] + counts["tie-C"],
         "n_complex": sum(1 for r in classified if r.complex),
+        "n_slow": sum(1 for r in classified if r.undrained_event == SLOW),
         "criteria": {c: sum(1 for r in classified if r.criteria.get(c, False))
                      for c in CRITERIA},
         "ratios": {name: _stats([getattr(r, name) for r in classified]) for name in RATIOS},

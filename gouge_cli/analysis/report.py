@@ -37,14 +37,14 @@ from ..detector import WallSeries, detect_slips
 from ..filedoc import document_analysis, json_safe
 from .blockslider import BlockSliderFit, fit_block_slider
 from .friction import dynamic_friction, estimate_natural_frequency, mean_dynamic_friction
-from .pairs import PairResult, campaign_summary, classify_pair
+from .pairs import PairDefinition, PairResult, campaign_summary, classify_pair
 
 __all__ = [
     "AnalysisError", "NotARunError", "RunStillRunningError", "NoSlipsError", "SlipNotFoundError",
     "RunInfo", "RunReader", "SlipFriction", "ForkPair", "RunAnalysis",
     "CATALOG_COLUMNS", "FIT_COLUMNS", "PAIR_COLUMNS", "SUMMARY_COLUMNS",
     "open_run", "read_catalog", "catalog_table", "summary_statistics", "fit_table",
-    "slip_window", "slip_friction", "fit_slip", "fork_dirs", "fork_branches", "classify_fork", "run_pairs",
+    "slip_window", "slip_friction", "fit_slip", "fork_dirs", "fork_branches", "classify_fork", "run_pairs", "pair_definition",
     "analyze_run", "campaign", "write_analysis", "series_envelope", "find_slip",
 ]
 
@@ -282,13 +282,16 @@ SUMMARY_COLUMNS = (
 FIT_COLUMNS = (
     "number", "duration", "half_period", "predicted_half_period", "half_period_ratio",
     "amplitude", "amplitude_over_Vs", "delta_mu", "static_friction", "mean_dynamic_friction",
-    "delta_mu_eq7", "notch_frequency", "r2", "nrms", "n_points", "success",
+    "delta_mu_eq7", "notch_frequency", "r2", "nrms", "n_points", "success", "reason",
+    "m_eff", "m_eff_over_m_b",
 )
 PAIR_COLUMNS = (
-    "run", "slip", "branch", "permeability", "type", "base_type", "complex", "criteria",
-    "drained_strength", "undrained_strength", "strength_difference", "peak_velocity_ratio",
-    "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs", "undrained_peak_over_Vs",
-    "n_undrained_slips", "drained_fit_r2", "undrained_fit_r2", "deborah_mean", "note",
+    "run", "slip", "branch", "permeability", "main", "type", "base_type", "complex", "criteria",
+    "undrained_event", "drained_strength", "undrained_strength", "strength_difference",
+    "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
+    "undrained_peak_over_Vs", "n_undrained_slips", "n_subevents", "drained_onset", "drained_end",
+    "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_ok", "undrained_fit_r2",
+    "deborah_mean", "note",
 )
 
 
@@ -555,6 +558,9 @@ def fit_table(reader: RunReader, catalog: list[dict] | None = None, notch: bool 
             "nrms": fit.nrms,
             "n_points": fit.n_points,
             "success": bool(fit.success),
+            "reason": fit.reason,
+            "m_eff": fit.m_eff,
+            "m_eff_over_m_b": fit.m_eff / info.m_b,
         })
     return rows
 
@@ -599,15 +605,24 @@ class ForkPair:
 
 
 def _r2(fit) -> float:
-    return float(fit.r2) if fit is not None and fit.success else _NAN
+    return float(fit.r2) if fit is not None else _NAN
 
 
-def classify_fork(fork_dir: Path) -> list[ForkPair]:
+def _when(slip, attr: str) -> float:
+    return float(getattr(slip, attr)) if slip is not None else _NAN
+
+
+def pair_definition(info: RunInfo, main: str = "first") -> PairDefinition:
+    """The pair definition with this run's detector thresholds."""
+    return PairDefinition.for_run(info.slip_params, main=main)
+
+
+def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
     """Classify every undrained branch of ``RUN/forks/slip_NNN`` against its drained branch.
 
-    Uses :func:`~gouge_cli.analysis.pairs.classify_pair` with the run's detector
-    thresholds. Raises :class:`RunStillRunningError` when a branch is still running and
-    :class:`NotARunError` when the drained branch is missing.
+    Uses :func:`~gouge_cli.analysis.pairs.classify_pair` with :func:`pair_definition` (the run's
+    detector thresholds; ``main``: "first" or "largest"). Raises :class:`RunStillRunningError`
+    when a branch is still running and :class:`NotARunError` when the drained branch is missing.
     """
     fork_dir = Path(fork_dir)
     drained_dir, undrained_dirs = fork_branches(fork_dir)
@@ -617,25 +632,14 @@ def classify_fork(fork_dir: Path) -> list[ForkPair]:
     with RunReader(drained_dir) as d:
         info = d.info
         drained = _wall_series(d)
+        definition = pair_definition(info, main)
         for udir in undrained_dirs:
             with RunReader(udir) as u:
                 undrained = _wall_series(u)
                 deborah = u.series(["deborah"])["deborah"]
                 uinfo = u.info
-            result = classify_pair(drained, undrained, info.V_s, info.k, info.m_b, info.sigma,
-                                   **info.slip_params)
-            note = ""
-            if result.undrained_slip is None:
-                vmax = float(np.max(undrained.v_wall)) / info.V_s if undrained.v_wall.size else _NAN
-                note = (f"undrained branch did not slip in its window (peak v = {vmax:.3g} V_s < trigger "
-                        f"{info.slip_params['start_factor']:g} V_s; max tau/sigma "
-                        f"{float(np.nanmax(undrained.tau_over_sigma)):.4g})")
-            elif result.drained_slip is None:
-                note = "drained branch did not slip in its window"
+            result = classify_pair(drained, undrained, info.V_s, info.k, info.m_b, info.sigma, definition)
             d_main, u_main = result.drained_slip, result.undrained_slip
-            drained_strength = result.drained_strength
-            if d_main is not None and not math.isfinite(drained_strength):
-                drained_strength = _nan_ext(drained.tau_over_sigma[:d_main.onset_index + 1], np.max)
             fired = [name for name, on in result.criteria.items() if on]
             parent = str(fork_dir.parent.parent)     # parent_run is stored relative to the branch
             row = {
@@ -643,23 +647,31 @@ def classify_fork(fork_dir: Path) -> list[ForkPair]:
                 "slip": int(info.fork_slip) if info.fork_slip is not None else _slip_number(fork_dir),
                 "branch": udir.name,
                 "permeability": uinfo.permeability if uinfo.permeability is not None else _NAN,
+                "main": definition.main,
                 "type": result.type,
                 "base_type": result.base_type,
                 "complex": bool(result.complex),
                 "criteria": ",".join(fired),
-                "drained_strength": drained_strength,
+                "undrained_event": result.undrained_event,
+                "drained_strength": result.drained_strength,
                 "undrained_strength": result.undrained_strength,
                 "strength_difference": result.strength_difference,
                 "peak_velocity_ratio": result.peak_velocity_ratio,
                 "stress_drop_ratio": result.stress_drop_ratio,
                 "duration_ratio": result.duration_ratio,
-                "drained_peak_over_Vs": d_main.peak_velocity / info.V_s if d_main else _NAN,
-                "undrained_peak_over_Vs": u_main.peak_velocity / info.V_s if u_main else _NAN,
+                "drained_peak_over_Vs": result.drained_peak_over_Vs,
+                "undrained_peak_over_Vs": result.undrained_peak_over_Vs,
                 "n_undrained_slips": len(result.undrained_slips),
+                "n_subevents": result.n_subevents,
+                "drained_onset": _when(d_main, "onset_time"),
+                "drained_end": _when(d_main, "end_time"),
+                "undrained_onset": _when(u_main, "onset_time"),
+                "undrained_end": _when(u_main, "end_time"),
                 "drained_fit_r2": _r2(result.drained_fit),
+                "drained_fit_ok": bool(result.drained_fit is not None and result.drained_fit.success),
                 "undrained_fit_r2": _r2(result.undrained_fit),
                 "deborah_mean": _nan_mean(deborah),
-                "note": note,
+                "note": result.note,
             }
             pairs.append(ForkPair(row, result, drained_dir, udir))
     return pairs
@@ -672,13 +684,14 @@ def _slip_number(fork_dir: Path) -> int:
         return -1
 
 
-def run_pairs(run_dir: Path, strict: bool = False) -> tuple[list[ForkPair], list[str]]:
-    """All pairs under ``RUN/forks``. Returns (pairs, skipped): a fork that cannot be
-    classified (still running, incomplete) is skipped with its reason, or raises when ``strict``."""
+def run_pairs(run_dir: Path, strict: bool = False, main: str = "first") -> tuple[list[ForkPair], list[str]]:
+    """All pairs under ``RUN/forks`` (compared events chosen by ``main``). Returns (pairs, skipped):
+    a fork that cannot be classified (still running, incomplete) is skipped with its reason, or
+    raises when ``strict``."""
     pairs, skipped = [], []
     for fork in fork_dirs(run_dir):
         try:
-            pairs.extend(classify_fork(fork))
+            pairs.extend(classify_fork(fork, main))
         except AnalysisError as exc:
             if strict:
                 raise
@@ -730,7 +743,7 @@ class RunAnalysis:
         }
 
 
-def analyze_run(run_dir: Path | str, notch: bool = True) -> RunAnalysis:
+def analyze_run(run_dir: Path | str, notch: bool = True, main: str = "first") -> RunAnalysis:
     """Catalog, summary statistics, block-slider fits and fork pairs of one run.
 
     Raises :class:`NotARunError`, :class:`RunStillRunningError` or :class:`NoSlipsError`.
@@ -745,7 +758,7 @@ def analyze_run(run_dir: Path | str, notch: bool = True) -> RunAnalysis:
         rows = catalog_table(reader, catalog)
         fits = fit_table(reader, catalog, notch=notch)
         info = reader.info
-    pairs, skipped = run_pairs(info.run_dir)
+    pairs, skipped = run_pairs(info.run_dir, main=main)
     return RunAnalysis(info, rows, summary_statistics(rows), fits, pairs, skipped, notch)
 
 

@@ -16,6 +16,11 @@ def _fmt(value: float) -> str:
     return "" if value is None or (isinstance(value, float) and math.isnan(value)) else f"{value:.3g}"
 
 
+def _order(name: str, value: float, flag: str) -> str:
+    """'name 1.23', or with the reason it is meaningless (accuracy.order_flag)."""
+    return f"{name} {value:.2f}" + (f" [not meaningful: {flag}]" if flag else "")
+
+
 def _print_report(result: dict):
     from rich.table import Table
 
@@ -33,7 +38,8 @@ def _print_report(result: dict):
                           str(r.steps), *errors, r.status[:60])
         out.print(table)
         for ladder, orders in scene["orders"].items():
-            shown = ", ".join(f"{k} {v:.2f}" for k, v in orders.items() if not math.isnan(v))
+            flags = scene.get("order_flags", {}).get(ladder, {})
+            shown = ", ".join(_order(k, v, flags.get(k, "")) for k, v in orders.items() if not math.isnan(v))
             out.print(f"observed order ({ladder}): {shown or 'n/a'}", highlight=False)
     if analytic:
         table = Table(title="analytic cases (relative error against the closed form)")
@@ -44,8 +50,9 @@ def _print_report(result: dict):
                           ", ".join(f"{k} {_fmt(v)}" for k, v in r.errors.items()))
         out.print(table)
         for case, orders in analytic["orders"].items():
-            out.print(f"observed order ({case}): " + ", ".join(f"{k} {v:.2f}" for k, v in orders.items()),
-                      highlight=False)
+            flags = analytic.get("order_flags", {}).get(case, {})
+            out.print(f"observed order ({case}): " + ", ".join(_order(k, v, flags.get(k, ""))
+                                                               for k, v in orders.items()), highlight=False)
 
 
 def accuracy(

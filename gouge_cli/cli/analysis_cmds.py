@@ -13,6 +13,8 @@ from typing import List, Optional
 
 import typer
 
+from ..filedoc import json_safe
+
 
 def _fmt(value, digits: int = 4) -> str:
     if isinstance(value, bool):
@@ -22,13 +24,6 @@ def _fmt(value, digits: int = 4) -> str:
     if isinstance(value, float):
         return "–" if not math.isfinite(value) else f"{value:.{digits}g}"
     return "" if value is None else str(value)
-
-
-def _clean(obj):
-    """JSON-safe copy: NaN/inf become null, paths and numpy scalars plain values."""
-    from ..filedoc import json_safe
-
-    return json_safe(obj)
 
 
 def _table(title: str, columns: list[tuple[str, str]], rows: list[dict]):
@@ -93,6 +88,15 @@ def _print_campaign(out, summary: dict, n_runs: int):
     out.print(line, highlight=False)
 
 
+def _main(main: str) -> str:
+    """Validate --main (exit 2 naming the option)."""
+    if main not in ("first", "largest"):
+        from .main import fail
+
+        fail(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
+    return main
+
+
 def register(app: typer.Typer) -> None:
     """Add the `analyze` and `plot` commands to ``app``."""
 
@@ -102,6 +106,8 @@ def register(app: typer.Typer) -> None:
         notch: bool = typer.Option(True, "--notch/--no-notch",
                                    help="notch-filter the layer's natural vibration out of μ_d(t)"),
         as_json: bool = typer.Option(False, "--json", help="machine-readable output (NaN as null)"),
+        main: str = typer.Option("first", "--main", help="compared event of each branch: first (the forked "
+                                 "slip) or largest"),
     ):
         """Slip catalog, block-slider fits, μ_d(t) and drained/undrained pair types.
 
@@ -114,7 +120,7 @@ def register(app: typer.Typer) -> None:
         done, failed = [], []
         for run_dir in run_dirs:
             try:
-                analysis = analyze_run(run_dir, notch=notch)
+                analysis = analyze_run(run_dir, notch=notch, main=_main(main))
                 written = write_analysis(analysis)
             except (AnalysisError, OSError) as exc:
                 exc = exc if isinstance(exc, AnalysisError) else describe_os_error(exc, str(run_dir))[0]
@@ -130,7 +136,7 @@ def register(app: typer.Typer) -> None:
         all_pairs = [p for a, _ in done for p in a.pairs]
         summary = campaign(all_pairs) if all_pairs else None
         if as_json:
-            print(json.dumps(_clean({
+            print(json.dumps(json_safe({
                 "runs": [dict(a.to_dict(), written={k: str(v) for k, v in w.items()}) for a, w in done],
                 "campaign": summary,
                 "errors": failed,
@@ -148,11 +154,12 @@ def register(app: typer.Typer) -> None:
         slip: Optional[int] = typer.Option(None, "--slip", help="also draw slip N (and its fork, if any)"),
         out_dir: Optional[Path] = typer.Option(None, "--out", help="figure directory (default RUN/figures)"),
         notch: bool = typer.Option(True, "--notch/--no-notch", help="notch-filter μ_d(t)"),
+        main: str = typer.Option("first", "--main", help="compared event of each branch: first or largest"),
     ):
         """PNG figures: run overview, grain snapshot, slip N with its fit, μ_d(t), drained vs undrained."""
         from ..plots import make_figures
         from .main import guarded, out
 
-        files = guarded(make_figures)(run_dir=run_dir, slip=slip, out_dir=out_dir, notch=notch)
+        files = guarded(make_figures)(run_dir=run_dir, slip=slip, out_dir=out_dir, notch=notch, main=_main(main))
         for path in files:
             out.print(str(path), highlight=False)

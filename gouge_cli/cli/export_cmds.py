@@ -94,7 +94,7 @@ def catalog_since_loading(run_dir: Path, slip_catalog) -> tuple[list[dict], floa
     began and NaN as None (valid JSON); returns (catalog, the clock at which loading began)."""
     from ..analysis.report import AnalysisError, RunReader
     from ..runner import RunDirError
-    from .analysis_cmds import _clean
+    from ..filedoc import json_safe
 
     try:
         with RunReader(run_dir, allow_running=True) as reader:
@@ -108,7 +108,7 @@ def catalog_since_loading(run_dir: Path, slip_catalog) -> tuple[list[dict], floa
                 entry[key] = float(entry[key]) - origin
         entry["subevent_time"] = [t - origin for t in entry.get("subevent_time", [])]
         entry["time_origin"] = "loading start"
-    return _clean(catalog), origin
+    return json_safe(catalog), origin
 
 
 def print_config_doc(schema: Optional[Path]) -> None:

@@ -115,21 +115,28 @@ def restart(
     until_slip_ends: bool = typer.Option(True, "--until-slip-ends/--full",
                                          help="stop each branch when its first slip ends (default)"),
     force: bool = typer.Option(False, "--force", help="run an existing fork again"),
+    main: str = typer.Option("first", "--main", help="compared event of each branch in pair.json: first "
+                             "(the forked slip) or largest"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
 ):
     """Fork drained and undrained branches from the packing kept just before slip N (no --perm:
-    the drained branch alone)."""
+    the drained branch alone); with --perm, writes pair.json."""
     import json
 
     from ..filedoc import json_safe
     from ..forks import run_fork
+    from ..workflows.pairs import write_pair_json
 
     target = _run_dir(run_dir)
     if duration is None and not until_slip_ends:
         fail("--full needs --duration")
     if duration is not None and not (duration > 0 and duration < float("inf")):
         fail(f"--duration = {duration:g}: give a positive, finite time [t0]")
+    if main not in ("first", "largest"):
+        fail(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
     summary = run_fork(target, slip, perm, set_, duration, force=force, quiet=quiet)
+    if perm:
+        summary["pair"] = write_pair_json(target / "forks" / f"slip_{slip:03d}", main)
     out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
 
 
@@ -316,6 +323,8 @@ from .export_cmds import register as _register_export
 _register_export(app)
 from .campaign_cmds import register as _register_campaign
 _register_campaign(app)
+from .study_cmds import register as _register_study
+_register_study(app)
 
 
 def main():

@@ -28,8 +28,18 @@ def _nearest_snapshot(reader: RunReader, t: float) -> str | None:
     return names[int(np.argmin(np.abs(times - t)))]
 
 
+def undrained_friction_figure(u: RunReader, pair, path: Path, notch: bool, drained_mean: float | None) -> Path:
+    """R/sigma = mu_d (1 - P*/sigma) (Eq. 6) over the pair's compared undrained event (thesis Fig. 18)."""
+    main = pair.result.undrained_slip
+    slip = int(pair.row["slip"])
+    fr = slip_friction(u, {"number": slip, "onset_time": main.onset_time, "end_time": main.end_time,
+                           "static_strength": pair.result.undrained_strength}, notch=notch)
+    return friction_figure(fr, u.info.V_s, path, title=f"slip {slip}, {pair.row['branch']}: R/σ = μ_d (1 − P*/σ), Eq. 6",
+                           drained_mean=drained_mean)
+
+
 def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | str | None = None,
-                 notch: bool = True) -> list[Path]:
+                 notch: bool = True, main: str = "first") -> list[Path]:
     """Draw the figures of one run into ``out_dir`` (default ``RUN/figures``); returns the files.
 
     Always: ``overview.png`` (four panels, slips shaded) and ``snapshot_<step>.png`` (the run's
@@ -39,6 +49,8 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
     ``slip_NNN_pair_B.png`` (drained black, undrained blue, pore pressure),
     ``slip_NNN_friction_B.png`` (R/sigma, Eq. 6) and ``slip_NNN_snapshot_B.png`` (the branch's
     snapshot nearest its peak velocity, pressure shaded) when the branch wrote snapshots.
+    Pairs are classified by :func:`~gouge_cli.analysis.report.classify_fork` (``main``: the compared
+    events), so titles and shading say what pairs.csv and pair.json say.
     Raises :class:`~gouge_cli.analysis.report.AnalysisError` subclasses for bad input.
     """
     run_dir = Path(run_dir)
@@ -67,7 +79,7 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
             written.append(friction_figure(fr, reader.info.V_s, out / f"{tag}_friction.png",
                                            title=f"{reader.info.run_dir.name}, slip {slip}: "
                                                  f"{'μ_d(t), Eq. 7' if fr.drained else 'R/σ, Eq. 6'}"))
-    pairs, _ = run_pairs(run_dir)
+    pairs, _ = run_pairs(run_dir, main=main)
     if entry is not None:
         fork = run_dir / "forks" / f"slip_{slip:03d}"
         drained_dir, undrained_dirs = fork_branches(fork)
@@ -81,14 +93,8 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
                         written.append(pair_figure(d, u, pair, out / f"{tag}_pair_{branch}.png"))
                         main = pair.result.undrained_slip
                         if main is not None:
-                            fr = slip_friction(u, {"number": slip, "onset_time": main.onset_time,
-                                                   "end_time": main.end_time,
-                                                   "static_strength": pair.result.undrained_strength},
-                                               notch=notch)
-                            written.append(friction_figure(
-                                fr, u.info.V_s, out / f"{tag}_friction_{branch}.png",
-                                title=f"slip {slip}, {branch}: R/σ = μ_d (1 − P*/σ), Eq. 6",
-                                drained_mean=drained_mean))
+                            written.append(undrained_friction_figure(
+                                u, pair, out / f"{tag}_friction_{branch}.png", notch, drained_mean))
                         if u.snapshot_names():
                             if main is not None:
                                 t_peak = main.peak_time

@@ -6,6 +6,7 @@ wall displacement against time; drained black, undrained blue.
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -94,11 +95,14 @@ def slip_figure(reader: RunReader, entry: dict, path: Path, pad: float = 1.0) ->
     if fit.success:
         tt = np.linspace(max(fit.t0, s["time"][0]), min(fit.t0 + fit.half_period, s["time"][-1]), 200)
         ax.plot(tt - onset, fit.amplitude * np.sin(fit.omega * (tt - fit.t0)) / info.V_s, color=FIT, lw=1.5,
-                ls="--", label=f"Eq. 3 fit: half period {fit.half_period:.4g} t₀, R² = {fit.r2:.2f}")
+                ls="--", label=f"Eq. 3 fit: half period {fit.half_period:.4g} t₀, R² = {fit.r2:.2f}, "
+                               f"m_eff = {fit.m_eff / info.m_b:.3g} m_b")
         omega = math.sqrt(info.k / info.m_b)
         tp = np.linspace(0.0, min(math.pi / omega, float(t[-1])), 200)
         ax.plot(tp, fit.amplitude * np.sin(omega * tp) / info.V_s, color=PREDICTED, lw=1.2, ls=":",
                 label=f"Eq. 3, π√(m_b/k) = {info.predicted_half_period:.4g} t₀, same amplitude")
+    else:
+        ax.plot([], [], " ", label=f"Eq. 3: no fit ({fit.reason})")
     ax.legend(loc="upper left", fontsize=8, frameon=True, framealpha=0.85, edgecolor="none")
     axes[0].axhline(float(entry["static_strength"]), color="0.5", lw=0.7, ls=":")
     axes[0].set_xlim(float(t[0]), float(t[-1]))
@@ -150,10 +154,14 @@ def pair_figure(drained: RunReader, undrained: RunReader, pair: ForkPair, path: 
     strength = ("" if not np.isfinite(row["strength_difference"]) else
                 f", S_u − S_d = {row['strength_difference']:+.3g}")
     extra = f"\n{row['note']}" if row["note"] else ""
-    fig.suptitle(f"slip {row['slip']}: drained vs {row['branch']} — Type {row['type']}{strength}"
-                 f"{' (' + row['criteria'] + ')' if row['criteria'] else ''}{extra}", fontsize=10)
+    title = (f"slip {row['slip']}: drained vs {row['branch']} — Type {row['type']}{strength}"
+             f"{' (' + row['criteria'] + ')' if row['criteria'] else ''}{extra}")
+    fig.suptitle(title, fontsize=10)
     fig.subplots_adjust(left=0.11, right=0.97, top=0.93, bottom=0.05, hspace=0.08)
-    return save(fig, path)
+    shaded = {"type": row["type"], "slip": row["slip"], "branch": row["branch"],
+              "drained": [row["drained_onset"], row["drained_end"]],
+              "undrained": [row["undrained_onset"], row["undrained_end"]]}
+    return save(fig, path, metadata={"Title": title, "Description": json.dumps(shaded)})
 
 
 def friction_figure(friction: SlipFriction, V_s: float, path: Path, title: str = "",

@@ -40,11 +40,12 @@ def new_figure(kind: str, nrows: int = 1, ncols: int = 1, **kwargs):
     return fig, axes
 
 
-def save(fig, path: Path) -> Path:
-    """Write ``fig`` as PNG at :data:`DPI` (exact figure size) and close it."""
+def save(fig, path: Path, metadata: dict | None = None) -> Path:
+    """Write ``fig`` as PNG at :data:`DPI` (exact figure size) and close it; ``metadata``: PNG
+    text chunks (e.g. {"Title": ..., "Description": ...}) so tests can read what a figure says."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI, format="png")
+    fig.savefig(path, dpi=DPI, format="png", metadata=metadata)
     plt.close(fig)
     return path
 

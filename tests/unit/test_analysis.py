@@ -349,10 +349,12 @@ def test_pair_restart_and_creep_criteria():
     def precursor(t):
         return _bump(t, 15.0, 2.0, 0.02) + _bump(t, 25.0, PDUR, 0.06)
 
-    r = _classify(*_pair(0.22, 0.23, precursor))
+    r = _classify(*_pair(0.22, 0.23, precursor), main="largest")
     assert r.criteria["restart"] and r.measures["n_restarts"] == 1
     assert r.undrained_slip.onset_time > 24 and len(r.undrained_slips) == 2
     assert r.type == "II-C"
+    first = _classify(*_pair(0.22, 0.23, precursor))        # default: the first slip (the precursor)
+    assert first.undrained_slip.onset_time < 16 and first.criteria["restart"]
 
     def creep(t):
         return np.where((t > 10) & (t < 20), PV, 0.0) + _bump(t, 25.0, PDUR, 0.06)

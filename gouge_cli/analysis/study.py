@@ -1,0 +1,170 @@
+"""The study table and summary (thesis Table 3 / Appendix B, Sections 4.1-4.3): reads files only.
+
+One row per drained/undrained pair (:data:`STUDY_COLUMNS`), built from the rows of
+:func:`~gouge_cli.analysis.report.classify_fork` (the one pair definition) and the drained
+slip's block-slider fit (Eq. 3). Transient slips (:func:`transient_slips`) are marked and left
+out of every statistic of :func:`study_summary`, which is printed next to :data:`THESIS`.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+
+import numpy as np
+
+from .report import ForkPair, RunReader, fit_slip, read_catalog
+
+__all__ = ["STUDY_COLUMNS", "THESIS", "TRANSIENT_TOL", "DURATION_TOL", "GOOD_R2",
+           "transient_slips", "study_rows", "study_summary", "summary_lines"]
+
+_NAN = float("nan")
+TRANSIENT_TOL = 0.3     # a slip is steady when S and stress drop are within 30 % of the late medians
+DURATION_TOL = 0.15     # drained durations "characteristic": within 15 % of their median
+GOOD_R2 = 0.9           # a drained slip "fits Eq. 3" with R^2 above this (and passing the fit bar)
+
+STUDY_COLUMNS = (
+    "slip", "transient", "k", "sigma", "V", "kappa_c", "type", "undrained_event", "S_d", "S_u",
+    "stress_drop_ratio", "peak_velocity_ratio", "duration_ratio", "deborah", "subevents",
+    "drained_duration", "drained_fit_r2", "drained_fit_ok", "m_eff_over_m_b", "criteria", "note",
+)
+
+#: The thesis's study (Section 4.2-4.3, Table 3): 39 pairs at kappa_c = 1e-5.
+THESIS = {"n": 39, "n_type_I": 9, "n_type_II": 30, "n_tie": 0, "n_complex": 25, "I-C": 5, "II-C": 20}
+
+
+def transient_slips(catalog: list[dict], tol: float = TRANSIENT_TOL) -> set[int]:
+    """Numbers of the transient slips of a run's catalog (dicts with number, static_strength,
+    stress_drop).
+
+    Rule: let S* and D* be the medians of static strength and stress drop over the second half
+    of the catalog (slips ceil(n/2)+1 .. n; the run has reached repeated stick-slip by then).
+    Slip 1 is always transient (it ends the first loading from rest); every later slip is
+    transient until the first one with ``|S - S*| <= tol S*`` and ``|D - D*| <= tol D*``.
+    """
+    slips = sorted(catalog, key=lambda e: int(e["number"]))
+    if not slips:
+        return set()
+    late = slips[len(slips) // 2:]
+    s_ref = statistics.median(float(e["static_strength"]) for e in late)
+    d_ref = statistics.median(float(e["stress_drop"]) for e in late)
+    out = {int(slips[0]["number"])}
+    for e in slips[1:]:
+        s, d = float(e["static_strength"]), float(e["stress_drop"])
+        if abs(s - s_ref) <= tol * s_ref and abs(d - d_ref) <= tol * d_ref:
+            break
+        out.add(int(e["number"]))
+    return out
+
+
+def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict]:
+    """One row per pair (:data:`STUDY_COLUMNS`), in slip then permeability order.
+
+    S_d, S_u: static strengths; ratios undrained / drained of the compared events; deborah: mean
+    Deborah number of the undrained branch; subevents: sub-events of the undrained event;
+    drained_fit_*: Eq. 3 fit of the drained slip in the parent run's catalog; m_eff_over_m_b:
+    k (T_fit / pi)^2 / m_b of that fit (NaN when it fails the fit bar).
+    """
+    rows = []
+    with RunReader(run_dir) as reader:
+        info = reader.info
+        catalog = {int(e["number"]): e for e in read_catalog(reader)}
+        fits = {}
+        for p in pairs:
+            n = int(p.row["slip"])
+            if n not in fits and n in catalog:
+                fits[n] = fit_slip(reader, catalog[n])
+    for p in sorted(pairs, key=lambda q: (int(q.row["slip"]), q.row["permeability"])):
+        r, n = p.row, int(p.row["slip"])
+        fit = fits.get(n)
+        entry = catalog.get(n, {})
+        rows.append({
+            "slip": n, "transient": n in transient, "k": info.k, "sigma": info.sigma, "V": info.V_s,
+            "kappa_c": r["permeability"], "type": r["type"], "undrained_event": r["undrained_event"],
+            "S_d": r["drained_strength"], "S_u": r["undrained_strength"],
+            "stress_drop_ratio": r["stress_drop_ratio"], "peak_velocity_ratio": r["peak_velocity_ratio"],
+            "duration_ratio": r["duration_ratio"], "deborah": r["deborah_mean"],
+            "subevents": int(p.result.n_subevents),
+            "drained_duration": float(entry.get("duration", _NAN)),
+            "drained_fit_r2": fit.r2 if fit is not None else _NAN,
+            "drained_fit_ok": bool(fit is not None and fit.success),
+            "m_eff_over_m_b": fit.m_eff / info.m_b if (fit is not None and fit.success) else _NAN,
+            "criteria": r["criteria"], "note": r["note"],
+        })
+    return rows
+
+
+def _spread(values) -> dict:
+    a = np.asarray([v for v in values if math.isfinite(v)], dtype=float)
+    if a.size == 0:
+        return {"n": 0, "mean": _NAN, "std": _NAN, "cv": _NAN, "min": _NAN, "max": _NAN}
+    return {"n": int(a.size), "mean": float(a.mean()), "std": float(a.std()),
+            "cv": float(a.std() / a.mean()) if a.mean() else _NAN, "min": float(a.min()), "max": float(a.max())}
+
+
+def study_summary(rows: list[dict]) -> dict:
+    """Statistics over the non-transient rows (one per pair; drained slips counted once).
+
+    counts: I, II, tie, none, complex (-C), slow; slower: fraction of classified pairs with
+    peak-velocity ratio < 1; smaller_drop: stress-drop ratio < 1; drained: fraction of the
+    study's drained slips passing the fit bar, with R^2 > GOOD_R2, and with duration within
+    DURATION_TOL of the median; m_eff (in m_b) mean, std, cv.
+    """
+    steady = [r for r in rows if not r["transient"]]
+    classified = [r for r in steady if r["type"] != "none"]
+    base = [r["type"].replace("-C", "") for r in classified]
+    drained = {r["slip"]: r for r in steady}.values()
+    durations = [r["drained_duration"] for r in drained if math.isfinite(r["drained_duration"])]
+    med = statistics.median(durations) if durations else _NAN
+    n_d = len(drained)
+
+    def frac(rs, test):
+        rs = list(rs)
+        return sum(1 for r in rs if test(r)) / len(rs) if rs else _NAN
+
+    return {
+        "n_rows": len(rows), "n_transient_rows": len(rows) - len(steady), "n": len(steady),
+        "n_classified": len(classified),
+        "n_type_I": base.count("I"), "n_type_II": base.count("II"), "n_tie": base.count("tie"),
+        "n_none": len(steady) - len(classified),
+        "n_complex": sum(1 for r in classified if r["type"].endswith("-C")),
+        "I-C": sum(1 for r in classified if r["type"] == "I-C"),
+        "II-C": sum(1 for r in classified if r["type"] == "II-C"),
+        "n_slow": sum(1 for r in classified if r["undrained_event"] != "slip"),
+        "frac_slower": frac(classified, lambda r: r["peak_velocity_ratio"] < 1),
+        "frac_smaller_drop": frac(classified, lambda r: r["stress_drop_ratio"] < 1),
+        "n_drained": n_d,
+        "drained_frac_fit_ok": frac(drained, lambda r: r["drained_fit_ok"]),
+        "drained_frac_r2_good": frac(drained, lambda r: r["drained_fit_ok"] and r["drained_fit_r2"] > GOOD_R2),
+        "drained_frac_duration_within": frac(drained, lambda r: abs(r["drained_duration"] - med) <= DURATION_TOL * med),
+        "drained_duration_median": med,
+        "m_eff_over_m_b": _spread(r["m_eff_over_m_b"] for r in drained),
+    }
+
+
+def _pct(x: float) -> str:
+    return "–" if not math.isfinite(x) else f"{100 * x:.0f} %"
+
+
+def summary_lines(s: dict) -> list[tuple[str, str, str]]:
+    """(quantity, this study, thesis) rows for printing side by side."""
+    t = THESIS
+    m = s["m_eff_over_m_b"]
+    return [
+        ("pairs (non-transient)", f"{s['n']} ({s['n_transient_rows']} transient left out)", str(t["n"])),
+        ("Type I (of them -C)", f"{s['n_type_I']} ({s['I-C']})", f"{t['n_type_I']} ({t['I-C']})"),
+        ("Type II (of them -C)", f"{s['n_type_II']} ({s['II-C']})", f"{t['n_type_II']} ({t['II-C']})"),
+        ("tie", str(s["n_tie"]), str(t["n_tie"])),
+        ("none (undrained did not move)", str(s["n_none"]), "–"),
+        ("complex (-C)", f"{s['n_complex']} of {s['n_classified']}", f"{t['n_complex']} of {t['n']}"),
+        ("slow slip below trigger", str(s["n_slow"]), "– (not a category)"),
+        ("undrained slower (peak v ratio < 1)", _pct(s["frac_slower"]), "not tabulated"),
+        ("undrained smaller stress drop", _pct(s["frac_smaller_drop"]), "'in both Type I and II' (Figs. 9-10)"),
+        ("drained slips passing the fit bar", _pct(s["drained_frac_fit_ok"]), "'good agreement' (Sec. 4.1)"),
+        (f"drained slips with R^2 > {GOOD_R2}", _pct(s["drained_frac_r2_good"]), "not tabulated"),
+        (f"drained durations within {DURATION_TOL:.0%} of median",
+         f"{_pct(s['drained_frac_duration_within'])} (median {s['drained_duration_median']:.4g} t0)",
+         "constant (Sec. 4.1)"),
+        ("m_eff / m_b, mean ± std (cv)",
+         "–" if not m["n"] else f"{m['mean']:.3g} ± {m['std']:.2g} ({m['cv']:.2f}, n {m['n']})", "1 (Eq. 3)"),
+    ]

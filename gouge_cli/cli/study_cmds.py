@@ -1,0 +1,60 @@
+"""`gouge study`: thin wrapper over gouge_cli.workflows.study (registered from cli/main.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import List, Optional
+
+import typer
+
+
+def register(app: typer.Typer) -> None:
+    """Add the `study` command to ``app``."""
+
+    @app.command()
+    def study(
+        target: Path = typer.Argument(..., help="a config (the dry loading run is run first) or a run directory"),
+        perm: List[float] = typer.Option([], "--perm", help="kappa_c [d^2] of the undrained branches; repeatable"),
+        slips: Optional[str] = typer.Option(None, "--slips", help="slips to fork, e.g. 3-12 or 3,5,7 "
+                                            "(default: every non-transient slip)"),
+        main: str = typer.Option("first", "--main", help="compared event of each branch: first or largest"),
+        jobs: Optional[int] = typer.Option(None, "--jobs", help="parallel branches (default: all cores)"),
+        out_dir: Optional[Path] = typer.Option(None, "--out", help="loading-run directory for a config"),
+        set_: List[str] = typer.Option([], "--set", help="config override for the loading run"),
+        figures: bool = typer.Option(True, "--figures/--no-figures", help="draw RUN/study/figures"),
+        quiet: bool = typer.Option(False, "--quiet"),
+    ):
+        """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
+        from ..analysis.report import AnalysisError
+        from ..analysis.study import STUDY_COLUMNS, summary_lines
+        from ..checkpoint import CheckpointError
+        from ..config import ConfigError
+        from ..runner import RunDirError
+        from ..simulation import PhysicsError
+        from ..workflows.study import StudyInterrupted, parse_slips, run_study
+        from .analysis_cmds import _table
+        from .main import EXIT_INTERRUPTED, EXIT_PHYSICS, fail, out
+
+        try:
+            wanted = parse_slips(slips)
+        except ValueError:
+            fail(f"--slips {slips!r}: give a range like 3-12 or a list like 3,5,7")
+        if not perm:
+            fail("give at least one --perm K (kappa_c in d^2, e.g. --perm 1e-5)")
+        say = (lambda m: None) if quiet else (lambda m: out.print(m, highlight=False))
+        try:
+            result = run_study(target, perm, wanted, main=main, jobs=jobs, out=out_dir, overrides=set_,
+                               quiet=quiet, figures=figures, on_progress=say)
+        except (ConfigError, RunDirError, CheckpointError, AnalysisError) as e:
+            fail(str(e))
+        except PhysicsError as e:
+            fail(f"physics failure: {e}", EXIT_PHYSICS)
+        except StudyInterrupted as e:
+            fail(str(e), EXIT_INTERRUPTED)
+        cols = [(c, c) for c in STUDY_COLUMNS if c not in ("note", "criteria")]
+        out.print(_table(f"study of {result.run_dir} ({len(result.rows)} pairs)", cols, result.rows))
+        side = [{"quantity": a, "this study": b, "thesis": c} for a, b, c in summary_lines(result.summary)]
+        out.print(_table("summary (transient slips left out) next to the thesis",
+                         [("quantity", "quantity"), ("this study", "this study"), ("thesis", "thesis")], side))
+        out.print(f"ran {len(result.ran)} branches, {len(result.skipped)} done before; wrote "
+                  f"{result.run_dir / 'study'}", highlight=False)

@@ -1,0 +1,55 @@
+"""``RUN/forks/slip_NNN/pair.json``: the pair verdict of one forked slip, from its branch files.
+
+Written after ``gouge restart`` and by ``gouge study`` from the same rows that ``gouge analyze``
+writes to pairs.csv (:func:`gouge_cli.analysis.report.classify_fork`, one pair definition), so the
+two cannot disagree.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from ..analysis.report import AnalysisError, RunReader, classify_fork, fork_branches
+from ..filedoc import json_safe
+from ..provenance import branch_bit_risks
+
+__all__ = ["write_pair_json", "branch_status"]
+
+
+def branch_status(branch_dir: Path) -> str:
+    """Status attribute of ``branch_dir/run.h5`` ('missing' or 'unreadable' when it has none)."""
+    h5 = Path(branch_dir) / "run.h5"
+    if not h5.is_file():
+        return "missing"
+    try:
+        with RunReader(branch_dir, allow_running=True) as r:
+            return r.info.status
+    except AnalysisError:
+        return "unreadable"
+
+
+def write_pair_json(fork_dir: Path, main: str = "first") -> dict:
+    """Classify the fork's pairs and write ``fork_dir/pair.json``; returns what it wrote.
+
+    ``{"slip", "fork_dir", "branches": {name: status}, "definition": {...}, "pairs": [pairs.csv row
+    per undrained branch], "library_differences_from_parent": [...]}`` (library versions that
+    differ between the parent's checkpoint and the branches: the drained branch may then not
+    retrace the parent bit for bit). Raises :class:`~gouge_cli.analysis.report.AnalysisError` when a
+    branch is missing or still running.
+    """
+    fork_dir = Path(fork_dir)
+    pairs = classify_fork(fork_dir, main)
+    drained, undrained = fork_branches(fork_dir)
+    branches = {p.name: branch_status(p) for p in [drained, *undrained] if p is not None}
+    risks = sorted({r for p in [drained, *undrained] if p is not None for r in branch_bit_risks(p)})
+    record = json_safe({
+        "slip": pairs[0].row["slip"] if pairs else int(fork_dir.name.split("_")[-1]),
+        "fork_dir": fork_dir.name,
+        "branches": branches,
+        "definition": pairs[0].result.definition if pairs else None,
+        "pairs": [p.row for p in pairs],
+        "library_differences_from_parent": risks,
+    })
+    (fork_dir / "pair.json").write_text(json.dumps(record, indent=2, allow_nan=False))
+    return record

@@ -1,0 +1,124 @@
+"""`gouge study` end to end on a tiny scene: real runs, forks, files and figures.
+
+Idempotence (a second invocation runs nothing), resumption (an interrupted branch is run again,
+nothing else), a new --perm adds only its branches, and pair.json / pairs.csv / table.csv /
+figure titles say the same thing for every pair.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import h5py
+import pytest
+import yaml
+from PIL import Image
+from typer.testing import CliRunner
+
+from gouge_cli.cli.main import EXIT_BAD_INPUT, app
+from gouge_cli.forks import slip_catalog
+
+SCENE = {
+    "name": "tiny_study",
+    "seed": 4,
+    "packing": {"n_grains": 300, "width": 15},
+    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
+    "numerics": {"dt_safety": 0.3, "threads": 1},
+    "run": {"duration": 50000},
+    "output": {"series_interval": 10, "snapshot_interval": 50000, "checkpoint_interval": 10000},
+}
+runner = CliRunner()
+
+
+def gouge(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def _branches(run_dir):
+    return {p.parent.relative_to(run_dir / "forks").as_posix(): p.stat().st_mtime_ns
+            for p in (run_dir / "forks").glob("slip_*/*/run.h5")}
+
+
+@pytest.fixture(scope="module")
+def study_run(tmp_path_factory):
+    """A loaded tiny run and the numbers of (up to) two of its slips with checkpoints."""
+    cfg = tmp_path_factory.mktemp("cfg") / "tiny_study.yaml"
+    cfg.write_text(yaml.safe_dump(SCENE))
+    out = tmp_path_factory.mktemp("runs") / "tiny_study"
+    assert gouge("run", cfg, "--out", out, "--quiet").exit_code == 0
+    numbers = [int(e["number"]) for e in slip_catalog(out) if e["checkpoint"]]
+    assert numbers, "the tiny scene must slip at least once"
+    return cfg, out, numbers[-2:]
+
+
+def test_study_end_to_end_idempotent_and_consistent(study_run):
+    cfg, run_dir, slips = study_run
+    arg = ",".join(map(str, slips))
+    first = gouge("study", cfg, "--out", run_dir, "--perm", "1e-5", "--slips", arg, "--jobs", "2")
+    assert first.exit_code == 0, first.output
+    assert "loading run" in first.output and "done before" in first.output     # the run was not redone
+    assert f"ran {2 * len(slips)} branches, 0 done before" in first.output
+    before = _branches(run_dir)
+    assert len(before) == 2 * len(slips)
+
+    # one table row per pair, and pair.json = pairs.csv = table.csv = figure title for each
+    with open(run_dir / "study" / "table.csv") as fh:
+        table = {int(r["slip"]): r for r in csv.DictReader(fh)}
+    with open(run_dir / "analysis" / "pairs.csv") as fh:
+        pairs_csv = {int(r["slip"]): r for r in csv.DictReader(fh)}
+    assert sorted(table) == sorted(pairs_csv) == slips
+    for n in slips:
+        pj = json.loads((run_dir / "forks" / f"slip_{n:03d}" / "pair.json").read_text())
+        (p,) = pj["pairs"]
+        row, trow = pairs_csv[n], table[n]
+        assert p["type"] == row["type"] == trow["type"]
+        assert p["main"] == row["main"] == "first"
+        for key, tkey in (("drained_strength", "S_d"), ("undrained_strength", "S_u"),
+                          ("peak_velocity_ratio", "peak_velocity_ratio"), ("stress_drop_ratio", "stress_drop_ratio")):
+            a = p[key]
+            b, c = float(row[key]) if row[key] not in ("", "nan") else None, trow[tkey]
+            if a is None:
+                assert b is None or math.isnan(b)
+            else:
+                assert a == pytest.approx(b, rel=1e-12) and a == pytest.approx(float(c), rel=1e-12)
+        assert (run_dir / "study" / "figures" / f"friction_slip_{n:03d}.png").is_file()      # Eq. 7, Fig. 17
+        png = Image.open(run_dir / "study" / "figures" / f"pair_slip_{n:03d}_perm_1e-05.png")
+        assert f"Type {p['type']}" in png.text["Title"]
+        shaded = json.loads(png.text["Description"])
+        assert shaded["type"] == p["type"]
+        if p["drained_onset"] is not None:
+            assert shaded["drained"][0] == pytest.approx(p["drained_onset"], rel=1e-12)
+    summary = json.loads((run_dir / "study" / "summary.json").read_text())
+    assert summary["summary"]["n_rows"] == len(slips)
+    assert any(line[0].startswith("Type II") and line[2] == "30 (20)" for line in summary["side_by_side"])
+
+    # second invocation: nothing runs, nothing is rewritten
+    again = gouge("study", run_dir, "--perm", "1e-5", "--slips", arg, "--no-figures")
+    assert again.exit_code == 0, again.output
+    assert f"ran 0 branches, {2 * len(slips)} done before" in again.output
+    assert _branches(run_dir) == before
+
+    # an interrupted branch is run again, and only it; a new --perm adds only its branches
+    victim = f"slip_{slips[0]:03d}/perm_1e-05"
+    with h5py.File(run_dir / "forks" / victim / "run.h5", "a") as h5:
+        h5.attrs["status"] = "interrupted"
+    more = gouge("study", run_dir, "--perm", "1e-5", "--perm", "1e-3", "--slips", arg, "--jobs", "2",
+                 "--no-figures")
+    assert more.exit_code == 0, more.output
+    after = _branches(run_dir)
+    changed = {k for k in after if before.get(k) != after[k]}
+    assert changed == {victim} | {f"slip_{n:03d}/perm_0.001" for n in slips}
+
+
+def test_study_bad_input(study_run):
+    cfg, run_dir, _ = study_run
+    r = gouge("study", run_dir, "--perm", "1e-5", "--slips", "99")
+    assert r.exit_code == EXIT_BAD_INPUT and "slip(s) 99" in r.output
+    r = gouge("study", run_dir, "--slips", "1")
+    assert r.exit_code == EXIT_BAD_INPUT and "--perm" in r.output
+    r = gouge("study", run_dir, "--perm", "1e-5", "--slips", "x-y")
+    assert r.exit_code == EXIT_BAD_INPUT and "--slips" in r.output
+    r = gouge("study", run_dir, "--perm", "1e-5", "--main", "biggest")
+    assert r.exit_code == EXIT_BAD_INPUT and "--main" in r.output
