@@ -146,6 +146,7 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     first_slip}}, "library_differences_from_parent"}`` (first_slip: the detector's record of the
     branch's first slip; paths relative to the fork directory)."""
     run_dir = check_run_dir(run_dir)
+    refuse_if_in_progress(run_dir, f"restart --slip {slip}")
     entry = fork_entry(run_dir, slip)
     check_perms(perms)
     ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)

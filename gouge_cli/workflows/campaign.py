@@ -163,13 +163,16 @@ def advance_run(run_dir: str, config: dict, settings: dict) -> dict:
 def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration: float | None,
                  settings: dict) -> dict:
     """Dask task: drained + undrained branches of one slip (:func:`gouge_cli.forks.run_fork`),
-    started afresh from the slip checkpoint (any partial branches of a lost attempt are replaced)."""
+    started afresh from the slip checkpoint (any partial branches of a lost attempt are replaced),
+    then the fork's pair.json (the one pair definition, :mod:`gouge_cli.workflows.pairs`)."""
     from ..forks import run_fork
+    from .pairs import write_pair_json
 
     run_dir = Path(run_dir)
 
     def body():
         summary = run_fork(run_dir, slip, list(permeabilities), None, duration, force=True, quiet=True)
+        write_pair_json(run_dir / "forks" / f"slip_{slip:03d}")
         return {"branches": {k: b["status"] for k, b in summary["branches"].items()}}
 
     return _task(run_dir / "ledger" / f"fork_{slip:03d}.json", settings, body)

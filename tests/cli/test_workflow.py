@@ -250,7 +250,6 @@ def test_run_file_and_checkpoints_record_provenance(finished_run):
 def test_moved_run_directory_still_forks(finished_run, tmp_path):
     """Stored paths are relative: a run directory copied elsewhere forks from its own checkpoints,
     and the branch's parent_run points back at the moved run."""
-    import json
     import re
     import shutil
     moved = tmp_path / "elsewhere" / "tiny"
@@ -261,8 +260,8 @@ def test_moved_run_directory_still_forks(finished_run, tmp_path):
     with h5py.File(branch / "run.h5", "r") as h5:
         assert (branch / h5.attrs["parent_run"]).resolve() == moved.resolve()
         assert re.fullmatch(r"[0-9a-f]{16}", h5.attrs["final_state_hash"])
-    stored = json.loads((branch.parent / "pair.json").read_text())
-    assert (branch.parent / stored["run"]).resolve() == moved.resolve() and summary["library_differences_from_parent"] == []
+    assert (branch.parent / summary["run"]).resolve() == moved.resolve()
+    assert summary["branches"]["drained"]["dir"] == "drained" and summary["library_differences_from_parent"] == []
 
 
 def test_restart_names_library_differences_from_the_parent(finished_run, tmp_path):
