@@ -81,13 +81,17 @@ def hdf5_os_error(exc: RuntimeError, where: str | None = None) -> OSError | None
     return OSError(code, os.strerror(code), name.group(1) if name else where)
 
 
-def exit_code_of(exc: BaseException) -> int:
+def describe(exc: BaseException, where: str | None = None) -> tuple[str, int] | None:
+    """(message, exit code) for an error the user can act on, or None for a bug (let it raise).
+    `where`: the run directory or file the command was working on."""
     if isinstance(exc, KeyboardInterrupt):
-        return EXIT_INTERRUPTED
+        return "interrupted", EXIT_INTERRUPTED
     if isinstance(exc, PhysicsFailure):
-        return EXIT_PHYSICS
+        return f"physics failure: {exc}", EXIT_PHYSICS
+    if isinstance(exc, InputError):
+        return str(exc), EXIT_BAD_INPUT
+    if isinstance(exc, RuntimeError):
+        exc = hdf5_os_error(exc, where)
     if isinstance(exc, OSError):
-        return describe_os_error(exc)[1]
-    if isinstance(exc, RuntimeError) and hdf5_os_error(exc) is not None:
-        return describe_os_error(hdf5_os_error(exc))[1]
-    return EXIT_BAD_INPUT
+        return describe_os_error(exc, where)
+    return None

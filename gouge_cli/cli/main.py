@@ -13,7 +13,7 @@ from rich.markup import escape
 
 from ..config import build_config, dump_config, load_config
 from ..errors import (EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_PHYSICS, InputError, PhysicsFailure,
-                      bounded, describe_os_error, hdf5_os_error)
+                      bounded, describe)
 
 __all__ = ["app", "main", "EXIT_OK", "EXIT_BAD_INPUT", "EXIT_PHYSICS", "EXIT_INTERRUPTED"]
 
@@ -45,26 +45,19 @@ def fail(message: str, code: int = EXIT_BAD_INPUT):
 
 
 def guarded(command):
-    """Run a command with the exit-code mapping of gouge_cli.errors: bad input 2, physics failure
-    or a full disk 3, Ctrl-C 130, each with a short message naming the key or path."""
+    """Run a command with the exit-code mapping of gouge_cli.errors.describe: bad input 2,
+    physics failure or a full disk 3, Ctrl-C 130, each with a short message naming the key or path."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
         try:
             return command(*args, **kwargs)
-        except InputError as e:
-            fail(str(e))
-        except PhysicsFailure as e:
-            fail(f"physics failure: {e}", EXIT_PHYSICS)
-        except (OSError, RuntimeError) as e:
+        except (InputError, PhysicsFailure, OSError, RuntimeError, KeyboardInterrupt) as e:
             where = next((kwargs[k] for k in ("run_dir", "out_dir", "config", "run_dirs") if kwargs.get(k)), None)
-            where = str(where) if where is not None else None
-            cause = e if isinstance(e, OSError) else hdf5_os_error(e, where)
-            if cause is None:
+            described = describe(e, str(where) if where is not None else None)
+            if described is None:
                 raise
-            fail(*describe_os_error(cause, where))
-        except KeyboardInterrupt:
-            fail("interrupted", EXIT_INTERRUPTED)
+            fail(*described)
 
     return wrapper
 

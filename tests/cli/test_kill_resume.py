@@ -168,3 +168,29 @@ def test_kill_9_twenty_times(reference, tmp_path):
           sum(h["tmp_seen"] for h in hits), "during a checkpoint write,",
           sum(h["tmp_left"] for h in hits), "left a temporary file (removed by resume)")
     assert len(hits) == 20
+
+
+@pytest.mark.parametrize("where", ["before the onset", "during the slip"])
+def test_resume_keeps_the_pre_slip_ring(reference, tmp_path, where):
+    """A run stopped where the slip's checkpoint exists only in memory (the ring of pre-slip
+    states, or the state set aside at the trigger) and resumed: the slip keeps that checkpoint."""
+    scene_file, ref, _ = reference
+    entry = next(e for e in slip_catalog(ref) if e["checkpoint"])
+    stop = entry["onset_time"] - 5.0 if where == "before the onset" else 0.5 * (entry["onset_time"] + entry["end_time"])
+    with h5py.File(ref / "run.h5", "r") as h5:
+        load_start, end_time = float(h5.attrs["load_start_time"]), float(h5.attrs["end_time"])
+    assert entry["checkpoint_time"] < stop
+    out = tmp_path / "stopped"
+    runner = CliRunner()
+    result = runner.invoke(app, ["run", str(scene_file), "--out", str(out), "--quiet",
+                                 "--set", f"run.duration={stop - load_start}"])
+    assert result.exit_code == 0, result.output
+    assert not (out / entry["checkpoint"]).exists()            # the slip was not recorded yet
+    saved = read_checkpoint(out / "checkpoints" / "latest.h5")
+    assert any(k.startswith("ring_") for k in saved.attached)
+    with h5py.File(out / "run.h5", "r+") as h5:                 # as if it had been killed there
+        h5.attrs["status"] = "running"
+        h5.attrs["end_time"] = end_time
+    result = runner.invoke(app, ["resume", str(out), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert_identical(ref, out)

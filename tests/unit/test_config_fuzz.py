@@ -119,21 +119,26 @@ def _count(name: str, ok: bool):
     tried_refused[1] += int(ok)
 
 
+def refused_by_run(text: str, key: str, extra: list[str], label: str):
+    """`gouge run` of this config text (plus extra arguments) into a fresh --out: refused (check_refused)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "c.yaml"
+        path.write_text(text)
+        out = Path(tmp) / "out"
+        result = runner.invoke(app, ["run", str(path), "--out", str(out), "--quiet", *extra])
+        try:
+            check_refused(result, key, out)
+        except AssertionError:
+            _count(label, False)
+            raise
+        _count(label, True)
+
+
 @FUZZ
 @given(invalid_config())
 def test_fuzzed_config_files_refused_by_run(case):
     data, key = case
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "c.yaml"
-        path.write_text(yaml.safe_dump(data, allow_unicode=True))
-        out = Path(tmp) / "out"
-        result = runner.invoke(app, ["run", str(path), "--out", str(out), "--quiet"])
-        try:
-            check_refused(result, key, out)
-        except AssertionError:
-            _count("config files", False)
-            raise
-        _count("config files", True)
+    refused_by_run(yaml.safe_dump(data, allow_unicode=True), key, [], "config files")
 
 
 @FUZZ
@@ -143,17 +148,7 @@ def test_fuzzed_config_files_refused_by_run(case):
                                          "{a: 1}", "abc", "'3 parsecs'", "*x", "&a 1", "0x"]))))
 def test_fuzzed_overrides_refused_by_run(case):
     key, value = case
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "c.yaml"
-        path.write_text(yaml.safe_dump(BASE))
-        out = Path(tmp) / "out"
-        result = runner.invoke(app, ["run", str(path), "--out", str(out), "--quiet", "--set", f"{key}={value}"])
-        try:
-            check_refused(result, key, out)
-        except AssertionError:
-            _count("overrides", False)
-            raise
-        _count("overrides", True)
+    refused_by_run(yaml.safe_dump(BASE), key, ["--set", f"{key}={value}"], "overrides")
 
 
 @FUZZ
