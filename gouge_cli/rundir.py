@@ -123,16 +123,17 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
         shown = ", ".join(entries[:5]) + (", ..." if len(entries) > 5 else "")
         raise RunDirError(f"{out_dir} is not empty and is not a gouge run directory (it holds {shown}); "
                           "nothing was changed: choose a new or empty --out")
+    if [e for e in entries if e != LOCK_NAME] and not force:       # refused before the lock: nothing changes
+        if (who := holder(out_dir)) is not None:
+            raise RunDirError(f"{out_dir} is in use by a gouge process in progress ({who}); nothing was changed")
+        raise RunDirError(f"{out_dir} already holds a run; choose another --out, another name (--set name=...), "
+                          "or pass --force to replace it")
     lock = RunLock(out_dir, "gouge run")
     busy = [who for branch in out_dir.glob("forks/*/*") if (who := holder(branch)) is not None]
     if busy:
         lock.release()
         raise RunDirError(f"{out_dir} has a fork in progress ({busy[0]}); nothing was changed: wait for it or "
                           "stop it first")
-    if [e for e in entries if e != LOCK_NAME] and not force:
-        lock.release()
-        raise RunDirError(f"{out_dir} already holds a run; choose another --out, another name (--set name=...), "
-                          "or pass --force to replace it")
     try:
         for name in OWNED:      # they belonged to the run being replaced
             target = out_dir / name

@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import seed_offset  # noqa: E402
 
 seed_offset.install()
-seed_offset.preload_workers()
+seed_offset.propagate()
 
 
 @pytest.fixture

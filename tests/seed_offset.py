@@ -1,9 +1,10 @@
 """``GOUGE_TEST_SEED_OFFSET=N``: every packing the suite builds uses seed + N.
 
 Applied through one wrapper of ``build_packing`` (scene dicts, shipped configs and defaults
-alike): in the test process by conftest, in the gouge processes that tests start through
-:func:`gouge_command`, and in Dask workers (a worker preload, :func:`preload_workers`), so ``GOUGE_TEST_SEED_OFFSET=7 make test`` shows that no test depends on
-the trajectory of the seed it happens to use.
+alike): in the test process by conftest, and in every Python process the tests start (gouge
+subprocesses, study process pools, Dask workers) through :func:`propagate`, so
+``GOUGE_TEST_SEED_OFFSET=7 make test`` shows that no test depends on the trajectory of the seed it
+happens to use.
 """
 
 from __future__ import annotations
@@ -19,7 +20,10 @@ def install() -> None:
     """Shift the seed of every packing built in this process by OFFSET (no-op for 0)."""
     if not OFFSET:
         return
-    from gouge_cli import packing, simulation
+    try:
+        from gouge_cli import packing, simulation
+    except ImportError:
+        return
 
     original = packing.build_packing
     if getattr(original, "seed_offset", None) is not None:
@@ -33,19 +37,16 @@ def install() -> None:
 
 
 def gouge_command() -> list[str]:
-    """argv prefix that runs the gouge command line in a new process with the same seed offset."""
-    here = str(Path(__file__).resolve().parent)
-    return [sys.executable, "-c",
-            f"import sys; sys.path.insert(0, {here!r}); import seed_offset; seed_offset.install(); "
-            "sys.argv[0] = 'gouge'; from gouge_cli.cli.main import app; app()"]
+    """argv prefix that runs the gouge command line in a new process (which applies the same seed
+    offset through :func:`propagate`)."""
+    return [sys.executable, "-m", "gouge_cli.cli"]
 
 
-def dask_setup(worker) -> None:
-    """Dask worker preload hook (set by conftest when OFFSET != 0): the same shift in workers."""
-    install()
-
-
-def preload_workers() -> None:
-    """Make Dask workers started from now on (LocalCluster processes) preload this module."""
+def propagate() -> None:
+    """Make every Python process started from now on apply the same shift: the folder
+    seed_offset_site (a sitecustomize that calls :func:`install`) goes first on PYTHONPATH, so gouge
+    subprocesses, the process-pool workers of `gouge study` and Dask workers all pick it up."""
     if OFFSET:
-        os.environ["DASK_DISTRIBUTED__WORKER__PRELOAD"] = f"[{str(Path(__file__).resolve())!r}]"
+        site = str(Path(__file__).resolve().parent / "seed_offset_site")
+        os.environ["PYTHONPATH"] = os.pathsep.join([site] + [p for p in os.environ.get("PYTHONPATH", "").split(
+            os.pathsep) if p and p != site])

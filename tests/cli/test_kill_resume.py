@@ -53,20 +53,27 @@ def _wait_for(path: Path, proc: subprocess.Popen, limit: float = 120.0):
         time.sleep(0.002)
 
 
+def slipping_scene(root: Path, tries: int = 4) -> tuple[Path, Path, float]:
+    """SCENE, its seed raised by 0, 1, ... until an uninterrupted run slips with a ring checkpoint
+    (whether 14,000 t0 of one packing slip is that packing's business; the identities tested here
+    hold for any). Returns (scene file, run dir, seconds from run.h5 to the end)."""
+    for k in range(tries):
+        scene_file = root / f"kill{k}.yaml"
+        scene_file.write_text(yaml.safe_dump(dict(SCENE, seed=SCENE["seed"] + k)))
+        out = root / f"reference{k}"
+        proc = _start(scene_file, out)
+        _wait_for(out / "run.h5", proc)
+        t0 = time.time()
+        assert proc.wait(timeout=300) == 0, proc.stderr.read().decode()
+        if any(e["checkpoint"] for e in slip_catalog(out)):
+            return scene_file, out, time.time() - t0
+    pytest.fail(f"none of {tries} packings of the kill scene slipped with a ring checkpoint")
+
+
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
     """Uninterrupted run; returns (scene file, run dir, seconds from run.h5 to the end)."""
-    root = tmp_path_factory.mktemp("kill")
-    scene_file = root / "kill.yaml"
-    scene_file.write_text(yaml.safe_dump(SCENE))
-    out = root / "reference"
-    proc = _start(scene_file, out)
-    _wait_for(out / "run.h5", proc)
-    t0 = time.time()
-    assert proc.wait(timeout=300) == 0, proc.stderr.read().decode()
-    catalog = slip_catalog(out)
-    assert any(e["checkpoint"] for e in catalog), "the scene must slip with a ring checkpoint"
-    return scene_file, out, time.time() - t0
+    return slipping_scene(tmp_path_factory.mktemp("kill"))
 
 
 def _same(a, b) -> bool:

@@ -22,7 +22,7 @@ from gouge_cli.config import build_config
 from gouge_cli.errors import MAX_MESSAGE
 from gouge_cli.rundir import LOCK_NAME, holder
 from seed_offset import gouge_command
-from test_kill_resume import ENV, SCENE
+from test_kill_resume import ENV, slipping_scene
 
 runner = CliRunner()
 QUICK = ["--set", "run.duration=200", "--set", "compaction.max_time=300", "--set", "compaction.min_time=100"]
@@ -50,18 +50,20 @@ def tree(root: Path) -> dict:
 
 
 @pytest.fixture(scope="module")
-def scene_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("safety") / "kill.yaml"
-    path.write_text(yaml.safe_dump(SCENE))
-    return path
+def slipping(tmp_path_factory):
+    """(scene file, finished run) of the kill scene, with a slip kept with a checkpoint."""
+    scene_file, out, _ = slipping_scene(tmp_path_factory.mktemp("safety"))
+    return scene_file, out
 
 
 @pytest.fixture(scope="module")
-def finished(scene_file, tmp_path_factory):
-    out = tmp_path_factory.mktemp("safety_runs") / "run"
-    result = gouge("run", scene_file, "--out", out, "--quiet")
-    assert result.exit_code == 0, result.output
-    return out
+def scene_file(slipping):
+    return slipping[0]
+
+
+@pytest.fixture(scope="module")
+def finished(slipping):
+    return slipping[1]
 
 
 def copy_of(run: Path, target: Path) -> Path:
