@@ -27,6 +27,7 @@ from . import provenance
 from .config import Config, ConfigError, build_config, dump_config
 from .filedoc import document_checkpoint
 from .errors import InputError
+from .rundir import pid_alive
 
 
 class CheckpointError(InputError):
@@ -81,22 +82,12 @@ def _groups(checkpoint: Checkpoint) -> dict[str, dict[str, np.ndarray]]:
     return groups
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def remove_stale_temps(path: Path) -> list[Path]:
     """Remove ``.NAME.tmpPID`` files next to `path` left by writers that are no longer alive."""
     removed = []
     for tmp in Path(path).parent.glob(f".{Path(path).name}.tmp*"):
         pid = tmp.name.rsplit(".tmp", 1)[1]
-        if pid.isdigit() and int(pid) != os.getpid() and not _pid_alive(int(pid)):
+        if pid.isdigit() and int(pid) != os.getpid() and not pid_alive(int(pid)):
             tmp.unlink(missing_ok=True)
             removed.append(tmp)
     return removed

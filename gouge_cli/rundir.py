@@ -64,6 +64,17 @@ class RunLock:
         self.release()
 
 
+def pid_alive(pid: int) -> bool:
+    """Whether a process with this PID exists on this host (a stale lock or temp file's writer)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
 def holder(run_dir: Path) -> str | None:
     """Who holds the lock of run_dir ('PID n, command'), or None when it is free or absent."""
     path = Path(run_dir) / LOCK_NAME

@@ -31,6 +31,7 @@ import h5py
 import yaml
 
 from ..config import Config, build_config
+from ..rundir import pid_alive
 from .campaign_spec import CampaignSpec, Point, expand, load_spec
 
 
@@ -76,16 +77,6 @@ def read_ledger(path: Path) -> dict | None:
         return json.loads(Path(path).read_text())
     except (OSError, ValueError):
         return None
-
-
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
 
 
 # --------------------------------------------------------------------------- pieces and tasks
@@ -260,7 +251,7 @@ def _piece_state(piece: Piece, ledger: Path, settings: dict, output: Path) -> Pi
         {k: v for k, v in settings.items() if k != "permeabilities"})
     state = record.get("state")
     if state == "running":
-        if record.get("host") == socket.gethostname() and not _pid_alive(int(record.get("pid", 0))):
+        if record.get("host") == socket.gethostname() and not pid_alive(int(record.get("pid", 0))):
             state, detail = "interrupted", f"worker lost after attempt {record.get('attempts')}; resumes"
         else:
             detail = f"on {record.get('host')} pid {record.get('pid')}, attempt {record.get('attempts')}"
