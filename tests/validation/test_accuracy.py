@@ -127,12 +127,14 @@ def test_cli_needs_a_scene():
 
 @pytest.mark.validation
 def test_full_ladders(tmp_path):
-    """Every ladder on the tiny scene (fixture seed, shifted by GOUGE_TEST_SEED_OFFSET): the wall's
-    dt errors fall from the coarsest to the finest level at a positive order and the fluid-step
-    pressure error falls at first order (backward Euler); the analytic orders are 2 (collision,
-    energy, Terzaghi) and ~2 for the block's slip. Level-by-level monotonicity through a whole slip
-    is not asserted: from the first slips of seeds 11-15 the wall_x order was 0.54-1.26 and only
-    two seeds fell at all five levels (a chaos floor ~2e-4 at the finest levels)."""
+    """Every ladder on the tiny scene (fixture seed, shifted by GOUGE_TEST_SEED_OFFSET): through the
+    slip the wall's dt errors and the fluid-step pressure error fall from the coarsest to the finest
+    level; on the first quarter of the window (not chaotic) the fluid-step pressure error falls at
+    every level at first order (backward Euler: 1.09-1.29 over seeds 11 and 18, where the whole
+    window gave 0.32-1.26); the analytic orders are 2 (collision, energy, Terzaghi) and ~2 for the
+    block's slip. Level-by-level monotonicity through a whole slip is not asserted: from the first
+    slips of seeds 11-15 the wall_x order was 0.54-1.26 and only two seeds fell at all five levels."""
+    import dataclasses
     result = run_accuracy(build_config(TINY), tmp_path, quick=False)
     scene = result["scene"]
     for name in ("wall_x", "wall_vx"):
@@ -140,9 +142,15 @@ def test_full_ladders(tmp_path):
         assert len(errs) == 5 and errs[0] > errs[-1], (name, errs)
     assert scene["orders"]["dt_safety"]["wall_vx"] > 0.3
     errs = errors_of(scene, "fluid.step", "pressure")
-    assert all(a > b for a, b in zip(errs, errs[1:])), errs
-    assert scene["orders"]["fluid.step"]["pressure"] > 0.8     # backward Euler: first order (0.98 here)
+    assert errs[0] > errs[-1], errs
     assert all(r.status == "ok" for r in scene["results"])
+    start = prepare_start(build_config(TINY), tmp_path / "window")
+    window = dataclasses.replace(start, interval=0.25 * start.interval)
+    steps = [lv for lv in scene_ladders(start.config, quick=False, fluid=True) if lv.ladder == "fluid.step"]
+    short = run_scene_ladders(window, steps, samples=200)
+    errs = errors_of(short, "fluid.step", "pressure")
+    assert all(a > b for a, b in zip(errs, errs[1:])), errs
+    assert short["orders"]["fluid.step"]["pressure"] > 0.8
     orders = result["analytic"]["orders"]
     assert 1.8 < orders["energy drift"]["energy"] < 2.3
     assert 1.8 < orders["head-on collision"]["contact_time"] < 2.2
