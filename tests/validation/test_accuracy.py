@@ -127,27 +127,27 @@ def test_cli_needs_a_scene():
 
 @pytest.mark.validation
 def test_full_ladders(tmp_path):
-    """Every ladder on the tiny scene (fixture seed, shifted by GOUGE_TEST_SEED_OFFSET): through the
-    slip the wall's dt errors and the fluid-step pressure error fall from the coarsest to the finest
-    level; on the first quarter of the window (not chaotic) the fluid-step pressure error falls at
-    every level at first order (backward Euler: 1.09-1.29 over seeds 11 and 18, where the whole
-    window gave 0.32-1.26); the analytic orders are 2 (collision, energy, Terzaghi) and ~2 for the
-    block's slip. Level-by-level monotonicity through a whole slip is not asserted: from the first
-    slips of seeds 11-15 the wall_x order was 0.54-1.26 and only two seeds fell at all five levels."""
+    """Every ladder on the tiny scene (fixture seed, shifted by GOUGE_TEST_SEED_OFFSET) runs, and
+    the analytic orders are 2 (collision, energy, Terzaghi) and ~2 for the block's slip. Through a
+    whole slip the levels part by the chaotic spread (wall_vx dt order 0.19 for seed 18; from seeds
+    11-15 the wall_x order was 0.54-1.26), so convergence is asserted on the first quarter of the
+    window, which is not chaotic: the wall's dt errors fall from the coarsest to the finest of five
+    levels at a positive order, and the fluid-step pressure error falls at every level at first
+    order (backward Euler: 1.09-1.29 over seeds 11 and 18, where the whole window gave 0.32-1.26)."""
     import dataclasses
     result = run_accuracy(build_config(TINY), tmp_path, quick=False)
     scene = result["scene"]
-    for name in ("wall_x", "wall_vx"):
-        errs = errors_of(scene, "dt_safety", name)
-        assert len(errs) == 5 and errs[0] > errs[-1], (name, errs)
-    assert scene["orders"]["dt_safety"]["wall_vx"] > 0.3
-    errs = errors_of(scene, "fluid.step", "pressure")
-    assert errs[0] > errs[-1], errs
     assert all(r.status == "ok" for r in scene["results"])
+    assert len(errors_of(scene, "dt_safety", "wall_x")) == 5
     start = prepare_start(build_config(TINY), tmp_path / "window")
     window = dataclasses.replace(start, interval=0.25 * start.interval)
-    steps = [lv for lv in scene_ladders(start.config, quick=False, fluid=True) if lv.ladder == "fluid.step"]
-    short = run_scene_ladders(window, steps, samples=200)
+    levels = [lv for lv in scene_ladders(start.config, quick=False, fluid=True)
+              if lv.ladder in ("dt_safety", "fluid.step")]
+    short = run_scene_ladders(window, levels, samples=200)
+    for name in ("wall_x", "wall_vx"):
+        errs = errors_of(short, "dt_safety", name)
+        assert errs[0] > errs[-1] > 0.0, (name, errs)
+    assert short["orders"]["dt_safety"]["wall_vx"] > 0.5
     errs = errors_of(short, "fluid.step", "pressure")
     assert all(a > b for a, b in zip(errs, errs[1:])), errs
     assert short["orders"]["fluid.step"]["pressure"] > 0.8
