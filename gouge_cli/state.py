@@ -66,6 +66,7 @@ class State:
         for name in ("x", "z", "radius", "vx", "vz", "spin"):
             setattr(self, name, kernel_array(getattr(self, name), np.float64))
         self.body = kernel_array(self.body, np.int8)
+        self.width, self.density = float(self.width), float(self.density)     # float64 scalars, never int
         self.mass = sphere_mass(self.radius, self.density)
         self.inv_mass = 1.0 / self.mass
         self.inv_inertia = 1.0 / (self.mass * (2.0 * self.radius) ** 2 / 10.0)

@@ -116,17 +116,19 @@ def test_the_bench_cache_and_profiles_reuse_the_compiled_kernels(reference, tmp_
 
 
 def test_a_state_from_any_float_arrays_gets_the_kernels_types(reference):
-    """float32, strided and read-only inputs are cast at the boundary (State), not compiled for."""
+    """float32, strided and read-only arrays and an integer width are cast at the boundary (State),
+    not compiled for."""
     dry, _, _, sigs = reference
     s = dry.state
+    assert s.width == int(s.width)          # SCENE is 12 d wide: an int width is the same scene
     order = np.argsort(s.id)
-    x = np.repeat(s.x[order], 2)[::2].astype(np.float32)          # strided float32
+    x = np.repeat(s.x[order], 2).astype(np.float32)[::2]          # strided float32
     z = s.z[order].copy()
     z.flags.writeable = False
     state = State(x=x, z=z, radius=s.radius[order].astype(np.float32), body=s.body[order].astype(np.int64),
-                  density=1.0, width=s.width)
+                  density=1, width=int(s.width))
     assert all(a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable
                for a in (state.x, state.z, state.radius, state.vx))
-    assert state.body.dtype == np.int8
+    assert state.body.dtype == np.int8 and type(state.width) is float
     step_and_observe(Simulation(dry.config, state=state))
     assert_no_new(sigs, "a state built from float32 / strided / read-only arrays")
