@@ -95,7 +95,7 @@ class SettleReport:
         wall = max(now - self._t0, 1e-9)
         self.last = out = self.tracker.update(check, wall)
         rate = f"{(step - self._step0) * self.n / wall / 1e6:.2f} M grain-steps/s"
-        info = f"t = {check.elapsed:.4g} t0, waiting for " + ", ".join(out["unmet"]) if out["unmet"] else "settled"
+        info = f"t = {check.elapsed:.4g} t0, " + ("waiting for " + ", ".join(out["unmet"]) if out["unmet"] else "criterion met")
         eta = format_eta(out["eta"], out["capped"])
         if self._progress is not None:
             self._progress.update(self._task, completed=out["fraction"], rate=rate, info=info, eta=eta)

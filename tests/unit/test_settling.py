@@ -61,7 +61,7 @@ def test_settle_report_prints_progress_toward_the_criterion(capsys):
     report.update(SettleCheck(600.0, 1e-4, 1e-4, 1e-3, 500.0), step=20)
     lines = capsys.readouterr().err.strip().splitlines()
     assert "waiting for min_time (100 / 500 t0), |wall vz| = 2 v_tol, rms grain speed = 1 v_tol" in lines[0]
-    assert lines[1].startswith("compaction: 100% settled, settled,") and lines[1].endswith("ETA 0:00:00")
+    assert lines[1].startswith("compaction: 100% settled, t = 600 t0, criterion met,") and lines[1].endswith("ETA 0:00:00")
 
 
 def test_progress_and_eta_on_a_small_scene(single_thread):
