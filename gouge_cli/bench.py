@@ -258,19 +258,20 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
 def sub_system(s, m: int) -> tuple:
     """Grains 0..m-1 of state s and the listed pairs among them (same order, shear copied):
     arguments of kernels.step.contact_forces for one thread, without drag, in its order (7 start,
-    8 index, 9 shear, 18-20 force_x, force_z, torque)."""
+    8 index, 9 shear, 18-20 force_x, force_z, torque), of the same types as compute_forces passes
+    (an int64 crossing list here once compiled the kernel a second time)."""
     rows = np.repeat(np.arange(s.n), np.diff(s.start))
     npairs = int(s.start[-1])
     keep = (rows < m) & (s.index[:npairs] < m)
-    start = np.zeros(m + 1, np.int64)
+    start = np.zeros(m + 1, s.start.dtype)
     np.cumsum(np.bincount(rows[keep], minlength=m), out=start[1:])
     index, shear = s.index[:npairs][keep].copy(), s.shear[:npairs][keep].copy()
     grain = tuple(a[:m].copy() for a in (s.x, s.z, s.vx, s.vz, s.spin, s.radius, s.mass))
-    one = np.zeros(1, np.int64)
-    layout = np.full(K.N_LAYOUT, -1, np.int64)
-    return (*grain, start, index, shear, one, one, one, *(np.zeros(1) for _ in range(4)),
+    cross = np.zeros(1, s.cross_i.dtype)        # the state's dtypes, so the step's compiled kernel serves
+    layout = np.full(K.N_LAYOUT, -1, s.layout.dtype)
+    return (*grain, start, index, shear, cross, cross, cross, *(np.zeros(1) for _ in range(4)),
             np.zeros((1, K.N_BUF, K.PAIR_BUF)), *(np.zeros(m) for _ in range(3)), np.zeros(0), np.zeros(0),
-            layout, np.zeros(m + 1, np.int64))
+            layout, np.zeros(m + 1, s.new_start.dtype))
 
 
 def footprint_profile(sim: Simulation, start: dict, sizes, repeats: int = 5) -> list[dict]:

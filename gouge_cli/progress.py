@@ -1,13 +1,17 @@
 """Progress report: a rich bar with simulated time, ETA and grain-steps/s on a terminal,
-plain lines (every ``every_s`` seconds) when the output is not a terminal (batch scripts)."""
+plain lines (every ``every_s`` seconds) when the output is not a terminal (batch scripts).
+:class:`SettleReport` is compaction's: progress and ETA toward the settling criterion."""
 
 from __future__ import annotations
 
+import math
 import sys
 import time
 
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from .settling import SettleCheck, SettleTracker
 
 
 class ProgressReport:
@@ -46,6 +50,59 @@ class ProgressReport:
             eta = wall * (1.0 - frac) / frac if frac > 0 else float("nan")
             print(f"{self.label}: t = {elapsed_sim:.6g} / {self.total:.6g} t0 ({100 * frac:.1f}%), "
                   f"{rate_text}, ETA {eta:.0f} s {info}", file=sys.stderr, flush=True)
+
+    def close(self):
+        if self._progress is not None:
+            self._progress.stop()
+
+
+def format_eta(seconds: float, capped: bool = False) -> str:
+    """'?' while unknown, '<= ...' when it is the time left to compaction.max_time."""
+    if not math.isfinite(seconds):
+        return "?"
+    m, sec = divmod(int(round(seconds)), 60)
+    text = f"{m // 60}:{m % 60:02d}:{sec:02d}"
+    return f"<= {text}" if capped else text
+
+
+class SettleReport:
+    """Compaction's progress toward settling (settling.SettleTracker): fraction, the conditions
+    still unmet, grain-steps/s and the ETA extrapolated from the recent decay of the speeds."""
+
+    def __init__(self, max_time: float, n_grains: int, console: Console | None = None,
+                 live: bool | None = None, every_s: float = 10.0):
+        self.console = console or Console(stderr=True)
+        self.live = sys.stderr.isatty() if live is None else live
+        self.n, self.every_s = n_grains, every_s
+        self.tracker = SettleTracker(max_time)
+        self._t0 = time.perf_counter()
+        self._last_print = self._t0
+        self._step0 = None
+        self.last: dict | None = None
+        self._progress = None
+        if self.live:
+            self._progress = Progress(
+                TextColumn("[bold]compaction"), BarColumn(), TextColumn("{task.percentage:>3.0f}% settled"),
+                TextColumn("{task.fields[info]}"), TextColumn("{task.fields[rate]}"), TimeElapsedColumn(),
+                TextColumn("ETA {task.fields[eta]}"), console=self.console, transient=False)
+            self._progress.start()
+            self._task = self._progress.add_task("compaction", total=1.0, rate="", info="", eta="?")
+
+    def update(self, check: SettleCheck, step: int):
+        now = time.perf_counter()
+        if self._step0 is None:
+            self._step0 = step
+        wall = max(now - self._t0, 1e-9)
+        self.last = out = self.tracker.update(check, wall)
+        rate = f"{(step - self._step0) * self.n / wall / 1e6:.2f} M grain-steps/s"
+        info = f"t = {check.elapsed:.4g} t0, " + ("waiting for " + ", ".join(out["unmet"]) if out["unmet"] else "criterion met")
+        eta = format_eta(out["eta"], out["capped"])
+        if self._progress is not None:
+            self._progress.update(self._task, completed=out["fraction"], rate=rate, info=info, eta=eta)
+        elif now - self._last_print >= self.every_s or not out["unmet"]:
+            self._last_print = now
+            print(f"compaction: {100 * out['fraction']:.0f}% settled, {info}, {rate}, ETA {eta}",
+                  file=sys.stderr, flush=True)
 
     def close(self):
         if self._progress is not None:

@@ -22,7 +22,7 @@ from .guards import guard_callbacks
 from .kernels import step as K
 from .output import RunFile
 from .preflight import check_config
-from .progress import ProgressReport
+from .progress import ProgressReport, SettleReport
 from .rundir import (RunDirError, RunLock, check_run_dir, ensure_space, latest_run, open_run_file,
                      prepare_run_dir)
 from .simulation import Every, PhysicsError, Simulation
@@ -156,7 +156,7 @@ def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False,
                      start: tuple[float, int] | None = None):
     """Simulation.compact with checkpoints/latest.h5 written every output.checkpoint_interval of
     compaction (on its 100 t0 checks) and on Ctrl-C, so that `gouge resume` continues a
-    compaction too."""
+    compaction too. Progress is shown toward the settling criterion (progress.SettleReport)."""
     config = sim.config
     latest = out_dir / "checkpoints" / "latest.h5"
     chunk = sim.steps_for(100.0)
@@ -168,11 +168,11 @@ def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False,
         ensure_space(out_dir, need)
         write_checkpoint(latest, snapshot_of(s, {"phase": "compaction", "compaction_start": list(s.compaction_start)}))
 
-    progress = None if quiet else ProgressReport("compaction", config.compaction.max_time, sim.state.n, live=live)
+    progress = None if quiet else SettleReport(config.compaction.max_time, sim.state.n, live=live)
 
     def on_chunk(s: Simulation, elapsed: float):
         if progress:
-            progress.update(elapsed, s.state.step)
+            progress.update(s.settling, s.state.step)
         if ((s.state.step - s.compaction_start[1]) // chunk) % every == 0:
             save(s)
 

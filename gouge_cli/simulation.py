@@ -8,7 +8,6 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -20,6 +19,7 @@ from .errors import PhysicsFailure
 from .kernels import measure as M
 from .kernels import step as K
 from .packing import build_packing
+from .settling import SettleCheck, settle_check
 from .state import State
 from .timestep import choose_dt, contact_constants
 
@@ -90,6 +90,7 @@ class Simulation:
         p[K.SORT_EVERY] = self._choose_sort_every(config.numerics.sort_every, s.n)
         self.compaction_settled: bool | None = None
         self.compaction_start: tuple[float, int] | None = None     # (time, step) where compaction began
+        self.settling: SettleCheck | None = None                    # the last check of compaction's criterion
         self.fluid = None
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(M.N_OBSERVABLES)
@@ -284,7 +285,8 @@ class Simulation:
     def compact(self, on_chunk: Callable = None, start: tuple[float, int] | None = None) -> dict:
         """Settle under the normal stress alone until the top wall and grains are still.
         Checked every 100 t0 of steps counted from `start` = (time, step) where compaction
-        began (default: now), so a compaction resumed from any step ends where it would have."""
+        began (default: now), so a compaction resumed from any step ends where it would have.
+        Each check is kept in ``self.settling`` (settling.SettleCheck) before `on_chunk` runs."""
         cfg = self.config.compaction
         v_tol = cfg.wall_velocity_tol * self.config.loading.normal_stress
         chunk = self.steps_for(100.0)
@@ -300,11 +302,11 @@ class Simulation:
             self.check()
             row = self.observe()
             elapsed = self.state.time - t0
+            self.settling = settle_check(self.state, row["kinetic_energy"], row["wall_vz"], elapsed, v_tol,
+                                         cfg.min_time)
             if on_chunk is not None:
                 on_chunk(self, elapsed)
-            n_free = max(1, int((self.state.body == 0).sum()))
-            rms = math.sqrt(2.0 * row["kinetic_energy"] / (n_free * float(self.state.mass.mean())))
-            if elapsed >= cfg.min_time and abs(row["wall_vz"]) < v_tol and rms < v_tol:
+            if self.settling.settled:
                 self.compaction_settled = True
                 break
             if elapsed >= cfg.max_time:

@@ -3,7 +3,9 @@
 Grains are discs in the x-z plane with sphere mass and inertia (physics.md section 1).
 ``body``: 0 free grain, 1 bottom-wall grain (fixed), 2 top-wall grain (moves with the top body).
 Everything a restart needs to continue bit for bit is in :meth:`State.arrays` (the
-neighbour list too, since it fixes the order of force sums).
+neighbour list too, since it fixes the order of force sums). Every array has one dtype and C
+layout however the state was built (kernel_array) and is restored by copying into those arrays,
+so one compiled specialisation of each kernel serves runs, restarts, forks and the bench.
 """
 
 from __future__ import annotations
@@ -31,6 +33,14 @@ EVOLVING = ("id", "x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
             "start", "index", "shear", "x_build", "z_build", "wall", "clock", "counters")
 
 
+def kernel_array(values, dtype) -> np.ndarray:
+    """`values` as the one array type the kernels are compiled for: `dtype`, C order, aligned and
+    writable (numba compiles a kernel again for each new dtype, layout or read-only flag; an
+    array that already fits is returned as is)."""
+    out = np.ascontiguousarray(values, dtype=dtype)
+    return out if out.flags.writeable and out.flags.aligned else out.copy()
+
+
 @dataclass
 class State:
     """Arrays of one scene. Shapes: (N,) per grain, (capacity,) per pair slot."""
@@ -53,7 +63,10 @@ class State:
         for name in ("vx", "vz", "spin"):
             if getattr(self, name) is None:
                 setattr(self, name, np.zeros(n))
-        self.body = np.asarray(self.body, np.int8)
+        for name in ("x", "z", "radius", "vx", "vz", "spin"):
+            setattr(self, name, kernel_array(getattr(self, name), np.float64))
+        self.body = kernel_array(self.body, np.int8)
+        self.width, self.density = float(self.width), float(self.density)     # float64 scalars, never int
         self.mass = sphere_mass(self.radius, self.density)
         self.inv_mass = 1.0 / self.mass
         self.inv_inertia = 1.0 / (self.mass * (2.0 * self.radius) ** 2 / 10.0)
