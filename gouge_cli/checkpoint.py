@@ -62,10 +62,6 @@ def _plain(value):
     raise TypeError(f"cannot store {type(value).__name__} in a checkpoint")
 
 
-def _digest(groups: dict[str, dict[str, np.ndarray]]) -> str:
-    return provenance.state_digest(groups)
-
-
 def snapshot_of(sim, extra: dict | None = None, attached: dict | None = None) -> Checkpoint:
     """In-memory copy of the simulation's evolving state (cheap enough to keep a few)."""
     fluid = sim.fluid.arrays() if sim.fluid is not None else {}
@@ -112,7 +108,7 @@ def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
             h5.attrs["extra"] = json.dumps(checkpoint.extra, default=_plain)
             h5.attrs["version"] = __version__
             h5.attrs["provenance"] = provenance.dumps(checkpoint.provenance or provenance.collect())
-            h5.attrs["checksum"] = _digest(groups)
+            h5.attrs["checksum"] = provenance.state_digest(groups)
             document_checkpoint(h5)
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
@@ -145,7 +141,7 @@ def read_checkpoint(path: Path, overrides: list[str] | dict | None = None) -> Ch
     except (OSError, KeyError, ValueError, RuntimeError) as err:
         raise CheckpointError(f"checkpoint {path} is unreadable or truncated ({str(err)[:200]})") from None
     groups.setdefault("fluid", {})
-    if _digest(groups) != checksum:
+    if provenance.state_digest(groups) != checksum:
         raise CheckpointError(f"checkpoint {path} is corrupt: its checksum does not match its contents")
     try:
         config = build_config(yaml.safe_load(config_text), overrides)

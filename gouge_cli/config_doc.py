@@ -10,7 +10,7 @@ Units come from the ``[unit]`` in each field's description.
 from __future__ import annotations
 
 import re
-from typing import Any, Literal, Union, get_args, get_origin
+from typing import Any, Literal, get_args, get_origin
 
 import yaml
 from pydantic import BaseModel

@@ -10,7 +10,6 @@ happens to use.
 from __future__ import annotations
 
 import os
-import sys
 from pathlib import Path
 
 OFFSET = int(os.environ.get("GOUGE_TEST_SEED_OFFSET", "0"))
@@ -34,12 +33,6 @@ def install() -> None:
 
     shifted.seed_offset = OFFSET
     packing.build_packing = simulation.build_packing = shifted
-
-
-def gouge_command() -> list[str]:
-    """argv prefix that runs the gouge command line in a new process (which applies the same seed
-    offset through :func:`propagate`)."""
-    return [sys.executable, "-m", "gouge_cli.cli"]
 
 
 def propagate() -> None:

@@ -30,11 +30,10 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..analysis.report import analyze_run, run_pairs, write_analysis
+from ..analysis.report import analyze_run, write_analysis
 from ..analysis.study import STUDY_COLUMNS, study_rows, study_summary, summary_lines, transient_slips
 from ..checkpoint import read_checkpoint
 from ..config import ConfigError, load_config
-from ..events import lead_time
 from ..forks import branch_name, check_perms, run_branch, slip_catalog
 from ..runner import RunDirError, check_run_dir, default_run_dir, resume_run, run_scene
 from ..filedoc import json_safe

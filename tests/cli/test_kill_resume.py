@@ -27,7 +27,6 @@ from typer.testing import CliRunner
 from gouge_cli.checkpoint import read_checkpoint
 from gouge_cli.cli.main import app
 from gouge_cli.forks import slip_catalog
-from seed_offset import gouge_command
 
 SCENE = {
     "name": "kill",
@@ -43,7 +42,7 @@ ENV = dict(os.environ, PYTHONUNBUFFERED="1", NUMBA_NUM_THREADS="1")
 
 
 def _start(scene_file: Path, out: Path) -> subprocess.Popen:
-    return subprocess.Popen(gouge_command() + ["run", str(scene_file), "--out", str(out),
+    return subprocess.Popen([sys.executable, "-m", "gouge_cli.cli", "run", str(scene_file), "--out", str(out),
                              "--quiet"], env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
 
 

@@ -21,7 +21,6 @@ from gouge_cli.cli.main import app
 from gouge_cli.config import build_config
 from gouge_cli.errors import MAX_MESSAGE
 from gouge_cli.rundir import LOCK_NAME, holder
-from seed_offset import gouge_command
 from test_kill_resume import ENV, slipping_scene
 
 runner = CliRunner()
@@ -129,7 +128,7 @@ def test_concurrent_commands_on_a_run_in_progress(scene_file, tmp_path):
     """Two runs into one new --out: one wins, the other is refused at once; while the winner
     runs, run --force, slips, resume and restart on it are refused and change nothing."""
     d = tmp_path / "busy"
-    cmd = gouge_command() + ["run", str(scene_file), "--out", str(d), "--quiet"]
+    cmd = [sys.executable, "-m", "gouge_cli.cli", "run", str(scene_file), "--out", str(d), "--quiet"]
     procs = [subprocess.Popen(cmd, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.PIPE) for _ in range(2)]
     try:
         deadline = time.time() + 120
@@ -266,7 +265,7 @@ def test_full_disk_stops_cleanly_and_resumes(scene_file, tmp_path):
         pytest.skip("cannot mount a tmpfs")
     try:
         d = mnt / "run"
-        proc = subprocess.run(gouge_command() + ["run", str(scene_file), "--out", str(d),
+        proc = subprocess.run([sys.executable, "-m", "gouge_cli.cli", "run", str(scene_file), "--out", str(d),
                                "--quiet"], env=ENV, capture_output=True, text=True, timeout=300)
         assert proc.returncode == 3, proc.stderr
         assert "no space left on device" in proc.stderr and str(d) in proc.stderr and "Traceback" not in proc.stderr

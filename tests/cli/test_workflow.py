@@ -19,7 +19,6 @@ from gouge_cli.checkpoint import CheckpointError, read_checkpoint, snapshot_of, 
 from gouge_cli.cli.main import EXIT_BAD_INPUT, app
 from gouge_cli.forks import run_fork, slip_catalog
 from gouge_cli.simulation import Simulation
-from seed_offset import gouge_command
 
 SCENE = {
     "name": "tiny",
@@ -193,7 +192,7 @@ def test_killed_writer_leaves_a_valid_checkpoint(tmp_path):
 def test_resume_after_kill_9_matches_uninterrupted(scene_file, finished_run, tmp_path):
     out = tmp_path / "killed"
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    proc = subprocess.Popen(gouge_command() + ["run", str(scene_file), "--out", str(out), "--quiet"], env=env)
+    proc = subprocess.Popen([sys.executable, "-m", "gouge_cli.cli", "run", str(scene_file), "--out", str(out), "--quiet"], env=env)
     latest = out / "checkpoints" / "latest.h5"
     try:
         deadline = time.time() + 120
