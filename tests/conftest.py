@@ -40,8 +40,8 @@ def free_grains():
     material keys go to config section ``material`` (damping defaults to 0); background
     (compaction) damping is always 0 so the dynamics are Newtonian."""
     from gouge_cli.config import build_config
-    from gouge_cli.simulation import Simulation
-    from gouge_cli.state import State
+    from gouge_cli.driver.simulation import Simulation
+    from gouge_cli.model.state import State
 
     def make(x, z, radius, *, vx=None, vz=None, spin=None, body=None, width=100.0, dt=0.01,
              normal_stress=None, **material):

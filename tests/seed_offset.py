@@ -20,7 +20,8 @@ def install() -> None:
     if not OFFSET:
         return
     try:
-        from gouge_cli import packing, simulation
+        from gouge_cli.driver import simulation
+        from gouge_cli.model import packing
     except ImportError:
         return
 

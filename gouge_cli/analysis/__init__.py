@@ -24,7 +24,7 @@ from .friction import (
     wall_acceleration,
 )
 from .pairs import PairDefinition, PairResult, campaign_summary, classify_pair, complexity_criteria
-from ..detector import Slip, SlipDetector, SubEvent, WallSeries, detect_slips, recurrence_intervals
+from ..driver.detector import Slip, SlipDetector, SubEvent, WallSeries, detect_slips, recurrence_intervals
 
 __all__ = [
     "BlockSliderFit",

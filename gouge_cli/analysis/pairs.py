@@ -9,7 +9,7 @@ decides which events are compared or what type a pair is.
 
 Rule (all thresholds are fields of :class:`PairDefinition`, velocities in units of V_s):
 
-* Events: slips found by :func:`~gouge_cli.detector.detect_slips` with the run's own
+* Events: slips found by :func:`~gouge_cli.driver.detector.detect_slips` with the run's own
   thresholds (trigger ``start_factor``, extent ``end_factor``). The *compared* event of each
   branch is its first slip (``main="first"``: the forked slip) or the one with the largest
   slip distance (``main="largest"``).
@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 import numpy as np
 
 from .blockslider import BlockSliderFit, fit_block_slider
-from ..detector import Slip, WallSeries, detect_slips
+from ..driver.detector import Slip, WallSeries, detect_slips
 
 __all__ = ["PairDefinition", "PairResult", "classify_pair", "complexity_criteria", "campaign_summary",
            "compared_event", "static_strength", "SLOW", "CRITERIA"]

@@ -1,9 +1,9 @@
 """Reading run files and computing what `gouge analyze` reports (thesis Sections IV-V).
 
-Reads only: ``RUN/run.h5`` (see :mod:`gouge_cli.output`) and the forks under
+Reads only: ``RUN/run.h5`` (see :mod:`gouge_cli.io.runfile`) and the forks under
 ``RUN/forks/slip_NNN/{drained,perm_K}/run.h5``. The physics is in the pure
 functions of :mod:`gouge_cli.analysis` (block-slider fit, Eq. 3; friction,
-Eqs. 5-7; pair types) and :mod:`gouge_cli.detector`; this module only finds the
+Eqs. 5-7; pair types) and :mod:`gouge_cli.driver.detector`; this module only finds the
 samples they need. Series are sliced per slip window with h5py (sample indices
 found by bisection on the ``time`` dataset), so a long run is never loaded whole
 except for :func:`series_envelope`, which reads it in chunks.
@@ -33,8 +33,8 @@ import yaml
 
 from .. import __version__
 from ..errors import InputError
-from ..detector import WallSeries, detect_slips
-from ..filedoc import document_analysis, json_safe
+from ..driver.detector import WallSeries, detect_slips
+from ..io.filedoc import document_analysis, json_safe
 from .blockslider import BlockSliderFit, fit_block_slider
 from .friction import dynamic_friction, estimate_natural_frequency, mean_dynamic_friction
 from .pairs import PairDefinition, PairResult, campaign_summary, classify_pair
@@ -331,7 +331,7 @@ def read_catalog(reader: RunReader, detect: bool = False) -> list[dict]:
     """The run's slips as dicts (the /slips catalog written while it ran).
 
     Runs without a /slips group (or ``detect=True``) are scanned with
-    :func:`~gouge_cli.detector.detect_slips` using the run's own thresholds.
+    :func:`~gouge_cli.driver.detector.detect_slips` using the run's own thresholds.
     """
     catalog = None if detect else _stored_catalog(reader)
     return _detected_catalog(reader) if catalog is None else catalog

@@ -24,7 +24,7 @@ def _order(name: str, value: float, flag: str) -> str:
 def _print_report(result: dict):
     from rich.table import Table
 
-    from ..accuracy import SCENE_ERRORS, order_value
+    from ..studies.accuracy import SCENE_ERRORS, order_value
 
     scene, analytic, start = result["scene"], result["analytic"], result["start"]
     if scene:
@@ -75,16 +75,16 @@ def accuracy(
     Every level starts from the same pre-slip state and runs the same short interval (the DEM
     is chaotic: longer intervals measure the chaotic spread, not the discretisation error).
     Writes accuracy.csv and accuracy.png (work-precision: error vs run time)."""
-    from ..accuracy import run_accuracy
-    from ..checkpoint import CheckpointError
-    from ..simulation import PhysicsError
+    from ..studies.accuracy import run_accuracy
+    from ..io.checkpoint import CheckpointError
+    from ..driver.simulation import PhysicsError
 
     if config is None and slip_checkpoint is None:
         fail("give a CONFIG, a --slip-checkpoint, or both")
     try:
         cfg = load_config(config, set_) if config is not None else None
         if cfg is None and set_:
-            from ..checkpoint import read_checkpoint
+            from ..io.checkpoint import read_checkpoint
 
             cfg = read_checkpoint(slip_checkpoint, set_).config
         name = cfg.name if cfg is not None else Path(slip_checkpoint).stem

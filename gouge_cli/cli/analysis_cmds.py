@@ -13,7 +13,7 @@ from typing import List, Optional
 
 import typer
 
-from ..filedoc import json_safe
+from ..io.filedoc import json_safe
 
 
 def _fmt(value, digits: int = 4) -> str:

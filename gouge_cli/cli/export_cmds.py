@@ -93,8 +93,8 @@ def catalog_since_loading(run_dir: Path, slip_catalog) -> tuple[list[dict], floa
     """The run's slip catalog (``slip_catalog(run_dir)``) with every time in t0 since loading
     began and NaN as None (valid JSON); returns (catalog, the clock at which loading began)."""
     from ..analysis.report import AnalysisError, RunReader
-    from ..runner import RunDirError
-    from ..filedoc import json_safe
+    from ..workflows.run import RunDirError
+    from ..io.filedoc import json_safe
 
     try:
         with RunReader(run_dir, allow_running=True) as reader:

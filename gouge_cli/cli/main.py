@@ -79,7 +79,7 @@ def run(
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
 ):
     """Compact the packing, then shear it under the spring until config.run.duration."""
-    from ..runner import default_run_dir, run_scene
+    from ..workflows.run import default_run_dir, run_scene
 
     cfg = load_config(config, set_)
     _set_threads(cfg.numerics.threads)
@@ -92,7 +92,7 @@ def run(
 
 
 def _run_dir(run_dir: Optional[Path]) -> Path:
-    from ..rundir import check_run_dir, latest_run
+    from ..io.rundir import check_run_dir, latest_run
 
     return check_run_dir(run_dir) if run_dir else latest_run()
 
@@ -116,8 +116,8 @@ def restart(
     the drained branch alone); with --perm, writes pair.json."""
     import json
 
-    from ..filedoc import json_safe
-    from ..forks import run_fork
+    from ..io.filedoc import json_safe
+    from ..workflows.fork import run_fork
     from ..workflows.pairs import write_pair_json
 
     target = _run_dir(run_dir)
@@ -140,7 +140,7 @@ def resume(
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
 ):
     """Continue an interrupted run (Ctrl-C, kill -9, power loss) from its latest checkpoint."""
-    from ..runner import resume_run
+    from ..workflows.run import resume_run
 
     result = resume_run(_run_dir(run_dir), quiet=quiet)
     out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s)",
@@ -160,8 +160,8 @@ def slips(
 
     from rich.table import Table
 
-    from ..forks import slip_catalog
-    from ..rundir import refuse_if_in_progress
+    from ..workflows.fork import slip_catalog
+    from ..io.rundir import refuse_if_in_progress
 
     from .export_cmds import catalog_since_loading
 
@@ -194,9 +194,9 @@ def show_config(
                                           "('-' for stdout), for editors"),
 ):
     """Validate a config and print it fully resolved (dimensionless), or print the defaults."""
-    from ..preflight import check_config
-    from ..simulation import Simulation
-    from ..timestep import stability_bound
+    from ..model.preflight import check_config
+    from ..driver.simulation import Simulation
+    from ..model.timestep import stability_bound
 
     if schema is not None or (defaults and config is None and not set_):
         from .export_cmds import print_config_doc
@@ -235,7 +235,7 @@ def bench(
     per-part profile, allocations per step, fluid share, projected thesis Run 24 wall times."""
     from rich.table import Table
 
-    from ..bench import run_benchmark, write_results
+    from ..studies.bench import run_benchmark, write_results
 
     size_list = [int(v) for v in sizes.split(",") if v]
     thread_list = [int(v) for v in threads.split(",") if v] or None

@@ -27,10 +27,10 @@ def register(app: typer.Typer) -> None:
         """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
         from ..analysis.report import AnalysisError
         from ..analysis.study import STUDY_COLUMNS, summary_lines
-        from ..checkpoint import CheckpointError
+        from ..io.checkpoint import CheckpointError
         from ..config import ConfigError
-        from ..runner import RunDirError
-        from ..simulation import PhysicsError
+        from ..workflows.run import RunDirError
+        from ..driver.simulation import PhysicsError
         from ..workflows.study import StudyInterrupted, parse_slips, run_study
         from .analysis_cmds import _table
         from .main import EXIT_INTERRUPTED, EXIT_PHYSICS, fail, out

@@ -45,7 +45,7 @@ import h5py
 import numpy as np
 
 from ..analysis.report import AnalysisError, RunReader
-from ..filedoc import BODY_CODES, TIME_ORIGIN
+from ..io.filedoc import BODY_CODES, TIME_ORIGIN
 
 VERSION = (2, 2)
 TOPOLOGIES = ("Vertices", "Lines", "Polygons", "Strips")

@@ -1,7 +1,7 @@
 """Pore-fluid kernels on the Goren pressure grid (thesis Eqs. 12, 14-20; physics.md section 4).
 
 Pure compute (``error_model="numpy"``: IEEE inf/NaN instead of ZeroDivisionError, so loops
-vectorise), no allocation: every array is allocated once by :class:`gouge_cli.fluid.FluidGrid`
+vectorise), no allocation: every array is allocated once by :class:`gouge_cli.model.fluid.FluidGrid`
 and passed in. Everything is dimensionless (d = E = rho_s = 1): lengths [d], time [t0],
 pressure [E], permeability [d^2], viscosity [E t0], compressibility [1/E].
 

@@ -31,7 +31,7 @@ import h5py
 import yaml
 
 from ..config import Config, build_config
-from ..rundir import pid_alive
+from ..io.rundir import pid_alive
 from .campaign_spec import CampaignSpec, Point, expand, load_spec
 
 
@@ -105,7 +105,7 @@ def _run_status(h5_path: Path) -> str | None:
 
 def _task(ledger: Path, settings: dict, body) -> dict:
     """Run ``body()`` with the piece's ledger kept: running -> done | failed (physics) | error."""
-    from ..simulation import PhysicsError
+    from ..driver.simulation import PhysicsError
 
     previous = read_ledger(ledger) or {}
     record = {"state": "running", "settings": settings, "host": socket.gethostname(), "pid": os.getpid(),
@@ -131,8 +131,8 @@ def _task(ledger: Path, settings: dict, body) -> dict:
 def advance_run(run_dir: str, config: dict, settings: dict) -> dict:
     """Dask task: bring the point's run to 'finished'. Resumes from checkpoints/latest.h5 when an
     earlier attempt left one; starts afresh otherwise. Returns the slips kept with checkpoints."""
-    from ..forks import slip_catalog
-    from ..runner import resume_run, run_scene
+    from .fork import slip_catalog
+    from .run import resume_run, run_scene
 
     run_dir = Path(run_dir)
 
@@ -153,10 +153,10 @@ def advance_run(run_dir: str, config: dict, settings: dict) -> dict:
 
 def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration: float | None,
                  settings: dict) -> dict:
-    """Dask task: drained + undrained branches of one slip (:func:`gouge_cli.forks.run_fork`),
+    """Dask task: drained + undrained branches of one slip (:func:`gouge_cli.workflows.fork.run_fork`),
     started afresh from the slip checkpoint (any partial branches of a lost attempt are replaced),
     then the fork's pair.json (the one pair definition, :mod:`gouge_cli.workflows.pairs`)."""
-    from ..forks import run_fork
+    from .fork import run_fork
     from .pairs import write_pair_json
 
     run_dir = Path(run_dir)

@@ -11,8 +11,8 @@ import json
 from pathlib import Path
 
 from ..analysis.report import AnalysisError, RunReader, classify_fork, fork_branches
-from ..filedoc import json_safe
-from ..provenance import branch_bit_risks
+from ..io.filedoc import json_safe
+from ..io.provenance import branch_bit_risks
 
 __all__ = ["write_pair_json", "branch_status"]
 

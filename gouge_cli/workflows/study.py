@@ -32,11 +32,11 @@ from pathlib import Path
 
 from ..analysis.report import analyze_run, write_analysis
 from ..analysis.study import STUDY_COLUMNS, study_rows, study_summary, summary_lines, transient_slips
-from ..checkpoint import read_checkpoint
+from ..io.checkpoint import read_checkpoint
 from ..config import ConfigError, load_config
-from ..forks import branch_name, check_perms, run_branch, slip_catalog
-from ..runner import RunDirError, check_run_dir, default_run_dir, resume_run, run_scene
-from ..filedoc import json_safe
+from .fork import branch_name, check_perms, run_branch, slip_catalog
+from .run import RunDirError, check_run_dir, default_run_dir, resume_run, run_scene
+from ..io.filedoc import json_safe
 from .pairs import branch_status, write_pair_json
 
 __all__ = ["EXTRA_STRENGTH", "StudyInterrupted", "StudyResult", "parse_slips", "study_window", "branch_task", "plan_branches",
@@ -82,7 +82,7 @@ def branch_task(run_dir: str, slip: int, perm: float | None, duration: float, st
     _one_thread()
     import numba
 
-    from ..simulation import PhysicsError
+    from ..driver.simulation import PhysicsError
 
     numba.set_num_threads(1)
     t0 = time.perf_counter()

@@ -12,7 +12,7 @@ import yaml
 
 import numpy as np
 
-from gouge_cli.bench import footprint_profile, prepare, run_benchmark, sub_system
+from gouge_cli.studies.bench import footprint_profile, prepare, run_benchmark, sub_system
 from gouge_cli.kernels import step as K
 
 REPO = Path(__file__).resolve().parents[2]

@@ -24,9 +24,9 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from gouge_cli.checkpoint import read_checkpoint
+from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.cli.main import app
-from gouge_cli.forks import slip_catalog
+from gouge_cli.workflows.fork import slip_catalog
 
 SCENE = {
     "name": "kill",

@@ -16,11 +16,11 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from gouge_cli.checkpoint import read_checkpoint
+from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.cli.main import app
 from gouge_cli.config import build_config
 from gouge_cli.errors import MAX_MESSAGE
-from gouge_cli.rundir import LOCK_NAME, holder
+from gouge_cli.io.rundir import LOCK_NAME, holder
 from test_kill_resume import ENV, slipping_scene
 
 runner = CliRunner()
@@ -246,8 +246,8 @@ def test_tiny_wall_mass_refused_before_writing(scene_file, tmp_path):
 
 def test_guard_names_the_damping(scene_file):
     """A runaway overlap at a step close to the dashpot's own limit blames material.damping."""
-    from gouge_cli.guards import OverlapGuard, Scan
-    from gouge_cli.simulation import PhysicsError, Simulation
+    from gouge_cli.driver.guards import OverlapGuard, Scan
+    from gouge_cli.driver.simulation import PhysicsError, Simulation
 
     data = dict(yaml.safe_load(scene_file.read_text()), material={"damping": 10.0}, numerics={"dt_safety": 0.15})
     sim = Simulation(build_config(data))

@@ -18,7 +18,7 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from gouge_cli.cli.main import EXIT_BAD_INPUT, app
-from gouge_cli.forks import slip_catalog
+from gouge_cli.workflows.fork import slip_catalog
 
 SCENE = {
     "name": "tiny_study",

@@ -15,10 +15,10 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from gouge_cli.checkpoint import CheckpointError, read_checkpoint, snapshot_of, write_checkpoint
+from gouge_cli.io.checkpoint import CheckpointError, read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.cli.main import EXIT_BAD_INPUT, app
-from gouge_cli.forks import run_fork, slip_catalog
-from gouge_cli.simulation import Simulation
+from gouge_cli.workflows.fork import run_fork, slip_catalog
+from gouge_cli.driver.simulation import Simulation
 
 SCENE = {
     "name": "tiny",
@@ -164,7 +164,7 @@ def test_bad_config_writes_nothing(scene_file, tmp_path):
 
 WRITER = """
 import sys, numpy as np
-from gouge_cli.checkpoint import Checkpoint, write_checkpoint
+from gouge_cli.io.checkpoint import Checkpoint, write_checkpoint
 from gouge_cli.config import build_config
 cfg = build_config({})
 i = 0
@@ -227,7 +227,7 @@ def test_run_file_and_checkpoints_record_provenance(finished_run):
 
     import numba
 
-    from gouge_cli import provenance
+    from gouge_cli.io import provenance
     with h5py.File(finished_run / "run.h5", "r") as h5:
         prov = json.loads(h5.attrs["provenance"])
         final_hash = h5.attrs["final_state_hash"]

@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 
 import gouge_cli.kernels
-from gouge_cli import bench
-from gouge_cli.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
+from gouge_cli.studies import bench
+from gouge_cli.io.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.config import build_config
 from gouge_cli.kernels import step as K
-from gouge_cli.simulation import Simulation
-from gouge_cli.state import State
+from gouge_cli.driver.simulation import Simulation
+from gouge_cli.model.state import State
 
 SCENE = {"packing": {"n_grains": 200, "width": 12}, "numerics": {"dt_safety": 0.3},
          "compaction": {"min_time": 200, "max_time": 400}}

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from gouge_cli.config import ConfigError, build_config, load_config
-from gouge_cli.timestep import choose_dt, stability_bound
+from gouge_cli.model.timestep import choose_dt, stability_bound
 
 
 def error_of(data, overrides=None) -> str:

@@ -8,7 +8,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from gouge_cli.config import FluidConfig
-from gouge_cli.fluid import FluidGrid
+from gouge_cli.model.fluid import FluidGrid
 from gouge_cli.kernels import fluid as kernels
 
 

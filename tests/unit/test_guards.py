@@ -1,4 +1,4 @@
-"""Run-time guards (gouge_cli.guards): each fires on a planted failure with a message that
+"""Run-time guards (gouge_cli.driver.guards): each fires on a planted failure with a message that
 names the cause and the parameter to change, and stays quiet on a healthy scene."""
 
 from __future__ import annotations
@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 from gouge_cli.config import build_config
-from gouge_cli.guards import (FluidSubstepGuard, Guards, KineticEnergyGuard, NonFiniteGuard, OverlapGuard, Scan,
+from gouge_cli.driver.guards import (FluidSubstepGuard, Guards, KineticEnergyGuard, NonFiniteGuard, OverlapGuard, Scan,
                               guard_callbacks)
 from gouge_cli.kernels import fluid as FK
 from gouge_cli.kernels import step as K
-from gouge_cli.simulation import PhysicsError, Simulation
-from gouge_cli.timestep import stability_bound
+from gouge_cli.driver.simulation import PhysicsError, Simulation
+from gouge_cli.model.timestep import stability_bound
 
 SCENE = {"packing": {"n_grains": 200, "width": 12}, "seed": 4,
          "loading": {"spring_constant": 2e-4, "velocity": 4e-5},

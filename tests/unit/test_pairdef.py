@@ -11,7 +11,7 @@ import pytest
 from gouge_cli.analysis.blockslider import FIT_MIN_R2, FIT_PERIOD_FACTOR, fit_block_slider, judge_fit
 from gouge_cli.analysis.pairs import SLOW, PairDefinition, classify_pair
 from gouge_cli.analysis.study import study_summary, transient_slips
-from gouge_cli.detector import WallSeries
+from gouge_cli.driver.detector import WallSeries
 from gouge_cli.workflows.study import parse_slips, study_window
 
 V, K, M, SIG = 1e-3, 0.5, 2.0, 1.0
@@ -119,7 +119,7 @@ def test_parse_slips_and_window():
 
 
 def test_order_flag_marks_errors_that_do_not_fall():
-    from gouge_cli.accuracy import fit_order, order_flag
+    from gouge_cli.studies.accuracy import fit_order, order_flag
 
     assert order_flag([0.4, 0.2, 0.1], [1.6e-3, 4e-4, 1e-4]) == ""                 # clean second order
     flag = order_flag([0.8, 0.4, 0.2, 0.1], [2.9e-3, 2.8e-3, 6.2e-4, 4.4e-4][::-1])

@@ -5,7 +5,7 @@ so it stands in for a second one by re-running the same scenes in fresh processe
 compiling for a baseline target (``NUMBA_CPU_NAME=generic``: no AVX, no FMA) and numpy's
 SIMD dispatch switched off (``NPY_DISABLE_CPU_FEATURES``: numpy's AVX2 / AVX-512 loops, whose
 transcendental functions differ in the last bit), on 1 and 2 threads, and comparing the final
-state hashes (gouge_cli.provenance.state_hash).
+state hashes (gouge_cli.io.provenance.state_hash).
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ import sys
 import numpy as np
 import pytest
 
-from gouge_cli import portable, provenance
+from gouge_cli.io import provenance
+from gouge_cli.model import portable
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}, "compaction": {"min_time": 200.0, "max_time": 600.0},
          "loading": {"spring_constant": 2e-4, "velocity": 4e-3}, "numerics": {"sort_every": 1}}
@@ -27,8 +28,8 @@ SCENE = {"packing": {"n_grains": 300, "width": 15}, "compaction": {"min_time": 2
 SCRIPT = """
 import json, sys
 from gouge_cli.config import build_config
-from gouge_cli.provenance import sim_hash
-from gouge_cli.simulation import Simulation
+from gouge_cli.io.provenance import sim_hash
+from gouge_cli.driver.simulation import Simulation
 data = json.loads(sys.argv[1])
 threads = int(sys.argv[2])
 sim = Simulation(build_config(data))
@@ -82,7 +83,7 @@ def test_same_bits_on_every_code_generation_target_and_thread_count(kind):
 
 
 def test_portable_cube_is_two_correctly_rounded_products():
-    """Why gouge_cli.portable exists: numpy's x**3 may run SIMD code whose last bit depends on the
+    """Why gouge_cli.model.portable exists: numpy's x**3 may run SIMD code whose last bit depends on the
     CPU; the cube used for masses is exactly (x*x)*x with two IEEE roundings (the same bits
     everywhere), within 2 ulp of the exact rational cube."""
     from fractions import Fraction

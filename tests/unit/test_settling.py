@@ -1,4 +1,4 @@
-"""Compaction's progress toward its settling criterion (gouge_cli.settling, progress.SettleReport):
+"""Compaction's progress toward its settling criterion (gouge_cli.driver.settling, progress.SettleReport):
 the fraction reaches 1 on the check that settles and the ETA extrapolates the time to settle,
 not the time to compaction.max_time."""
 
@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from gouge_cli.config import build_config
-from gouge_cli.progress import SettleReport, format_eta
-from gouge_cli.provenance import sim_hash
-from gouge_cli.settling import SettleCheck, SettleTracker
-from gouge_cli.simulation import Simulation
+from gouge_cli.driver.progress import SettleReport, format_eta
+from gouge_cli.io.provenance import sim_hash
+from gouge_cli.driver.settling import SettleCheck, SettleTracker
+from gouge_cli.driver.simulation import Simulation
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}}     # default compaction: min_time 500, max_time 50,000 t0
 

@@ -1,4 +1,4 @@
-"""Accuracy ladders (gouge_cli.accuracy, `gouge accuracy`): errors fall as the settings are
+"""Accuracy ladders (gouge_cli.studies.accuracy, `gouge accuracy`): errors fall as the settings are
 refined, and the measured orders of the schemes are those of the analytic cases.
 
 Default suite: a 3-level dt ladder on a 300-grain scene from the checkpoint before its first
@@ -13,7 +13,7 @@ import math
 import pytest
 from typer.testing import CliRunner
 
-from gouge_cli.accuracy import (analytic_ladders, fit_order, prepare_start, run_accuracy, run_scene_ladders,
+from gouge_cli.studies.accuracy import (analytic_ladders, fit_order, prepare_start, run_accuracy, run_scene_ladders,
                                 scene_ladders)
 from gouge_cli.cli.main import EXIT_BAD_INPUT, app
 from gouge_cli.config import build_config
@@ -55,9 +55,9 @@ def test_start_moves_up_to_the_capped_lead(start, tmp_path):
 
     import h5py
 
-    from gouge_cli.accuracy import MAX_LEAD_SLIPS, slip_duration, start_from_checkpoint
-    from gouge_cli.checkpoint import read_checkpoint
-    from gouge_cli.simulation import Simulation
+    from gouge_cli.studies.accuracy import MAX_LEAD_SLIPS, slip_duration, start_from_checkpoint
+    from gouge_cli.io.checkpoint import read_checkpoint
+    from gouge_cli.driver.simulation import Simulation
     ck = read_checkpoint(start.source)
     duration = slip_duration(start.config, Simulation(start.config, arrays=ck.state).wall_mass_per_length)
     copy = tmp_path / "far.h5"

@@ -14,7 +14,7 @@ import pytest
 
 from gouge_cli.config import build_config
 from gouge_cli.kernels.contact import hertz_mindlin
-from gouge_cli.timestep import contact_constants
+from gouge_cli.model.timestep import contact_constants
 
 E, NU = 1.0, 0.2
 C_N, C_T = contact_constants(build_config({}))

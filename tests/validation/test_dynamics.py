@@ -16,10 +16,10 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 from scipy.special import beta
 
-from gouge_cli.accuracy import closed_box
+from gouge_cli.studies.accuracy import closed_box
 from gouge_cli.config import build_config
 from gouge_cli.kernels.step import K_NEEDED_CAPACITY, K_REBUILDS, K_STEP, W_VX
-from gouge_cli.timestep import contact_constants
+from gouge_cli.model.timestep import contact_constants
 
 M_STAR = math.pi / 12.0                    # reduced mass of two d = 1 grains (rho = 1)
 C_N, C_T = contact_constants(build_config({}))
@@ -142,7 +142,7 @@ def test_restitution_at_physics_md_speed():
 # ---- energy: many grains, gamma = 0, mu = 0 ------------------------------------------------
 
 def _closed_box():
-    """gouge_cli.accuracy.closed_box (free grains closed in z by two rows of fixed grains, body 1
+    """gouge_cli.studies.accuracy.closed_box (free grains closed in z by two rows of fixed grains, body 1
     both: they never pair, never move, do no work) with its velocities as keyword arrays."""
     box = closed_box()
     box.update(box.pop("velocities"))
@@ -236,7 +236,7 @@ def test_oblique_impact_angular_momentum_conserved(free_grains, single_thread):
 # ---- determinism --------------------------------------------------------------------------
 
 def _run_scene(threads, n_grains=400, steps=(1500, 1000), sort_every=None):
-    from gouge_cli.simulation import Simulation
+    from gouge_cli.driver.simulation import Simulation
     cfg = build_config({"packing": {"n_grains": n_grains}, "seed": 5,
                         "numerics": {"threads": threads, "sort_every": sort_every}})
     sim = Simulation(cfg)
@@ -269,7 +269,7 @@ def test_bits_do_not_depend_on_advance_calls_or_list_growth():
     one pass: cutting the run into other calls (1, 7, 250, ... steps) gives the same bits. So
     does a neighbour list that overflows at a rebuild: the step resumes after the pair arrays
     grow."""
-    from gouge_cli.simulation import Simulation
+    from gouge_cli.driver.simulation import Simulation
     a = _run_scene(1)
     cfg = build_config({"packing": {"n_grains": 400}, "seed": 5, "numerics": {"threads": 1}})
     sim = Simulation(cfg)
@@ -293,7 +293,7 @@ def test_renumbering_bitwise_across_threads_and_restarts():
     """With grains re-numbered at every rebuild: 1 and 2 threads give the same bits, and a
     restart from mid-run arrays (another numbering than the packing's) continues bit for bit."""
     import numba
-    from gouge_cli.simulation import Simulation
+    from gouge_cli.driver.simulation import Simulation
     a = _run_scene(1, sort_every=1)
     assert not np.array_equal(a["id"], np.arange(a["id"].size))
     threads = min(2, numba.config.NUMBA_NUM_THREADS)
@@ -309,7 +309,7 @@ def test_renumbering_bitwise_across_threads_and_restarts():
     resumed.advance(600)
     for name, values in resumed.state.arrays().items():
         assert values.tobytes() == a[name].tobytes(), name
-    from gouge_cli.packing import build_packing
+    from gouge_cli.model.packing import build_packing
     np.testing.assert_array_equal(resumed.state.radius, build_packing(cfg).radius[resumed.state.id])
 
 
@@ -342,9 +342,9 @@ def test_snapshot_of_renumbered_scene_is_in_packing_order(tmp_path):
     radii are the packing's, and each contact's (i, j) centres are as far apart as the two
     grains' radii allow (so the contact numbers match the coordinates)."""
     import h5py
-    from gouge_cli.output import RunFile
-    from gouge_cli.packing import build_packing
-    from gouge_cli.simulation import Simulation
+    from gouge_cli.io.runfile import RunFile
+    from gouge_cli.model.packing import build_packing
+    from gouge_cli.driver.simulation import Simulation
     cfg = build_config({"packing": {"n_grains": 400}, "seed": 5, "numerics": {"sort_every": 1}})
     sim = Simulation(cfg)
     sim.advance(1500)
@@ -366,7 +366,7 @@ def test_snapshot_of_renumbered_scene_is_in_packing_order(tmp_path):
 def test_checkpoint_without_grain_numbers_restores_in_packing_order():
     """Checkpoints written before re-numbering existed carry no ``id``: they restore as the
     packing's order, bit for bit."""
-    from gouge_cli.simulation import Simulation
+    from gouge_cli.driver.simulation import Simulation
     cfg = build_config({"packing": {"n_grains": 400}, "seed": 5})
     sim = Simulation(cfg)
     sim.advance(300)

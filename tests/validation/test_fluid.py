@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from gouge_cli.config import FluidConfig
-from gouge_cli.fluid import FluidGrid
+from gouge_cli.model.fluid import FluidGrid
 from gouge_cli.kernels import fluid as kernels
 
 BETA = 36.0

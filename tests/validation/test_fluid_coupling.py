@@ -8,11 +8,11 @@ import sys
 import numpy as np
 import pytest
 
-from gouge_cli.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
+from gouge_cli.io.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.config import build_config
-from gouge_cli.forks import branch_config
+from gouge_cli.workflows.fork import branch_config
 from gouge_cli.kernels.step import K_REBUILDS
-from gouge_cli.simulation import Simulation
+from gouge_cli.driver.simulation import Simulation
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}, "seed": 3,
          "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
@@ -138,14 +138,14 @@ def test_fluid_bits_do_not_depend_on_advance_calls(sheared):
 DRY_PROBE = """
 import sys
 from gouge_cli.config import build_config
-from gouge_cli.simulation import Simulation
+from gouge_cli.driver.simulation import Simulation
 sim = Simulation(build_config({"packing": {"n_grains": 200, "width": 12}}))
 sim.compact()
 sim.advance(200)
 row = sim.observe()
 assert sim.fluid is None and sim.drag[0].size == 0
 assert not any(k.startswith("pressure") for k in row)
-print("fluid modules:", sorted(m for m in sys.modules if m in ("gouge_cli.fluid", "gouge_cli.kernels.fluid",
+print("fluid modules:", sorted(m for m in sys.modules if m in ("gouge_cli.model.fluid", "gouge_cli.kernels.fluid",
                                                                  "gouge_cli.kernels.coupled")))
 """
 

@@ -14,7 +14,7 @@ import pytest
 
 from gouge_cli.config import build_config
 from gouge_cli.kernels import step as K
-from gouge_cli.simulation import Simulation
+from gouge_cli.driver.simulation import Simulation
 
 
 def listed_pairs(st):

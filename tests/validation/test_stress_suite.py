@@ -16,9 +16,9 @@ from typer.testing import CliRunner
 
 from gouge_cli.cli.main import EXIT_BAD_INPUT, EXIT_PHYSICS, app
 from gouge_cli.config import ConfigError, load_config
-from gouge_cli.guards import guarded_run
+from gouge_cli.driver.guards import guarded_run
 from gouge_cli.kernels import fluid as FK
-from gouge_cli.simulation import PhysicsError, Simulation
+from gouge_cli.driver.simulation import PhysicsError, Simulation
 
 STRESS = Path(__file__).resolve().parents[2] / "configs" / "stress"
 

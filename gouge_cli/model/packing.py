@@ -2,7 +2,7 @@
 
 Each wall is one row of grains (diameters from the same distribution) glued to a
 rigid body; free grains start on a jittered square lattice with no overlaps and
-are then compacted under the normal stress (:func:`gouge_cli.simulation.compact`).
+are then compacted under the normal stress (:func:`gouge_cli.driver.simulation.compact`).
 
 Grain numbering: strip by strip (STRIP d wide columns along x), bottom to top within a strip.
 Neighbours then have nearby numbers, so the force pass works in a small window of memory
@@ -16,8 +16,8 @@ import math
 
 import numpy as np
 
-from .config import Config, ConfigError
-from .kernels.reorder import STRIP
+from ..config import Config, ConfigError
+from ..kernels.reorder import STRIP
 from .state import BOTTOM, FREE, TOP, State
 
 

@@ -13,19 +13,19 @@ from dataclasses import dataclass
 from pathlib import Path
 
 
-from . import provenance
-from .checkpoint import CheckpointError, read_checkpoint, remove_stale_temps, snapshot_of, write_checkpoint
-from .config import Config, dump_config, load_config
-from .errors import hdf5_os_error
-from .events import SlipRecorder
-from .guards import guard_callbacks
-from .kernels import step as K
-from .output import RunFile
-from .preflight import check_config
-from .progress import ProgressReport, SettleReport
-from .rundir import (RunDirError, RunLock, check_run_dir, ensure_space, latest_run, open_run_file,
+from ..io import provenance
+from ..io.checkpoint import CheckpointError, read_checkpoint, remove_stale_temps, snapshot_of, write_checkpoint
+from ..config import Config, dump_config, load_config
+from ..errors import hdf5_os_error
+from ..driver.slips import SlipRecorder
+from ..driver.guards import guard_callbacks
+from ..kernels import step as K
+from ..io.runfile import RunFile
+from ..model.preflight import check_config
+from ..driver.progress import ProgressReport, SettleReport
+from ..io.rundir import (RunDirError, RunLock, check_run_dir, ensure_space, latest_run, open_run_file,
                      prepare_run_dir)
-from .simulation import Every, PhysicsError, Simulation
+from ..driver.simulation import Every, PhysicsError, Simulation
 
 
 @dataclass

@@ -4,7 +4,7 @@ Layout of ``run.h5``::
 
     /            attrs: config (YAML), scales (JSON), version, seed, dt, status, created,
                  provenance (JSON: version, commit, command, libraries, CPU, threads; see
-                 gouge_cli.provenance), provenance_resumed (JSON, of the latest resume) and
+                 gouge_cli.io.provenance), provenance_resumed (JSON, of the latest resume) and
                  final_state_hash (16 hex digits of the state when the run stopped)
     /series/<q>  (T,) float64, resizable; attrs unit, description
     /snapshots/<step>/{x,z,radius,vx,vz,spin,body, contact_i, contact_j, contact_fx, contact_fz}
@@ -12,7 +12,7 @@ Layout of ``run.h5``::
                  scene has fluid (attrs origin, spacing, axis_order); grains in their original
                  (packing) order, contact_i/j in those numbers
     Every dataset has unit and description attributes; attribute_units (JSON) documents the
-    attributes of each group (gouge_cli.filedoc).
+    attributes of each group (gouge_cli.io.filedoc).
 
 Rows are buffered and flushed every ``flush_rows`` rows or on close, so a crash loses at
 most the rows since the last flush and never corrupts earlier ones.
@@ -27,11 +27,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from . import __version__, provenance
-from .config import Config, dump_config
+from .. import __version__
+from . import provenance
+from ..config import Config, dump_config
 from .filedoc import SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, document_run_file, grid_geometry
-from .kernels import measure as M
-from .kernels import step as K
+from ..kernels import measure as M
+from ..kernels import step as K
 
 # name -> (unit, description); units are the dimensionless scales of physics.md section 1
 SERIES = {

@@ -5,7 +5,7 @@ and git commit, the command line, the Python and library versions, the C library
 model and vector features, numba's code-generation target and thread count; run files also
 store ``final_state_hash`` (:func:`state_hash` of the last state) when they close.
 
-The state's bits are meant not to depend on the CPU (see :mod:`gouge_cli.portable`; tested
+The state's bits are meant not to depend on the CPU (see :mod:`gouge_cli.model.portable`; tested
 across numba/numpy code-generation targets and thread counts). They do depend on the versions
 of the libraries that compute it (numpy, numba, llvmlite) and on the C library's ``sin`` /
 ``atan2`` (fluid deposit), so :func:`bit_risks` names a stored/current difference in those.
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from .. import __version__
 
 # keys whose difference can change the bits of a continued trajectory
 BIT_KEYS = ("numpy", "numba", "llvmlite", "libc", "python")
@@ -34,7 +34,7 @@ VECTOR_FEATURES = ("sse4_2", "avx", "fma", "avx2", "avx512f", "avx512vl", "avx51
 @lru_cache(maxsize=1)
 def git_commit() -> str:
     """Commit of the source tree gouge runs from ('+dirty' if it has changes), or 'not a git checkout'."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     if not (root / ".git").exists():
         return "not a git checkout"
     try:

@@ -19,11 +19,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .checkpoint import Checkpoint, snapshot_of, write_checkpoint
-from .config import Config
+from ..io.checkpoint import Checkpoint, snapshot_of, write_checkpoint
+from ..config import Config
 from .detector import Slip, SlipDetector
-from .filedoc import document_slip
-from .kernels.step import W_VX
+from ..io.filedoc import document_slip
+from ..kernels.step import W_VX
 
 
 def lead_time(config: Config) -> float:

@@ -33,16 +33,17 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from . import __version__, provenance
+from .. import __version__
+from ..io import provenance
 from .accuracy import slip_duration
-from .config import build_config, find_config, load_config
-from .kernels import step as K
-from .simulation import Simulation
-from .timestep import choose_dt
+from ..config import build_config, find_config, load_config
+from ..kernels import step as K
+from ..driver.simulation import Simulation
+from ..model.timestep import choose_dt
 
 CACHE = Path("runs/bench/cache")
-DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "kernels/reorder.py", "packing.py",
-               "simulation.py", "state.py", "config.py", "timestep.py", "portable.py")     # (and bench_config below)
+DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "kernels/reorder.py", "model/packing.py",
+               "driver/simulation.py", "model/state.py", "config.py", "model/timestep.py", "model/portable.py")     # (and bench_config below)
 RUN24_CYCLE = 1.6e7     # [t0] one loading cycle of thesis Run 24 (physics.md section 6)
 
 
@@ -80,7 +81,7 @@ def dry_digest() -> str:
     """Hash of the sources a pre-sheared dry state depends on (the cache key)."""
     h = hashlib.sha256(__version__.encode())
     for name in DRY_SOURCES:
-        h.update((Path(__file__).parent / name).read_bytes())
+        h.update((Path(__file__).resolve().parents[1] / name).read_bytes())
     return h.hexdigest()[:16]
 
 
@@ -126,8 +127,8 @@ def time_gouge(sim: Simulation, start: dict, threads: int, steps: int, repeats: 
 
 def lammps_script() -> Path | None:
     candidates = [os.environ.get("GOUGE_LAMMPS_BENCH", ""),
-                  Path(__file__).resolve().parents[1] / "shared" / "bench" / "lammps" / "run_lammps.sh",
-                  Path(__file__).resolve().parents[2] / "shared" / "bench" / "lammps" / "run_lammps.sh"]
+                  Path(__file__).resolve().parents[2] / "shared" / "bench" / "lammps" / "run_lammps.sh",
+                  Path(__file__).resolve().parents[3] / "shared" / "bench" / "lammps" / "run_lammps.sh"]
     for c in candidates:
         if c and Path(c).is_file():
             return Path(c)

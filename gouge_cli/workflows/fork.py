@@ -17,15 +17,15 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import provenance
-from .checkpoint import read_checkpoint
-from .config import Config, ConfigError, build_config
-from .events import lead_time
-from .output import RunFile
-from .preflight import check_config
-from .rundir import RunDirError, RunLock, check_run_dir, open_run_file, refuse_if_in_progress
-from .runner import load_phase
-from .simulation import Simulation
+from ..io import provenance
+from ..io.checkpoint import read_checkpoint
+from ..config import Config, ConfigError, build_config
+from ..driver.slips import lead_time
+from ..io.runfile import RunFile
+from ..model.preflight import check_config
+from ..io.rundir import RunDirError, RunLock, check_run_dir, open_run_file, refuse_if_in_progress
+from .run import load_phase
+from ..driver.simulation import Simulation
 
 
 def slip_catalog(run_dir: Path) -> list[dict]:

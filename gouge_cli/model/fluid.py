@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .kernels import fluid as kernels
+from ..kernels import fluid as kernels
 
 
 class FluidGrid:

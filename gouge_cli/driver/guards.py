@@ -1,7 +1,7 @@
 """Run-time guards: callbacks that stop a run with a PhysicsError naming the cause and the fix.
 
-Each guard is called as ``guard(sim)`` from :class:`gouge_cli.simulation.Every`, between
-numba chunks, and raises :class:`gouge_cli.simulation.PhysicsError` (cause, fix, time) when
+Each guard is called as ``guard(sim)`` from :class:`gouge_cli.driver.simulation.Every`, between
+numba chunks, and raises :class:`gouge_cli.driver.simulation.PhysicsError` (cause, fix, time) when
 its condition holds. None of them changes the state, so a guarded run is bit for bit the
 unguarded one. :class:`Guards` runs all four on one scan of the state;
 :func:`guard_callbacks` wraps it in an ``Every`` for a scene.
@@ -50,7 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .kernels import step as K
+from ..kernels import step as K
 from .simulation import Every, PhysicsError, Simulation
 
 
@@ -79,7 +79,7 @@ class Scan:
 
 def _suspects(sim: Simulation) -> str:
     """Parameters near their own stability limit at this step (preflight), named first."""
-    from .preflight import damped_step_bound, min_wall_mass
+    from ..model.preflight import damped_step_bound, min_wall_mass
 
     cfg, dt = sim.config, float(sim.params[K.DT])
     out = []

@@ -14,14 +14,14 @@ from typing import Callable
 import numba
 import numpy as np
 
-from .config import Config
-from .errors import PhysicsFailure
-from .kernels import measure as M
-from .kernels import step as K
-from .packing import build_packing
+from ..config import Config
+from ..errors import PhysicsFailure
+from ..kernels import measure as M
+from ..kernels import step as K
+from ..model.packing import build_packing
 from .settling import SettleCheck, settle_check
-from .state import State
-from .timestep import choose_dt, contact_constants
+from ..model.state import State
+from ..model.timestep import choose_dt, contact_constants
 
 _EMPTY = np.zeros(0)
 AUTO_PARALLEL_MIN_GRAINS = 2000
@@ -116,7 +116,7 @@ class Simulation:
         include its (zero) drag from the next step on."""
         if self.config.fluid is None or self.fluid is not None:
             return
-        from .fluid import FluidGrid
+        from ..model.fluid import FluidGrid
 
         s = self.state
         z_bot, z_top = self.wall_planes()
@@ -198,7 +198,7 @@ class Simulation:
                 raise PhysicsError(*self.fluid.failure(int(self._fluid_status[0])), s.time)
 
     def _advance_fluid(self, nsteps: int):
-        from .kernels.coupled import advance_fluid
+        from ..kernels.coupled import advance_fluid
 
         s = self.state
         args = self.fluid.kernel_args()
@@ -274,7 +274,7 @@ class Simulation:
 
     def check(self):
         """Stop with a PhysicsError on NaN/inf or a runaway overlap (the non-finite and overlap
-        guards of gouge_cli.guards, run once; used while compacting and by the benchmark)."""
+        guards of gouge_cli.driver.guards, run once; used while compacting and by the benchmark)."""
         from .guards import NonFiniteGuard, OverlapGuard, Scan
 
         scan = Scan.of(self)

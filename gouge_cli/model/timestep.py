@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .config import Config, ConfigError
+from ..config import Config, ConfigError
 from .portable import cube, power
 
 CHAIN_FACTOR = 10.0

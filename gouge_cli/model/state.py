@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from .kernels import step as K
+from ..kernels import step as K
 from .portable import sphere_mass
 
 FREE, BOTTOM, TOP = K.FREE, K.BOTTOM, K.TOP

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import h5py
 
-from .errors import InputError
+from ..errors import InputError
 
 LOCK_NAME = ".gouge.lock"
 OWNED = ("run.h5", "config.yaml", "checkpoints", "forks", "figures", "analysis")

@@ -79,7 +79,7 @@ RUN_ATTRS = {
     "body_codes": ("-", "meaning of the snapshot body codes (JSON)"),
     "snapshot_dense_interval": ("t0", "snapshot cadence during a slip (forks)"),
     "provenance": ("-", "what wrote the file (JSON): gouge version, git commit, command line, library "
-                        "versions, CPU model and vector features, numba target, threads (gouge_cli.provenance)"),
+                        "versions, CPU model and vector features, numba target, threads (gouge_cli.io.provenance)"),
     "provenance_resumed": ("-", "provenance (JSON) of the latest `gouge resume` that continued this run"),
     "final_state_hash": ("-", "SHA-256 (16 hex digits) of every evolving array when the run stopped"),
 }

@@ -4,7 +4,7 @@ A checkpoint is an HDF5 file: datasets ``state/<name>`` (see State.EVOLVING) and
 ``fluid/<name>``; states attached to it (the slip recorder's pre-slip ring, see events.py) under
 ``attached/<key>/{state,fluid}/<name>`` with their own ``extra`` attribute; attributes
 ``config`` (YAML of the validated config), ``extra`` (JSON: detector state, slip number, parent
-run, ...), ``provenance`` (JSON, see :mod:`gouge_cli.provenance`) and ``checksum`` (SHA-256 over
+run, ...), ``provenance`` (JSON, see :mod:`gouge_cli.io.provenance`) and ``checksum`` (SHA-256 over
 every dataset's name, dtype, shape and bytes). It is written to a temporary file in the same
 directory and renamed over the target, so a crash never leaves a half-written checkpoint behind; a
 temporary file left by a killed writer (``.NAME.tmpPID`` of a process no longer alive) is
@@ -22,11 +22,11 @@ import h5py
 import numpy as np
 import yaml
 
-from . import __version__
+from .. import __version__
 from . import provenance
-from .config import Config, ConfigError, build_config, dump_config
+from ..config import Config, ConfigError, build_config, dump_config
 from .filedoc import document_checkpoint
-from .errors import InputError
+from ..errors import InputError
 from .rundir import pid_alive
 
 

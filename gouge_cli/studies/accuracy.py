@@ -49,12 +49,12 @@ from pathlib import Path
 import numpy as np
 from numba import njit
 
-from . import NUMBA_CACHE
-from .checkpoint import read_checkpoint
-from .config import Config, ConfigError, build_config
-from .guards import Guards
-from .kernels import step as K
-from .simulation import PhysicsError, Simulation
+from .. import NUMBA_CACHE
+from ..io.checkpoint import read_checkpoint
+from ..config import Config, ConfigError, build_config
+from ..driver.guards import Guards
+from ..kernels import step as K
+from ..driver.simulation import PhysicsError, Simulation
 
 DT_SAFETY = (0.8, 0.4, 0.2, 0.1, 0.05, 0.025)
 CELL_SIZE = (4.0, 3.0, 2.5, 2.0)
@@ -109,7 +109,7 @@ def slip_duration(config: Config, wall_mass_per_length: float) -> float:
 def slip_end(path: Path, extra: dict) -> float | None:
     """End time of the slip a checkpoint was kept for, from the run's catalog (RUN/run.h5 next
     to RUN/checkpoints/), or None."""
-    from .forks import slip_catalog
+    from ..workflows.fork import slip_catalog
 
     run_dir = Path(path).resolve().parent.parent
     if "slip" not in extra or not (run_dir / "run.h5").is_file():
@@ -160,8 +160,8 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
     """Compact and load `config` (at most run.duration) until its first slip ends; start from the
     slip checkpoint written before it (work_dir/checkpoints/slip_001.h5), or from the end state
     (checkpoints/latest.h5) if no slip came."""
-    from .output import RunFile
-    from .runner import load_phase
+    from ..io.runfile import RunFile
+    from ..workflows.run import load_phase
 
     work_dir = Path(work_dir)
     work_dir.mkdir(parents=True, exist_ok=True)
@@ -182,7 +182,7 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
 
 def fluid_dt(config: Config, finest_step: float) -> float:
     """DEM step of the fluid ladders: finest_step / ceil(finest_step / dt of the scene)."""
-    from .timestep import choose_dt
+    from ..model.timestep import choose_dt
 
     return finest_step / math.ceil(finest_step / choose_dt(config) - 1e-9)
 
@@ -254,7 +254,7 @@ def run_level(start: Start, level: Level, period: float, count: int) -> LevelRes
 def sampling(start: Start, levels: list[Level], samples: int) -> tuple[float, int]:
     """(period, count): a period that is a whole number of steps of the coarsest level (the
     ladders' steps divide each other), about interval / samples, and the samples in the interval."""
-    from .timestep import choose_dt
+    from ..model.timestep import choose_dt
 
     coarsest = max(choose_dt(level_config(start.config, lv)) for lv in levels)
     period = coarsest * max(1, int(round(start.interval / samples / coarsest)))
@@ -393,7 +393,7 @@ class AnalyticRow:
 
 def _free_grains(x, z, radius, vx, dt, width=100.0, body=None, **material):
     """Simulation of free grains without walls (compaction damping 0, given material)."""
-    from .state import State
+    from ..model.state import State
 
     material.setdefault("damping", 0.0)
     cfg = build_config({"numerics": {"dt": dt}, "compaction": {"damping": 0.0}, "material": material})
@@ -409,7 +409,7 @@ def hertz_reference(v: float) -> tuple[float, float]:
     """(contact time, max overlap) of two d = 1 grains meeting at relative speed v (gamma = 0)."""
     from scipy.special import beta
 
-    from .timestep import contact_constants
+    from ..model.timestep import contact_constants
 
     k = contact_constants(build_config({}))[0] * math.sqrt(0.5)
     m_star = math.pi / 12.0
@@ -490,8 +490,8 @@ def energy_drift(dt: float, duration: float = 200.0, sample: float = 0.32) -> tu
 def terzaghi_error(nz: int, solver: str = "implicit", ratio: float = 0.5, thickness: float = 10.0) -> float:
     """Largest error of mean and mid-plane P/P0 at T = 0.01, 0.05, 0.1, 0.2, 0.5 on a frozen
     uniform packing (phi = 0.15, two discs per lattice site), fluid steps Delta T = ratio / nz^2."""
-    from .fluid import FluidGrid
-    from .kernels import fluid as FK
+    from ..model.fluid import FluidGrid
+    from ..kernels import fluid as FK
 
     targets = (0.01, 0.05, 0.1, 0.2, 0.5)
     m = np.arange(1, 8000, 2)

@@ -1,0 +1,1 @@
+"""Files: the run file (run.h5), checkpoints, run directories, provenance, self-description."""

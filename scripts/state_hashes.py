@@ -1,0 +1,26 @@
+"""Print the dry and undrained state hashes of the two 300-grain reference scenes
+(seed 2, 3,000 loading steps), the bitwise check of any refactoring.
+
+    NUMBA_NUM_THREADS=1 .venv/bin/python scripts/state_hashes.py   (T=2 for two threads)
+
+Expected since main 3548805 (1 or 2 threads): dry e9db53e39dbb39ad, undrained ecf1238ba035ffc2.
+"""
+
+import os
+
+from gouge_cli.config import build_config
+from gouge_cli.io.provenance import sim_hash
+from gouge_cli.driver.simulation import Simulation
+
+SCENE = {"packing": {"n_grains": 300, "width": 15}, "compaction": {"min_time": 200.0, "max_time": 600.0},
+         "loading": {"spring_constant": 2e-4, "velocity": 4e-3}, "numerics": {"sort_every": 1}, "seed": 2}
+for kind in ("dry", "undrained"):
+    data = dict(SCENE)
+    if kind == "undrained":
+        data["fluid"] = {"permeability": 1e-5}
+    sim = Simulation(build_config(data))
+    sim.threads = int(os.environ.get("T", "1"))
+    sim.compact()
+    sim.start_fluid()
+    sim.advance(3000)
+    print(kind, sim_hash(sim))
