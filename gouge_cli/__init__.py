@@ -1,27 +1,6 @@
 """gouge: grain-scale simulations of water-saturated fault gouge (2D DEM + Goren pore fluid)."""
 
-import hashlib
-import os
-import sys
-from pathlib import Path
-
 __version__ = "0.1.0"
 
-
-def _kernel_digest() -> str:
-    """Hash of every kernel source: numba's on-disk cache only tracks the file of each function,
-    not the kernels it inlines from other files, so the cache lives in a folder per digest."""
-    h = hashlib.sha256()
-    for path in sorted((Path(__file__).parent / "kernels").glob("*.py")):
-        h.update(path.name.encode())
-        h.update(path.read_bytes())
-    return h.hexdigest()[:16]
-
-
-# numba compiles kernels once per machine and caches them (GOUGE_NUMBA_CACHE=0 turns it off).
-NUMBA_CACHE = os.environ.get("GOUGE_NUMBA_CACHE", "1") != "0"
-if NUMBA_CACHE and "NUMBA_CACHE_DIR" not in os.environ:
-    _cache = str(Path(__file__).parent / "__pycache__" / f"numba-{_kernel_digest()}")
-    os.environ["NUMBA_CACHE_DIR"] = _cache
-    if "numba" in sys.modules:
-        sys.modules["numba"].config.CACHE_DIR = _cache
+# numba's cache folder is chosen (per digest of the kernel sources) when gouge is imported
+from .kernels import NUMBA_CACHE  # noqa: E402,F401

@@ -95,3 +95,12 @@ def describe(exc: BaseException, where: str | None = None) -> tuple[str, int] | 
     if isinstance(exc, OSError):
         return describe_os_error(exc, where)
     return None
+
+
+class PhysicsError(PhysicsFailure):
+    """The physics went wrong (NaN, runaway overlap, unstable fluid step); names cause and fix."""
+
+    def __init__(self, cause: str, fix: str, time: float | None = None):
+        self.cause, self.fix, self.time = cause, fix, time
+        at = f" at t = {time:.6g} t0" if time is not None else ""
+        super().__init__(f"{cause}{at}. {fix}")

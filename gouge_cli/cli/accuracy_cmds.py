@@ -9,7 +9,8 @@ from typing import List, Optional
 import typer
 
 from ..config import ConfigError, load_config
-from .main import EXIT_PHYSICS, err, fail, out
+from ..errors import EXIT_PHYSICS
+from .common import err, fail, out
 
 
 def _fmt(value: float) -> str:
@@ -77,7 +78,7 @@ def accuracy(
     Writes accuracy.csv and accuracy.png (work-precision: error vs run time)."""
     from ..studies.accuracy import run_accuracy
     from ..io.checkpoint import CheckpointError
-    from ..driver.simulation import PhysicsError
+    from ..errors import PhysicsError
 
     if config is None and slip_checkpoint is None:
         fail("give a CONFIG, a --slip-checkpoint, or both")

@@ -91,7 +91,7 @@ def _print_campaign(out, summary: dict, n_runs: int):
 def _main(main: str) -> str:
     """Validate --main (exit 2 naming the option)."""
     if main not in ("first", "largest"):
-        from .main import fail
+        from .common import fail
 
         fail(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
     return main
@@ -115,7 +115,8 @@ def register(app: typer.Typer) -> None:
         """
         from ..analysis.report import AnalysisError, analyze_run, campaign, write_analysis
         from ..errors import describe_os_error
-        from .main import EXIT_BAD_INPUT, err, fail, out
+        from ..errors import EXIT_BAD_INPUT
+        from .common import err, fail, out
 
         done, failed = [], []
         for run_dir in run_dirs:
@@ -158,7 +159,7 @@ def register(app: typer.Typer) -> None:
     ):
         """PNG figures: run overview, grain snapshot, slip N with its fit, μ_d(t), drained vs undrained."""
         from ..plots import make_figures
-        from .main import guarded, out
+        from .common import guarded, out
 
         files = guarded(make_figures)(run_dir=run_dir, slip=slip, out_dir=out_dir, notch=notch, main=_main(main))
         for path in files:

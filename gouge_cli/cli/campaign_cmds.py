@@ -14,7 +14,8 @@ import typer
 
 
 def register(app: typer.Typer):
-    from .main import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_PHYSICS, fail, out
+    from ..errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_PHYSICS
+    from .common import fail, out
 
     @app.command()
     def campaign(

@@ -46,7 +46,7 @@ def register(app: typer.Typer) -> None:
         grains, contacts (normal and tangential force), walls, pressure grid; time in t0 since loading began."""
         from ..analysis.report import AnalysisError
         from ..export.vtkhdf import export_run
-        from .main import fail, out as console
+        from .common import fail, out as console
 
         if fmt != "vtkhdf":
             fail(f"--format {fmt!r}: the only format is vtkhdf")
@@ -77,7 +77,7 @@ def register(app: typer.Typer) -> None:
         pore pressure P/sigma on a fixed colour scale, time since onset, v_w/V_s with a moving marker."""
         from ..analysis.report import AnalysisError
         from ..plots.movie import make_movie
-        from .main import fail, out as console
+        from .common import fail, out as console
 
         try:
             path, frames = make_movie(run_dir, slip, perm, out, fps=fps)

@@ -2,27 +2,20 @@
 
 from __future__ import annotations
 
-import functools
-import sys
 from pathlib import Path
 from typing import List, Optional
 
 import typer
-from rich.console import Console
-from rich.markup import escape
 
 from ..config import build_config, dump_config, load_config
-from ..errors import (EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_OK, EXIT_PHYSICS, InputError, PhysicsFailure,
-                      bounded, describe)
+from .common import fail, guarded, out
+from ..errors import EXIT_INTERRUPTED
 
-__all__ = ["app", "main", "EXIT_OK", "EXIT_BAD_INPUT", "EXIT_PHYSICS", "EXIT_INTERRUPTED"]
+__all__ = ["app", "main"]
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, context_settings={"help_option_names": ["-h", "--help"]},
                   rich_markup_mode=None,   # help texts hold units in brackets, e.g. [d^2]: no markup
                   help="gouge: grain-scale stick-slip simulations of (water-saturated) fault gouge.")
-_WIDE = None if sys.stdout.isatty() else 200
-err = Console(stderr=True, soft_wrap=True, width=_WIDE)
-out = Console(soft_wrap=True, width=_WIDE)
 
 
 def _version(value: bool):
@@ -37,29 +30,6 @@ def _version(value: bool):
 def _main(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
                                        help="print the version and exit")):
     """gouge: grain-scale stick-slip simulations of (water-saturated) fault gouge."""
-
-
-def fail(message: str, code: int = EXIT_BAD_INPUT):
-    err.print(f"[bold red]error:[/] {escape(bounded(message))}", highlight=False)
-    raise typer.Exit(code)
-
-
-def guarded(command):
-    """Run a command with the exit-code mapping of gouge_cli.errors.describe: bad input 2,
-    physics failure or a full disk 3, Ctrl-C 130, each with a short message naming the key or path."""
-
-    @functools.wraps(command)
-    def wrapper(*args, **kwargs):
-        try:
-            return command(*args, **kwargs)
-        except (InputError, PhysicsFailure, OSError, RuntimeError, KeyboardInterrupt) as e:
-            where = next((kwargs[k] for k in ("run_dir", "out_dir", "config", "run_dirs") if kwargs.get(k)), None)
-            described = describe(e, str(where) if where is not None else None)
-            if described is None:
-                raise
-            fail(*described)
-
-    return wrapper
 
 
 def _set_threads(threads: int):
@@ -160,7 +130,7 @@ def slips(
 
     from rich.table import Table
 
-    from ..workflows.fork import slip_catalog
+    from ..io.runfile import slip_catalog
     from ..io.rundir import refuse_if_in_progress
 
     from .export_cmds import catalog_since_loading

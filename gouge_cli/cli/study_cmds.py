@@ -30,10 +30,11 @@ def register(app: typer.Typer) -> None:
         from ..io.checkpoint import CheckpointError
         from ..config import ConfigError
         from ..workflows.run import RunDirError
-        from ..driver.simulation import PhysicsError
+        from ..errors import PhysicsError
         from ..workflows.study import StudyInterrupted, parse_slips, run_study
         from .analysis_cmds import _table
-        from .main import EXIT_INTERRUPTED, EXIT_PHYSICS, fail, out
+        from ..errors import EXIT_INTERRUPTED, EXIT_PHYSICS
+        from .common import fail, out
 
         try:
             wanted = parse_slips(slips)

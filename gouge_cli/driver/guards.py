@@ -1,7 +1,7 @@
 """Run-time guards: callbacks that stop a run with a PhysicsError naming the cause and the fix.
 
-Each guard is called as ``guard(sim)`` from :class:`gouge_cli.driver.simulation.Every`, between
-numba chunks, and raises :class:`gouge_cli.driver.simulation.PhysicsError` (cause, fix, time) when
+Each guard is called as ``guard(sim)`` from :class:`gouge_cli.driver.schedules.Every`, between
+numba chunks, and raises :class:`gouge_cli.errors.PhysicsError` (cause, fix, time) when
 its condition holds. None of them changes the state, so a guarded run is bit for bit the
 unguarded one. :class:`Guards` runs all four on one scan of the state;
 :func:`guard_callbacks` wraps it in an ``Every`` for a scene.
@@ -50,8 +50,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..kernels import step as K
-from .simulation import Every, PhysicsError, Simulation
+from ..kernels import layout as L
+from typing import TYPE_CHECKING
+
+from ..errors import PhysicsError
+from .schedules import Every
+
+if TYPE_CHECKING:
+    from .simulation import Simulation
 
 
 @dataclass
@@ -72,7 +78,7 @@ class Scan:
         row = sim.observe()
         kinetic = row["kinetic_energy"]
         if s.top.size:
-            kinetic += 0.5 * sim.wall_mass_per_length * s.width * (s.wall[K.W_VX] ** 2 + s.wall[K.W_VZ] ** 2)
+            kinetic += 0.5 * sim.wall_mass_per_length * s.width * (s.wall[L.W_VX] ** 2 + s.wall[L.W_VZ] ** 2)
         return cls(s.time, int(row["nonfinite"]), float(kinetic), float(row["max_overlap"]), row["worst_pair"],
                    float(row["contact_energy"]))
 
@@ -81,7 +87,7 @@ def _suspects(sim: Simulation) -> str:
     """Parameters near their own stability limit at this step (preflight), named first."""
     from ..model.preflight import damped_step_bound, min_wall_mass
 
-    cfg, dt = sim.config, float(sim.params[K.DT])
+    cfg, dt = sim.config, float(sim.params[L.DT])
     out = []
     if cfg.material.damping > 0 and dt > 0.5 * damped_step_bound(cfg):
         out.append(f"lower material.damping (now {cfg.material.damping:g} 1/t0; the dashpot is stable up to "
@@ -97,7 +103,7 @@ def _suspects(sim: Simulation) -> str:
 def _dt_hint(sim: Simulation) -> str:
     n = sim.config.numerics
     knob = f"numerics.dt (now {n.dt:g} t0)" if n.dt is not None else f"numerics.dt_safety (now {n.dt_safety:g})"
-    return f"{_suspects(sim)}lower {knob}; the step is {sim.params[K.DT]:.4g} t0"
+    return f"{_suspects(sim)}lower {knob}; the step is {sim.params[L.DT]:.4g} t0"
 
 
 def _fluid_hint(sim: Simulation) -> str:
@@ -115,7 +121,7 @@ class NonFiniteGuard:
     def __call__(self, sim: Simulation, scan: Scan | None = None):
         s = sim.state
         bad = (scan or Scan.of(sim)).nonfinite
-        wall_bad = not all(math.isfinite(v) for v in s.wall[:K.W_VZ + 1])
+        wall_bad = not all(math.isfinite(v) for v in s.wall[:L.W_VZ + 1])
         pressure_bad = sim.fluid is not None and not bool(np.isfinite(sim.fluid.pressure).all())
         if bad or wall_bad or pressure_bad:
             parts = [f"{bad} grains"] if bad else []
@@ -148,7 +154,7 @@ def fluid_energy(grid) -> float:
     """Compression energy of the pore fluid, sum beta phi P^2 / 2 dx dz [E d^3] (phi clamped)."""
     if grid is None:
         return 0.0
-    beta = grid.params[grid.kernels.P_BETA]
+    beta = grid.params[L.P_BETA]
     return float(0.5 * beta * np.sum(grid._clamped_porosity() * grid.pressure ** 2) * grid.dx * grid.dz)
 
 
@@ -186,11 +192,11 @@ class KineticEnergyGuard:
         if not s.top.size:
             return 0.0, 0.0, 0.0
         stretch = sim.spring_stretch()
-        return abs(float(stretch)), float(s.wall[K.W_Z]), 0.5 * p[K.SPRING] * s.width * float(stretch) ** 2
+        return abs(float(stretch)), float(s.wall[L.W_Z]), 0.5 * p[L.SPRING] * s.width * float(stretch) ** 2
 
     def budget(self, sim: Simulation, wall_z: float) -> float:
         """min_j B_j(t) over the kept references (inf before the first)."""
-        sigma_l = sim.params[K.SIGMA] * sim.state.width if sim.state.top.size else 0.0
+        sigma_l = sim.params[L.SIGMA] * sim.state.width if sim.state.top.size else 0.0
         best = math.inf
         for level in self.references:
             for stored, z_ref, work_ref in level:
@@ -204,10 +210,10 @@ class KineticEnergyGuard:
         if not math.isfinite(scan.kinetic):
             raise PhysicsError("non-finite kinetic energy",
                                f"the integration is unstable: {_dt_hint(sim)}{_fluid_hint(sim)}", scan.time)
-        if self.last is not None and p[K.DRIVE] > 0 and s.top.size:
-            self.work += p[K.SPRING] * s.width * p[K.V_LOAD] * (scan.time - self.last[0]) * max(stretch, self.last[1])
+        if self.last is not None and p[L.DRIVE] > 0 and s.top.size:
+            self.work += p[L.SPRING] * s.width * p[L.V_LOAD] * (scan.time - self.last[0]) * max(stretch, self.last[1])
         self.last = (scan.time, stretch)
-        floor = self.floor * p[K.SIGMA] * s.width * 2.0 * float(s.radius.max()) if s.top.size else 0.0
+        floor = self.floor * p[L.SIGMA] * s.width * 2.0 * float(s.radius.max()) if s.top.size else 0.0
         budget = self.budget(sim, wall_z)
         if scan.kinetic > self.margin * max(budget, floor):
             raise PhysicsError(
@@ -230,11 +236,11 @@ class FluidSubstepGuard:
 
     def __call__(self, sim: Simulation, scan: Scan | None = None):
         grid = sim.fluid
-        if grid is None or grid.solver != "explicit" or grid.state[grid.kernels.S_UPDATES] < 1:
+        if grid is None or grid.solver != "explicit" or grid.state[L.S_UPDATES] < 1:
             return
-        substeps = int(grid.state[grid.kernels.S_SUBSTEPS])
+        substeps = int(grid.state[L.S_SUBSTEPS])
         if substeps > self.limit:
-            bound = float(grid.state[grid.kernels.S_DT_MAX])
+            bound = float(grid.state[L.S_DT_MAX])
             step = sim.fluid_interval * sim.dt
             raise PhysicsError(
                 f"explicit pressure step above its bound: the fluid step {step:.4g} t0 is {step / bound:.3g} x the "
@@ -279,7 +285,7 @@ def guarded_run(sim: Simulation, duration: float, interval: float | None = None,
     [t0] with all guards every `interval` [t0] (default output.series_interval); returns the
     time-series rows (Simulation.observe) taken at the same cadence. Raises PhysicsError."""
     guards = Guards(**limits)
-    if compact and sim.phase == K.COMPACTION:
+    if compact and sim.phase == L.COMPACTION:
         sim.compact(on_chunk=lambda s, elapsed: guards(s))
     sim.start_fluid()
     rows = [sim.observe()]

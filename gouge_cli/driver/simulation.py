@@ -8,17 +8,19 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Callable
 
 import numba
 import numpy as np
 
 from ..config import Config
-from ..errors import PhysicsFailure
+from ..errors import PhysicsError
+from ..kernels import layout as L
 from ..kernels import measure as M
 from ..kernels import step as K
 from ..model.packing import build_packing
+from .guards import NonFiniteGuard, OverlapGuard, Scan
+from .schedules import Every
 from .settling import SettleCheck, settle_check
 from ..model.state import State
 from ..model.timestep import choose_dt, contact_constants
@@ -31,42 +33,19 @@ AUTO_SORT_EVERY = 20        # rebuilds between re-numberings (~900 steps at the 
 def build_params(config: Config, dt: float, width: float, wall_mass: float) -> np.ndarray:
     """Kernel parameter vector (layout: kernels.step DT..DRIVE). wall_mass: total m_b L_x; 0 = no top wall."""
     c_normal, c_tangential = contact_constants(config)
-    p = np.zeros(K.N_PARAMS)
-    p[K.DT] = dt
-    p[K.WIDTH] = width
-    p[K.SKIN] = config.numerics.skin
-    p[K.C_NORMAL] = c_normal
-    p[K.C_TANGENTIAL] = c_tangential
-    p[K.DAMPING] = config.material.damping
-    p[K.FRICTION] = config.material.friction
-    p[K.SIGMA] = config.loading.normal_stress
-    p[K.SPRING] = config.loading.spring_constant
-    p[K.V_LOAD] = config.loading.velocity
-    p[K.WALL_MASS] = wall_mass
+    p = np.zeros(L.N_PARAMS)
+    p[L.DT] = dt
+    p[L.WIDTH] = width
+    p[L.SKIN] = config.numerics.skin
+    p[L.C_NORMAL] = c_normal
+    p[L.C_TANGENTIAL] = c_tangential
+    p[L.DAMPING] = config.material.damping
+    p[L.FRICTION] = config.material.friction
+    p[L.SIGMA] = config.loading.normal_stress
+    p[L.SPRING] = config.loading.spring_constant
+    p[L.V_LOAD] = config.loading.velocity
+    p[L.WALL_MASS] = wall_mass
     return p
-
-
-class PhysicsError(PhysicsFailure):
-    """The physics went wrong (NaN, runaway overlap, unstable fluid step); names cause and fix."""
-
-    def __init__(self, cause: str, fix: str, time: float | None = None):
-        self.cause, self.fix, self.time = cause, fix, time
-        at = f" at t = {time:.6g} t0" if time is not None else ""
-        super().__init__(f"{cause}{at}. {fix}")
-
-
-@dataclass
-class Every:
-    """Call ``action(sim)`` every ``steps`` steps (step counts since step 0, so restarts line up)."""
-
-    steps: int
-    action: Callable
-
-    def next_step(self, step: int) -> int:
-        return (step // self.steps + 1) * self.steps
-
-    def due(self, step: int) -> bool:
-        return step % self.steps == 0
 
 
 class Simulation:
@@ -87,13 +66,13 @@ class Simulation:
         p = build_params(config, self.dt, s.width, self.wall_mass_per_length * s.width)
         self.params = p
         self.threads = self._choose_threads(config.numerics.threads, s.n)
-        p[K.SORT_EVERY] = self._choose_sort_every(config.numerics.sort_every, s.n)
+        p[L.SORT_EVERY] = self._choose_sort_every(config.numerics.sort_every, s.n)
         self.compaction_settled: bool | None = None
         self.compaction_start: tuple[float, int] | None = None     # (time, step) where compaction began
         self.settling: SettleCheck | None = None                    # the last check of compaction's criterion
         self.fluid = None
         self.drag = (_EMPTY, _EMPTY)
-        self._observables = np.zeros(M.N_OBSERVABLES)
+        self._observables = np.zeros(L.N_OBSERVABLES)
         self._fluid_status = np.zeros(1, np.int64)
         if arrays is not None:
             s.restore(arrays)
@@ -101,14 +80,14 @@ class Simulation:
             self._rebuild()
             K.compute_forces(s.grains(), s.lists(), s.pairs(), s.wall, p, *self.drag)
         self._apply_phase()
-        if self.phase == K.LOADING:
+        if self.phase == L.LOADING:
             self.start_fluid(fluid_arrays)
 
     # ---- fluid -------------------------------------------------------------------------
     def wall_planes(self) -> tuple[float, float]:
         """(z_bottom, z_top): mean z of the bottom- and top-wall grain centres [d]."""
         s = self.state
-        return float(s.z[s.bottom].mean()), float(s.wall[K.W_Z])
+        return float(s.z[s.bottom].mean()), float(s.wall[L.W_Z])
 
     def start_fluid(self, fluid_arrays: dict | None = None):
         """Build the pressure grid if the config has a fluid section (never for a dry scene).
@@ -133,23 +112,23 @@ class Simulation:
     # ---- phase -------------------------------------------------------------------------
     @property
     def phase(self) -> int:
-        return int(self.state.counters[K.K_PHASE])
+        return int(self.state.counters[L.K_PHASE])
 
     def _apply_phase(self):
-        loading = self.phase == K.LOADING
-        self.params[K.DRIVE] = 1.0 if loading else 0.0
-        self.params[K.BG_DAMPING] = 0.0 if loading else self.config.compaction.damping
+        loading = self.phase == L.LOADING
+        self.params[L.DRIVE] = 1.0 if loading else 0.0
+        self.params[L.BG_DAMPING] = 0.0 if loading else self.config.compaction.damping
 
     def start_loading(self):
         """End compaction and start the driver clock. The spring is attached in equilibrium
         with the residual grain shear force on the wall (initial stretch s0 = -F_x / (k L_x)),
         so the wall does not jump when it is released along x."""
         s = self.state
-        s.counters[K.K_PHASE] = K.LOADING
-        s.clock[K.C_ANCHOR] = -s.wall[K.W_FX] / (self.params[K.SPRING] * s.width)
-        s.wall[K.W_X] = 0.0
-        s.wall[K.W_VX] = 0.0
-        s.clock[K.C_DRIVE_TIME] = 0.0
+        s.counters[L.K_PHASE] = L.LOADING
+        s.clock[L.C_ANCHOR] = -s.wall[L.W_FX] / (self.params[L.SPRING] * s.width)
+        s.wall[L.W_X] = 0.0
+        s.wall[L.W_VX] = 0.0
+        s.clock[L.C_DRIVE_TIME] = 0.0
         self._apply_phase()
 
     # ---- stepping ----------------------------------------------------------------------
@@ -168,16 +147,16 @@ class Simulation:
 
     def _rebuild(self):
         s = self.state
-        self.params[K.THREADS] = numba.get_num_threads()
+        self.params[L.THREADS] = numba.get_num_threads()
         while not K.rebuild(s.grains(), s.lists(), self.params, s.counters, *self.drag):
-            s.grow_pairs(int(s.counters[K.K_NEEDED_CAPACITY]))
+            s.grow_pairs(int(s.counters[L.K_NEEDED_CAPACITY]))
 
     def advance(self, nsteps: int):
         """Advance exactly nsteps steps (numba); grows the pair arrays if a rebuild overflows."""
         left = int(nsteps)
         previous = numba.get_num_threads()
         numba.set_num_threads(self.threads)
-        self.params[K.THREADS] = self.threads
+        self.params[L.THREADS] = self.threads
         try:
             self._advance(left)
         finally:
@@ -192,9 +171,9 @@ class Simulation:
             else:
                 status, done = self._advance_fluid(left)
             left -= done
-            if status == K.LIST_OVERFLOW:
-                s.grow_pairs(int(s.counters[K.K_NEEDED_CAPACITY]))
-            elif status == K.FLUID_FAILED:
+            if status == L.LIST_OVERFLOW:
+                s.grow_pairs(int(s.counters[L.K_NEEDED_CAPACITY]))
+            elif status == L.FLUID_FAILED:
                 raise PhysicsError(*self.fluid.failure(int(self._fluid_status[0])), s.time)
 
     def _advance_fluid(self, nsteps: int):
@@ -233,40 +212,40 @@ class Simulation:
     def spring_stretch(self) -> float:
         """V_s t_load + s0 - x_wall [d] (0 before loading)."""
         s, p = self.state, self.params
-        if self.phase != K.LOADING:
+        if self.phase != L.LOADING:
             return 0.0
-        return float(p[K.V_LOAD] * s.clock[K.C_DRIVE_TIME] + s.clock[K.C_ANCHOR] - s.wall[K.W_X])
+        return float(p[L.V_LOAD] * s.clock[L.C_DRIVE_TIME] + s.clock[L.C_ANCHOR] - s.wall[L.W_X])
 
     def tau_over_sigma(self) -> float:
-        return float(self.params[K.SPRING] * self.spring_stretch() / self.params[K.SIGMA])
+        return float(self.params[L.SPRING] * self.spring_stretch() / self.params[L.SIGMA])
 
     def observe(self) -> dict:
         """Time-series row (dimensionless); see output.SERIES for names and units."""
         s, p = self.state, self.params
         o = self._observables
         M.observe(s.x, s.z, s.vx, s.vz, s.spin, s.radius, s.mass, s.body, s.force_x, s.force_z,
-                  s.start, s.index, s.shear, s.width, p[K.C_NORMAL], p[K.C_TANGENTIAL], o)
-        sigma = p[K.SIGMA]
+                  s.start, s.index, s.shear, s.width, p[L.C_NORMAL], p[L.C_TANGENTIAL], o)
+        sigma = p[L.SIGMA]
         stretch = self.spring_stretch()
         row = {
-            "time": s.clock[K.C_TIME],
-            "load_time": s.clock[K.C_DRIVE_TIME],
-            "wall_x": s.wall[K.W_X],
-            "wall_z": s.wall[K.W_Z],
-            "wall_vx": s.wall[K.W_VX],
-            "wall_vz": s.wall[K.W_VZ],
+            "time": s.clock[L.C_TIME],
+            "load_time": s.clock[L.C_DRIVE_TIME],
+            "wall_x": s.wall[L.W_X],
+            "wall_z": s.wall[L.W_Z],
+            "wall_vx": s.wall[L.W_VX],
+            "wall_vz": s.wall[L.W_VZ],
             "spring_stretch": stretch,
-            "tau_over_sigma": p[K.SPRING] * stretch / sigma,
-            "wall_shear_stress": -s.wall[K.W_FX] / s.width,
-            "wall_normal_stress": s.wall[K.W_FZ] / s.width,
-            "thickness": o[M.THICKNESS],
-            "porosity": o[M.POROSITY],
-            "kinetic_energy": o[M.KINETIC],
-            "coordination": o[M.COORDINATION],
-            "max_overlap": o[M.MAX_OVERLAP],
-            "nonfinite": o[M.NONFINITE],
-            "contact_energy": o[M.CONTACT_ENERGY],
-            "worst_pair": (int(o[M.WORST_I]), int(o[M.WORST_J])),
+            "tau_over_sigma": p[L.SPRING] * stretch / sigma,
+            "wall_shear_stress": -s.wall[L.W_FX] / s.width,
+            "wall_normal_stress": s.wall[L.W_FZ] / s.width,
+            "thickness": o[L.THICKNESS],
+            "porosity": o[L.POROSITY],
+            "kinetic_energy": o[L.KINETIC],
+            "coordination": o[L.COORDINATION],
+            "max_overlap": o[L.MAX_OVERLAP],
+            "nonfinite": o[L.NONFINITE],
+            "contact_energy": o[L.CONTACT_ENERGY],
+            "worst_pair": (int(o[L.WORST_I]), int(o[L.WORST_J])),
         }
         if self.fluid is not None:
             row.update(self.fluid.observe())
@@ -275,8 +254,6 @@ class Simulation:
     def check(self):
         """Stop with a PhysicsError on NaN/inf or a runaway overlap (the non-finite and overlap
         guards of gouge_cli.driver.guards, run once; used while compacting and by the benchmark)."""
-        from .guards import NonFiniteGuard, OverlapGuard, Scan
-
         scan = Scan.of(self)
         NonFiniteGuard()(self, scan)
         OverlapGuard()(self, scan)

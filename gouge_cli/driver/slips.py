@@ -23,7 +23,7 @@ from ..io.checkpoint import Checkpoint, snapshot_of, write_checkpoint
 from ..config import Config
 from .detector import Slip, SlipDetector
 from ..io.filedoc import document_slip
-from ..kernels.step import W_VX
+from ..kernels.layout import W_VX
 
 
 def lead_time(config: Config) -> float:

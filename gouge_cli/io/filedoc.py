@@ -129,7 +129,7 @@ CHECKPOINT = {
     "state/counters": ("-", "[step, rebuilds, pairs, need_rebuild, needed_capacity, phase] (kernels.step K_*)"),
     "fluid/pressure": SNAPSHOT["pressure"],
     "fluid/solid_fraction": ("-", "solid fraction s = 1 - porosity per grid cell; " + GRID_AXES),
-    "fluid/state": ("d, -", "fluid kernel state vector (kernels.fluid S_*; S_Z_BOT, S_Z_TOP: wall planes [d])"),
+    "fluid/state": ("d, -", "fluid kernel state vector (kernels.layout S_*; S_Z_BOT, S_Z_TOP: wall planes [d])"),
     "fluid/drag_x": ("E d^2", "fluid drag on each grain along x (Eq. 12)"),
     "fluid/drag_z": ("E d^2", "fluid drag on each grain along z (Eq. 12)"),
 }

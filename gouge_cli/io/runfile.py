@@ -31,8 +31,9 @@ from .. import __version__
 from . import provenance
 from ..config import Config, dump_config
 from .filedoc import SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, document_run_file, grid_geometry
+from ..kernels import layout as L
 from ..kernels import measure as M
-from ..kernels import step as K
+from .rundir import open_run_file
 
 # name -> (unit, description); units are the dimensionless scales of physics.md section 1
 SERIES = {
@@ -135,7 +136,7 @@ class RunFile:
             return
         grp = self.h5["snapshots"].create_group(f"{s.step:012d}")
         grp.attrs["time"] = s.time
-        grp.attrs["load_time"] = float(s.clock[K.C_DRIVE_TIME])
+        grp.attrs["load_time"] = float(s.clock[L.C_DRIVE_TIME])
         grp.attrs["step"] = s.step
         for name in ("x", "z", "radius", "vx", "vz", "spin", "body"):     # in original grain order
             grp.create_dataset(name, data=s.by_id(getattr(s, name)), compression="gzip", compression_opts=1)
@@ -145,15 +146,15 @@ class RunFile:
         cfx = np.empty(npairs)
         cfz = np.empty(npairs)
         p = sim.params
-        m = M.contact_list(s.x, s.z, s.radius, s.start, s.index, s.shear, s.width, p[K.C_NORMAL],
-                           p[K.C_TANGENTIAL], p[K.FRICTION], ci, cj, cfx, cfz)
+        m = M.contact_list(s.x, s.z, s.radius, s.start, s.index, s.shear, s.width, p[L.C_NORMAL],
+                           p[L.C_TANGENTIAL], p[L.FRICTION], ci, cj, cfx, cfz)
         ci[:m] = s.id[ci[:m]]
         cj[:m] = s.id[cj[:m]]
         for name, arr in (("contact_i", ci), ("contact_j", cj), ("contact_fx", cfx), ("contact_fz", cfz)):
             grp.create_dataset(name, data=arr[:m], compression="gzip", compression_opts=1)
         if sim.fluid is not None:
             f = sim.fluid
-            geometry = grid_geometry(f.state[f.kernels.S_Z_BOT], f.dx, f.dz)
+            geometry = grid_geometry(f.state[L.S_Z_BOT], f.dx, f.dz)
             for name, arr in f.snapshot_fields().items():
                 grp.create_dataset(name, data=arr).attrs.update(geometry)
         for name, ds in grp.items():
@@ -182,3 +183,18 @@ class RunFile:
 def read_series(path: Path) -> dict[str, np.ndarray]:
     with h5py.File(path, "r") as h5:
         return {name: ds[...] for name, ds in h5["series"].items()}
+
+
+def slip_catalog(run_dir: Path) -> list[dict]:
+    """The run's slip catalog (one dict of attributes per slip, in order)."""
+    with open_run_file(Path(run_dir) / "run.h5") as h5:
+        if "slips" not in h5:
+            return []
+        out = []
+        for name in sorted(h5["slips"]):
+            g = h5["slips"][name]
+            entry = {k: (v.item() if hasattr(v, "item") else v) for k, v in g.attrs.items()}
+            entry["subevent_time"] = g["subevent_time"][...].tolist()
+            entry["subevent_velocity"] = g["subevent_velocity"][...].tolist()
+            out.append(entry)
+        return out

@@ -1,1 +1,29 @@
-"""numba kernels: they take arrays and scalars, write into preallocated arrays and return a status."""
+"""numba kernels only: arrays and scalars in, status codes out; no allocation, no exceptions, no
+imports from the rest of gouge. Named indices of every shared array: layout.py. One home per
+equation: contact.py (Eqs. 8-11), step.py (velocity Verlet, physics.md 2-3), deposit.py (App. E),
+pressure.py (Eqs. 14-20), drag.py (Eqs. 12-13), fluid_update.py (their order), coupled.py
+(step + fluid), measure.py (observables), neighbors.py reorder.py (lists, numbering)."""
+
+import hashlib
+import os
+import sys
+from pathlib import Path
+
+
+def _kernel_digest() -> str:
+    """Hash of every kernel source: numba's on-disk cache only tracks the file of each function,
+    not the kernels it inlines from other files, so the cache lives in a folder per digest."""
+    h = hashlib.sha256()
+    for path in sorted(Path(__file__).parent.glob("*.py")):
+        h.update(path.name.encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()[:16]
+
+
+# numba compiles kernels once per machine and caches them (GOUGE_NUMBA_CACHE=0 turns it off).
+NUMBA_CACHE = os.environ.get("GOUGE_NUMBA_CACHE", "1") != "0"
+if NUMBA_CACHE and "NUMBA_CACHE_DIR" not in os.environ:
+    _cache = str(Path(__file__).parent.parent / "__pycache__" / f"numba-{_kernel_digest()}")
+    os.environ["NUMBA_CACHE_DIR"] = _cache
+    if "numba" in sys.modules:
+        sys.modules["numba"].config.CACHE_DIR = _cache

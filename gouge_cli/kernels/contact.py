@@ -17,7 +17,7 @@ import math
 
 from numba import njit
 
-from .. import NUMBA_CACHE
+from . import NUMBA_CACHE
 
 
 @njit(inline="always", cache=NUMBA_CACHE)

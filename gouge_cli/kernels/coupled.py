@@ -5,16 +5,17 @@ from __future__ import annotations
 
 from numba import njit, prange
 
-from .. import NUMBA_CACHE
-from .fluid import fluid_begin, fluid_drag, fluid_solve
-from .step import (BG_DAMPING, DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, L_CELL_OF, L_X_BUILD, L_Z_BUILD,
-                   LIST_OVERFLOW, OK, THREADS, W_VX, W_VZ, W_Z, WIDTH, _step, close_step, move_range, open_step)
+from . import NUMBA_CACHE
+from .layout import (BG_DAMPING, DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, LIST_OVERFLOW, L_CELL_OF, L_X_BUILD, L_Z_BUILD,
+                     OK, THREADS, WIDTH, W_VX, W_VZ, W_Z)
+from .fluid_update import fluid_begin, fluid_drag, fluid_solve
+from .step import _step, close_step, move_range, open_step
 
 
 @njit(cache=NUMBA_CACHE)
 def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, drag_z,
                   fluid, interval, z_bottom, fluid_status):
-    """As kernels.step.advance, plus a pore-pressure update (kernels.fluid.fluid_update) after every
+    """As kernels.step.advance, plus a pore-pressure update (kernels.fluid_update.fluid_update) after every
     `interval`-th step (step count multiple of interval) over dt_f = interval * dt; the drag
     it leaves in drag_x/drag_z acts on the grains until the next update. fluid: the tuple
     FluidGrid.kernel_args() without drag. Returns (FLUID_FAILED, steps) with fluid_status[0]

@@ -7,14 +7,12 @@ import math
 import numpy as np
 from numba import njit
 
-from .. import NUMBA_CACHE
+from . import NUMBA_CACHE
+from .layout import (BOTTOM_FX, BOTTOM_FZ, CONTACT_ENERGY, COORDINATION, KINETIC, MAX_OVERLAP, NONFINITE, POROSITY,
+                     THICKNESS, WORST_I, WORST_J, Z_BOTTOM, Z_TOP)
 from .contact import hertz_mindlin
 from .neighbors import minimum_image
 
-# indices of the vector returned by observe()
-KINETIC, COORDINATION, MAX_OVERLAP, POROSITY, THICKNESS, Z_BOTTOM, Z_TOP, BOTTOM_FX, BOTTOM_FZ, \
-    NONFINITE, CONTACT_ENERGY, WORST_I, WORST_J = range(13)
-N_OBSERVABLES = 13
 
 
 @njit(cache=NUMBA_CACHE)

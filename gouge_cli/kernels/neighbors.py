@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from numba import njit, prange
 
-from .. import NUMBA_CACHE
+from . import NUMBA_CACHE
 
 LIST_BLOCKS = 16    # row blocks of a parallel rebuild
 

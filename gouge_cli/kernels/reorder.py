@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from .. import NUMBA_CACHE
+from . import NUMBA_CACHE
 from .neighbors import bucket_order
 
 STRIP = 16.0            # [d] widest numbering strip, and the packing's initial numbering (fixed: a

@@ -20,46 +20,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .. import NUMBA_CACHE
+from . import NUMBA_CACHE
+from .layout import (BG_DAMPING, B_DVX, B_DVZ, B_DX, B_DZ, B_FX, B_FZ, B_MI, B_MJ, B_RI, B_RJ, B_SHEAR, B_TI, B_TJ, B_WI,
+                     B_WJ, C_ANCHOR, C_DRIVE_TIME, C_NORMAL, C_TANGENTIAL, C_TIME, DAMPING, DRIVE, DT,
+                     FREE, FRICTION, K_NEEDED_CAPACITY, K_NEED_REBUILD, K_PAIRS, K_REBUILDS, K_STEP,
+                     LIST_OVERFLOW, L_BUILT, L_CELL_OF, L_IN, L_OUT, L_ROWS, L_X_BUILD, L_Z_BUILD,
+                     MAX_BLOCKS, MID_STEP, OK, PAIR_BUF, SIGMA, SKIN, SORT_EVERY, SPRING, THREADS, TOP,
+                     V_LOAD, WALL_MASS, WIDTH, W_FX, W_FZ, W_VX, W_VZ, W_X, W_Z)
 from .contact import hertz_mindlin
 from .neighbors import build_neighbors, minimum_image
 from .reorder import permute, renumber_list, spatial_order
-
-# params: float64 array
-DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \
-    WALL_MASS, BG_DAMPING, DRIVE, THREADS, SORT_EVERY = range(15)
-N_PARAMS = 15
-# body codes (state.body)
-FREE, BOTTOM, TOP = 0, 1, 2
-# wall: float64 array, the top body
-W_X, W_Z, W_VX, W_VZ, W_FX, W_FZ = range(6)
-N_WALL = 6
-# clock: float64 array (C_ANCHOR: spring stretch at the start of loading [d])
-C_TIME, C_DRIVE_TIME, C_ANCHOR = range(3)
-N_CLOCK = 3
-# counters: int64 array
-K_STEP, K_REBUILDS, K_PAIRS, K_NEED_REBUILD, K_NEEDED_CAPACITY, K_PHASE = range(6)
-N_COUNTERS = 6
-# counters[K_NEED_REBUILD]: 0, 1 (rebuild after the next drift) or MID_STEP (drifted, rebuild pending)
-MID_STEP = 2
-# phases (counters[K_PHASE])
-COMPACTION, LOADING = 0, 1
-# return codes of advance
-OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
-
-
-MAX_BLOCKS = 256    # most row blocks of the force pass
-# layout: int64 (N_LAYOUT,): row bounds of the blocks, offsets of each block's outgoing
-# and incoming crossing pairs, and the block count it was built for (-1: stale, rebuild it)
-L_ROWS, L_OUT, L_IN, L_BUILT = 0, MAX_BLOCKS + 1, 2 * MAX_BLOCKS + 2, 3 * MAX_BLOCKS + 3
-N_LAYOUT = 3 * MAX_BLOCKS + 4
-# positions in the lists tuple (state.LIST_FIELDS); cell_of is rebuild scratch, and between
-# rebuilds holds the per-grain flags of the skin check
-L_X_BUILD, L_Z_BUILD, L_CELL_OF = 6, 7, 12
-# pair_buf: float64 (blocks, N_BUF, PAIR_BUF), per-block chunk of pair inputs and results
-B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ, B_RI, B_RJ, B_MI, B_MJ, B_SHEAR, B_FX, B_FZ, B_TI, B_TJ = range(15)
-N_BUF = 15
-PAIR_BUF = 256
 
 
 @njit(cache=NUMBA_CACHE)
@@ -281,7 +251,7 @@ def wall_force(force_x, force_z, top, wall):
 
 
 @njit(cache=NUMBA_CACHE)
-def _wall_kick(wall, clock, params):
+def wall_kick(wall, clock, params):
     """Half kick of the top body: M a = F_grains + (spring, -sigma) L_x; M = m_b L_x."""
     half = 0.5 * params[DT]
     width = params[WIDTH]
@@ -380,7 +350,7 @@ def move_range(first, last, x, z, vx, vz, spin, force_x, force_z, torque, inv_ma
 
 
 @njit(parallel=True, cache=NUMBA_CACHE)
-def _kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, x_build, z_build,
+def kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, x_build, z_build,
                 double, params, late):
     """Half kick (two if double) and drift of every grain; returns how many grains lie farther
     than skin/2 from their build positions (the list must be rebuilt before forces).
@@ -411,7 +381,7 @@ def open_step(grains, wall, clock, params):
     advances by dt."""
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
     dt = params[DT]
-    _wall_kick(wall, clock, params)
+    wall_kick(wall, clock, params)
     wall[W_X] += dt * wall[W_VX]
     wall[W_Z] += dt * wall[W_VZ]
     _set_wall_grain_velocity(vx, vz, spin, top, wall)
@@ -505,7 +475,7 @@ def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, ow
     x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
     if counters[K_NEED_REBUILD] != MID_STEP and not drifted:
         open_step(grains, wall, clock, params)
-        late = _kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
+        late = kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
                            lists[L_X_BUILD], lists[L_Z_BUILD], owed, params, lists[L_CELL_OF])
         if late > 0:
             counters[K_NEED_REBUILD] = 1
@@ -514,7 +484,7 @@ def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, ow
             counters[K_NEED_REBUILD] = MID_STEP
             return False
     compute_forces(grains, lists, pair, wall, params, drag_x, drag_z)
-    _wall_kick(wall, clock, params)
+    wall_kick(wall, clock, params)
     counters[K_STEP] += 1
     if close:
         close_step(grains, wall, params)

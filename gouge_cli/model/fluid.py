@@ -8,14 +8,16 @@ Python or from njit code,
     status = fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, *grid.kernel_args())
 
 and adds ``grid.drag_x``, ``grid.drag_z`` to the contact forces. The numerics are
-documented in :mod:`gouge_cli.kernels.fluid`. A dry scene never builds this.
+documented in gouge_cli.kernels (deposit, pressure, drag, fluid_update; indices in layout). A dry scene never builds this.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import fluid as kernels
+from ..kernels import layout as L
+
+from ..kernels import fluid_update as KF
 
 
 class FluidGrid:
@@ -34,7 +36,6 @@ class FluidGrid:
     """
 
     EVOLVING = ("pressure", "solid_fraction", "state", "drag_x", "drag_z")
-    kernels = kernels  # the kernel module, for its index constants
 
     def __init__(self, nx: int, nz: int, Lx: float, z_bot: float, z_top: float, n_grains: int,
                  permeability: float, compressibility: float, viscosity: float,
@@ -52,23 +53,23 @@ class FluidGrid:
         self.Lx = float(Lx)
         self.n_grains = int(n_grains)
         self.solver = solver
-        params = np.zeros(kernels.N_PARAMS)
-        params[kernels.P_KAPPA_C] = permeability
-        params[kernels.P_BETA] = compressibility
-        params[kernels.P_ETA] = viscosity
-        params[kernels.P_SOLVER] = kernels.SOLVER_IMPLICIT if solver == "implicit" else kernels.SOLVER_EXPLICIT
-        params[kernels.P_SAFETY] = explicit_safety
-        params[kernels.P_TOL] = tolerance
-        params[kernels.P_MAX_ITER] = max_iterations
-        params[kernels.P_PHI_MIN] = porosity_min
-        params[kernels.P_PHI_MAX] = porosity_max
-        params[kernels.P_MAX_SUBSTEPS] = max_substeps
+        params = np.zeros(L.N_FLUID_PARAMS)
+        params[L.P_KAPPA_C] = permeability
+        params[L.P_BETA] = compressibility
+        params[L.P_ETA] = viscosity
+        params[L.P_SOLVER] = L.SOLVER_IMPLICIT if solver == "implicit" else L.SOLVER_EXPLICIT
+        params[L.P_SAFETY] = explicit_safety
+        params[L.P_TOL] = tolerance
+        params[L.P_MAX_ITER] = max_iterations
+        params[L.P_PHI_MIN] = porosity_min
+        params[L.P_PHI_MAX] = porosity_max
+        params[L.P_MAX_SUBSTEPS] = max_substeps
         self.params = params
-        self.state = np.zeros(kernels.N_STATE)
-        self.state[kernels.S_Z_BOT] = z_bot
-        self.state[kernels.S_Z_TOP] = z_top
+        self.state = np.zeros(L.N_FLUID_STATE)
+        self.state[L.S_Z_BOT] = z_bot
+        self.state[L.S_Z_TOP] = z_top
         self._allocate_grid(self.nx, self.nz)
-        self.corners = np.zeros((kernels.N_CORNERS, self.n_grains))
+        self.corners = np.zeros((L.N_CORNERS, self.n_grains))
         self.drag_x = np.zeros(self.n_grains)
         self.drag_z = np.zeros(self.n_grains)
 
@@ -82,8 +83,8 @@ class FluidGrid:
         self.solid_velocity_z = np.zeros(shape)
         self.permeability = np.zeros(shape)
         self.div_u = np.zeros(shape)
-        self.work = np.zeros((kernels.N_WORK, nx, nz))
-        self.partial = np.zeros((kernels.DEPOSIT_GROUPS, nx * nz, kernels.N_MOMENTS))
+        self.work = np.zeros((L.N_GRID_WORK, nx, nz))
+        self.partial = np.zeros((L.DEPOSIT_GROUPS, nx * nz, L.N_MOMENTS))
 
     @classmethod
     def from_config(cls, fluid_config, Lx: float, z_bot: float, z_top: float, n_grains: int) -> "FluidGrid":
@@ -143,30 +144,30 @@ class FluidGrid:
     def failure(self, status: int) -> tuple[str, str]:
         """(cause, fix) for a non-zero status of fluid_update, worded for the user."""
         state = self.state
-        if status == kernels.STATUS_NONFINITE:
+        if status == L.STATUS_NONFINITE:
             return ("non-finite pore pressure",
                     "the pressure source or the grain state blew up: lower fluid.step or numerics.dt_safety, "
                     "and check the grain state for NaN")
-        if status == kernels.STATUS_SOLVER and self.solver == "explicit":
-            return (f"explicit pressure step needs {int(state[kernels.S_SUBSTEPS])} sub-steps "
-                    f"(FTCS bound {state[kernels.S_DT_MAX]:.3g} t0), above the limit "
-                    f"{int(self.params[kernels.P_MAX_SUBSTEPS])}",
+        if status == L.STATUS_SOLVER and self.solver == "explicit":
+            return (f"explicit pressure step needs {int(state[L.S_SUBSTEPS])} sub-steps "
+                    f"(FTCS bound {state[L.S_DT_MAX]:.3g} t0), above the limit "
+                    f"{int(self.params[L.P_MAX_SUBSTEPS])}",
                     "use fluid.solver=implicit, or raise fluid.cell_size")
-        if status == kernels.STATUS_SOLVER:
-            return (f"pressure solver did not converge in {int(self.params[kernels.P_MAX_ITER])} iterations "
-                    f"(relative residual {state[kernels.S_RESIDUAL]:.2g}), or the layer thickness is not positive",
+        if status == L.STATUS_SOLVER:
+            return (f"pressure solver did not converge in {int(self.params[L.P_MAX_ITER])} iterations "
+                    f"(relative residual {state[L.S_RESIDUAL]:.2g}), or the layer thickness is not positive",
                     "lower fluid.step or raise fluid.cell_size (nearly empty cells make the system stiff)")
         return (f"fluid update returned unknown status {status}", "report this as a bug")
 
     def init(self, x, z, vx, vz, radius, z_bot: float, z_top: float, n: int | None = None) -> int:
-        """Python convenience for kernels.fluid_init; returns its status."""
+        """Python convenience for KF.fluid_init; returns its status."""
         n = len(x) if n is None else n
-        return kernels.fluid_init(x, z, vx, vz, radius, n, self.Lx, z_bot, z_top, *self.kernel_args())
+        return KF.fluid_init(x, z, vx, vz, radius, n, self.Lx, z_bot, z_top, *self.kernel_args())
 
     def update(self, x, z, vx, vz, radius, z_bot: float, z_top: float, dt_f: float, n: int | None = None) -> int:
-        """Python convenience for kernels.fluid_update; returns its status."""
+        """Python convenience for KF.fluid_update; returns its status."""
         n = len(x) if n is None else n
-        return kernels.fluid_update(x, z, vx, vz, radius, n, self.Lx, z_bot, z_top, dt_f, *self.kernel_args())
+        return KF.fluid_update(x, z, vx, vz, radius, n, self.Lx, z_bot, z_top, dt_f, *self.kernel_args())
 
     @property
     def dx(self) -> float:
@@ -175,7 +176,7 @@ class FluidGrid:
     @property
     def dz(self) -> float:
         """Cell height at the last update [d]."""
-        return (self.state[kernels.S_Z_TOP] - self.state[kernels.S_Z_BOT]) / self.nz
+        return (self.state[L.S_Z_TOP] - self.state[L.S_Z_BOT]) / self.nz
 
     @property
     def porosity(self) -> np.ndarray:
@@ -183,7 +184,7 @@ class FluidGrid:
         return 1.0 - self.solid_fraction
 
     def _clamped_porosity(self) -> np.ndarray:
-        return np.clip(self.porosity, self.params[kernels.P_PHI_MIN], self.params[kernels.P_PHI_MAX])
+        return np.clip(self.porosity, self.params[L.P_PHI_MIN], self.params[L.P_PHI_MAX])
 
     def mean_pressure(self) -> float:
         return float(self.pressure.mean())
@@ -196,14 +197,14 @@ class FluidGrid:
 
     def diffusivity(self) -> np.ndarray:
         """D = kappa / (eta beta phi) [d^2/t0] per cell (phi clamped as for kappa)."""
-        eta = self.params[kernels.P_ETA]
-        beta = self.params[kernels.P_BETA]
+        eta = self.params[L.P_ETA]
+        beta = self.params[L.P_BETA]
         return self.permeability / (eta * beta * self._clamped_porosity())
 
     def mean_diffusivity(self) -> float:
         """D of the mean permeability and mean clamped porosity [d^2/t0]."""
-        eta = self.params[kernels.P_ETA]
-        beta = self.params[kernels.P_BETA]
+        eta = self.params[L.P_ETA]
+        beta = self.params[L.P_BETA]
         return float(self.permeability.mean() / (eta * beta * self._clamped_porosity().mean()))
 
     def deborah(self, length: float, speed: float) -> float:

@@ -15,10 +15,10 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from ..kernels import step as K
+from ..kernels import layout as L
 from .portable import sphere_mass
 
-FREE, BOTTOM, TOP = K.FREE, K.BOTTOM, K.TOP
+FREE, BOTTOM, TOP = L.FREE, L.BOTTOM, L.TOP
 
 GRAIN_FIELDS = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inertia", "body",
                 "force_x", "force_z", "torque", "top", "id")
@@ -26,7 +26,7 @@ GRAIN_FIELDS = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv
 STATIC = ("radius", "mass", "inv_mass", "inv_inertia", "body")
 LIST_FIELDS = ("start", "index", "shear", "cross_i", "cross_k", "cross_in", "x_build", "z_build",
                "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count")
-assert tuple(LIST_FIELDS[i] for i in (K.L_X_BUILD, K.L_Z_BUILD, K.L_CELL_OF)) == ("x_build", "z_build", "cell_of")
+assert tuple(LIST_FIELDS[i] for i in (L.L_X_BUILD, L.L_Z_BUILD, L.L_CELL_OF)) == ("x_build", "z_build", "cell_of")
 PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_buf")
 # (block layout, crossing pairs and cell arrays are derived or scratch, rebuilt on demand)
 EVOLVING = ("id", "x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
@@ -54,9 +54,9 @@ class State:
     vx: np.ndarray = None
     vz: np.ndarray = None
     spin: np.ndarray = None
-    wall: np.ndarray = field(default_factory=lambda: np.zeros(K.N_WALL))
-    clock: np.ndarray = field(default_factory=lambda: np.zeros(K.N_CLOCK))
-    counters: np.ndarray = field(default_factory=lambda: np.zeros(K.N_COUNTERS, np.int64))
+    wall: np.ndarray = field(default_factory=lambda: np.zeros(L.N_WALL))
+    clock: np.ndarray = field(default_factory=lambda: np.zeros(L.N_CLOCK))
+    counters: np.ndarray = field(default_factory=lambda: np.zeros(L.N_COUNTERS, np.int64))
 
     def __post_init__(self):
         n = self.x.shape[0]
@@ -77,19 +77,19 @@ class State:
         self.id = np.arange(n, dtype=np.int64)      # original grain number (grains are re-numbered in place)
         self.start = np.zeros(n + 1, np.int64)
         self.new_start = np.zeros(n + 1, np.int64)
-        self.layout = np.zeros(K.N_LAYOUT, np.int64)
-        self.layout[K.L_BUILT] = -1
+        self.layout = np.zeros(L.N_LAYOUT, np.int64)
+        self.layout[L.L_BUILT] = -1
         self.cell_of = np.zeros(n, np.int64)
         self.order = np.zeros(n, np.int64)
         self.cell_count = np.zeros(2 * n + 64, np.int64)
         self.x_build = self.x.copy()
         self.z_build = self.z.copy()
         # one chunk buffer of the force pass per row block, as many as numba may run threads
-        self.pair_buf = np.zeros((max(numba.config.NUMBA_NUM_THREADS, 1), K.N_BUF, K.PAIR_BUF))
+        self.pair_buf = np.zeros((max(numba.config.NUMBA_NUM_THREADS, 1), L.N_BUF, L.PAIR_BUF))
         self._allocate_pairs(4 * n + 64)     # ~2.5 listed pairs per grain in a dense layer; grows if needed
-        self.counters[K.K_NEED_REBUILD] = 1
+        self.counters[L.K_NEED_REBUILD] = 1
         if self.top.size:
-            self.wall[K.W_Z] = self.z[self.top].mean()
+            self.wall[L.W_Z] = self.z[self.top].mean()
 
     @property
     def n(self) -> int:
@@ -113,7 +113,7 @@ class State:
         self.cross_i = np.zeros(capacity, np.int32)
         self.cross_k = np.zeros(capacity, np.int32)
         self.cross_in = np.zeros(capacity, np.int32)
-        self.layout[K.L_BUILT] = -1      # derived from the list: rebuilt when next needed
+        self.layout[L.L_BUILT] = -1      # derived from the list: rebuilt when next needed
         for name, arr in old.items():
             if arr is not None and keep:
                 getattr(self, name)[:keep] = arr[:keep]
@@ -139,11 +139,11 @@ class State:
 
     @property
     def time(self) -> float:
-        return float(self.clock[K.C_TIME])
+        return float(self.clock[L.C_TIME])
 
     @property
     def step(self) -> int:
-        return int(self.counters[K.K_STEP])
+        return int(self.counters[L.K_STEP])
 
     def arrays(self) -> dict:
         """Evolving arrays for a checkpoint (pair slots trimmed to the pairs in use)."""
@@ -180,4 +180,4 @@ class State:
                 if target.shape != source.shape:
                     raise ValueError(f"checkpoint array {name!r} has shape {source.shape}, scene has {target.shape}")
                 target[...] = source
-        self.layout[K.L_BUILT] = -1
+        self.layout[L.L_BUILT] = -1

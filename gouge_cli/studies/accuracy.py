@@ -53,8 +53,10 @@ from .. import NUMBA_CACHE
 from ..io.checkpoint import read_checkpoint
 from ..config import Config, ConfigError, build_config
 from ..driver.guards import Guards
+from ..kernels import layout as L
 from ..kernels import step as K
-from ..driver.simulation import PhysicsError, Simulation
+from ..driver.simulation import Simulation
+from ..errors import PhysicsError
 
 DT_SAFETY = (0.8, 0.4, 0.2, 0.1, 0.05, 0.025)
 CELL_SIZE = (4.0, 3.0, 2.5, 2.0)
@@ -109,7 +111,7 @@ def slip_duration(config: Config, wall_mass_per_length: float) -> float:
 def slip_end(path: Path, extra: dict) -> float | None:
     """End time of the slip a checkpoint was kept for, from the run's catalog (RUN/run.h5 next
     to RUN/checkpoints/), or None."""
-    from ..workflows.fork import slip_catalog
+    from ..io.runfile import slip_catalog
 
     run_dir = Path(path).resolve().parent.parent
     if "slip" not in extra or not (run_dir / "run.h5").is_file():
@@ -161,7 +163,7 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
     slip checkpoint written before it (work_dir/checkpoints/slip_001.h5), or from the end state
     (checkpoints/latest.h5) if no slip came."""
     from ..io.runfile import RunFile
-    from ..workflows.run import load_phase
+    from ..driver.phases import load_phase
 
     work_dir = Path(work_dir)
     work_dir.mkdir(parents=True, exist_ok=True)
@@ -232,7 +234,7 @@ def run_level(start: Start, level: Level, period: float, count: int) -> LevelRes
 
     def sample():
         s = sim.state
-        for key, value in (("time", s.time), ("wall_x", s.wall[K.W_X]), ("wall_vx", s.wall[K.W_VX]),
+        for key, value in (("time", s.time), ("wall_x", s.wall[L.W_X]), ("wall_vx", s.wall[L.W_VX]),
                            ("tau_over_sigma", sim.tau_over_sigma()),
                            ("pressure_rms", _pressure_rms(sim))):
             series[key].append(float(value))
@@ -467,7 +469,7 @@ def total_energy(sim: Simulation) -> float:
     xi = st.radius[i] + st.radius[j] - np.hypot(dx, st.z[j] - st.z[i])
     touching = (xi > 0.0) & ~((st.body[i] == st.body[j]) & (st.body[i] > 0))
     r_ij = 2.0 * st.radius[i] * st.radius[j] / (st.radius[i] + st.radius[j])
-    return float(kinetic + np.sum(0.4 * sim.params[K.C_NORMAL] * np.sqrt(r_ij[touching]) * xi[touching] ** 2.5))
+    return float(kinetic + np.sum(0.4 * sim.params[L.C_NORMAL] * np.sqrt(r_ij[touching]) * xi[touching] ** 2.5))
 
 
 def energy_drift(dt: float, duration: float = 200.0, sample: float = 0.32) -> tuple[float, float]:
@@ -491,7 +493,6 @@ def terzaghi_error(nz: int, solver: str = "implicit", ratio: float = 0.5, thickn
     """Largest error of mean and mid-plane P/P0 at T = 0.01, 0.05, 0.1, 0.2, 0.5 on a frozen
     uniform packing (phi = 0.15, two discs per lattice site), fluid steps Delta T = ratio / nz^2."""
     from ..model.fluid import FluidGrid
-    from ..kernels import fluid as FK
 
     targets = (0.01, 0.05, 0.1, 0.2, 0.5)
     m = np.arange(1, 8000, 2)
@@ -517,7 +518,7 @@ def terzaghi_error(nz: int, solver: str = "implicit", ratio: float = 0.5, thickn
     due = {round(T / delta): T for T in targets}
     worst = 0.0
     for step in range(1, max(due) + 1):
-        if grid.update(x, z, v, v, radius, z_bot, z_bot + thickness, delta * thickness ** 2 / diffusivity) != FK.STATUS_OK:
+        if grid.update(x, z, v, v, radius, z_bot, z_bot + thickness, delta * thickness ** 2 / diffusivity) != L.STATUS_OK:
             return float("nan")
         if step in due:
             T = due[step]
@@ -529,34 +530,34 @@ def terzaghi_error(nz: int, solver: str = "implicit", ratio: float = 0.5, thickn
 
 @njit(cache=NUMBA_CACHE)
 def _block_slip(wall, clock, params, mu_s, mu_d, nsteps, out):
-    """The top-wall integrator (kernels.step._wall_kick, _step's order) with imposed Coulomb
+    """The top-wall integrator (kernels.step.wall_kick, _step's order) with imposed Coulomb
     friction; out = (t start, t end, x start, x end, peak v) of the first complete slip.
     Returns 1 if a slip completed."""
-    dt = params[K.DT]
-    length = params[K.WIDTH]
-    sigma = params[K.SIGMA]
+    dt = params[L.DT]
+    length = params[L.WIDTH]
+    sigma = params[L.SIGMA]
     sliding = False
     peak = 0.0
     for _ in range(nsteps):
-        K._wall_kick(wall, clock, params)
-        wall[K.W_X] += dt * wall[K.W_VX]
-        clock[K.C_TIME] += dt
-        clock[K.C_DRIVE_TIME] += dt
-        spring = params[K.SPRING] * length * (params[K.V_LOAD] * clock[K.C_DRIVE_TIME] - wall[K.W_X])
-        if sliding and wall[K.W_VX] <= 0.0:
-            out[1] = clock[K.C_TIME]
-            out[3] = wall[K.W_X]
+        K.wall_kick(wall, clock, params)
+        wall[L.W_X] += dt * wall[L.W_VX]
+        clock[L.C_TIME] += dt
+        clock[L.C_DRIVE_TIME] += dt
+        spring = params[L.SPRING] * length * (params[L.V_LOAD] * clock[L.C_DRIVE_TIME] - wall[L.W_X])
+        if sliding and wall[L.W_VX] <= 0.0:
+            out[1] = clock[L.C_TIME]
+            out[3] = wall[L.W_X]
             out[4] = peak
             return 1
         if not sliding and spring > mu_s * sigma * length:
             sliding = True
-            out[0] = clock[K.C_TIME]
-            out[2] = wall[K.W_X]
-        wall[K.W_FX] = -mu_d * sigma * length if sliding else -spring
-        wall[K.W_FZ] = sigma * length
-        K._wall_kick(wall, clock, params)
+            out[0] = clock[L.C_TIME]
+            out[2] = wall[L.W_X]
+        wall[L.W_FX] = -mu_d * sigma * length if sliding else -spring
+        wall[L.W_FZ] = sigma * length
+        K.wall_kick(wall, clock, params)
         if sliding:
-            peak = max(peak, wall[K.W_VX])
+            peak = max(peak, wall[L.W_VX])
     return 0
 
 
@@ -565,10 +566,10 @@ def block_slider_errors(dt: float, m=1.0, k=1e-2, sigma=1e-2, mu_s=0.6, mu_d=0.5
     solution with loading during the slip (see tests/validation/test_block_slider.py)."""
     from scipy.optimize import brentq
 
-    p = np.zeros(K.N_PARAMS)
-    p[K.DT], p[K.WIDTH], p[K.SIGMA], p[K.SPRING], p[K.V_LOAD] = dt, 1.0, sigma, k, v_load
-    p[K.WALL_MASS], p[K.DRIVE] = m, 1.0
-    wall, clock, out = np.zeros(K.N_WALL), np.zeros(K.N_CLOCK), np.zeros(5)
+    p = np.zeros(L.N_PARAMS)
+    p[L.DT], p[L.WIDTH], p[L.SIGMA], p[L.SPRING], p[L.V_LOAD] = dt, 1.0, sigma, k, v_load
+    p[L.WALL_MASS], p[L.DRIVE] = m, 1.0
+    wall, clock, out = np.zeros(L.N_WALL), np.zeros(L.N_CLOCK), np.zeros(5)
     t_end = (mu_s * sigma / k) / v_load + 3.0 * math.pi * math.sqrt(m / k)
     if not _block_slip(wall, clock, p, mu_s, mu_d, int(t_end / dt), out):
         return {"duration": float("nan"), "slip": float("nan"), "peak_velocity": float("nan")}

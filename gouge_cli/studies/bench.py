@@ -37,6 +37,7 @@ from .. import __version__
 from ..io import provenance
 from .accuracy import slip_duration
 from ..config import build_config, find_config, load_config
+from ..kernels import layout as L
 from ..kernels import step as K
 from ..driver.simulation import Simulation
 from ..model.timestep import choose_dt
@@ -214,17 +215,17 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
     neighbour rebuild (per rebuild, and amortised over the measured steps between rebuilds)."""
     sim.threads = threads
     s, p = sim.state, sim.params.copy()
-    p[K.THREADS] = threads
+    p[L.THREADS] = threads
     numba.set_num_threads(threads)
     s.restore(start)
-    r0, k0 = int(s.counters[K.K_REBUILDS]), s.step
+    r0, k0 = int(s.counters[L.K_REBUILDS]), s.step
     sim.advance(2000)
-    per_rebuild_steps = (s.step - k0) / max(1, int(s.counters[K.K_REBUILDS]) - r0)
+    per_rebuild_steps = (s.step - k0) / max(1, int(s.counters[L.K_REBUILDS]) - r0)
     g, lists, pairs = s.grains(), s.lists(), s.pairs()
     (x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, fx, fz, tq, top, ident) = g
-    sort_every = int(p[K.SORT_EVERY])
-    p[K.SORT_EVERY] = 0        # rebuild alone; the re-numbering is timed on its own below
-    xb, zb, flags = lists[K.L_X_BUILD], lists[K.L_Z_BUILD], lists[K.L_CELL_OF]
+    sort_every = int(p[L.SORT_EVERY])
+    p[L.SORT_EVERY] = 0        # rebuild alone; the re-numbering is timed on its own below
+    xb, zb, flags = lists[L.L_X_BUILD], lists[L.L_Z_BUILD], lists[L.L_CELL_OF]
     shear0 = s.shear.copy()
     v0 = (s.vx.copy(), s.vz.copy(), s.spin.copy(), s.x.copy(), s.z.copy())
 
@@ -237,12 +238,12 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
 
     out = {
         "contact_forces": timed(lambda: K.compute_forces(g, lists, pairs, s.wall, p, *sim.drag), reset=reset),
-        "kick_drift": timed(lambda: K._kick_drift(x, z, vx, vz, spin, fx, fz, tq, inv_mass, inv_inertia, body, xb, zb,
+        "kick_drift": timed(lambda: K.kick_drift(x, z, vx, vz, spin, fx, fz, tq, inv_mass, inv_inertia, body, xb, zb,
                                                   True, p, flags), reset=reset),
         "rebuild_each": timed(lambda: K.rebuild(g, lists, p, s.counters, *sim.drag), n=max(3, repeats // 10),
                               reset=reset),
         "steps_per_rebuild": per_rebuild_steps,
-        "renumber_each": timed(lambda: K.renumber(g, lists, *sim.drag, p[K.WIDTH]), n=max(3, repeats // 10)),
+        "renumber_each": timed(lambda: K.renumber(g, lists, *sim.drag, p[L.WIDTH]), n=max(3, repeats // 10)),
         "rebuilds_per_renumber": sort_every,
     }
     out["rebuild_per_step"] = out["rebuild_each"] / per_rebuild_steps
@@ -269,9 +270,9 @@ def sub_system(s, m: int) -> tuple:
     index, shear = s.index[:npairs][keep].copy(), s.shear[:npairs][keep].copy()
     grain = tuple(a[:m].copy() for a in (s.x, s.z, s.vx, s.vz, s.spin, s.radius, s.mass))
     cross = np.zeros(1, s.cross_i.dtype)        # the state's dtypes, so the step's compiled kernel serves
-    layout = np.full(K.N_LAYOUT, -1, s.layout.dtype)
+    layout = np.full(L.N_LAYOUT, -1, s.layout.dtype)
     return (*grain, start, index, shear, cross, cross, cross, *(np.zeros(1) for _ in range(4)),
-            np.zeros((1, K.N_BUF, K.PAIR_BUF)), *(np.zeros(m) for _ in range(3)), np.zeros(0), np.zeros(0),
+            np.zeros((1, L.N_BUF, L.PAIR_BUF)), *(np.zeros(m) for _ in range(3)), np.zeros(0), np.zeros(0),
             layout, np.zeros(m + 1, s.new_start.dtype))
 
 
@@ -282,7 +283,7 @@ def footprint_profile(sim: Simulation, start: dict, sizes, repeats: int = 5) -> 
     s = sim.state
     s.restore(start)
     p = sim.params.copy()
-    p[K.THREADS] = 1
+    p[L.THREADS] = 1
     numba.set_num_threads(1)
     out = []
     for m in sorted(v for v in sizes if v <= s.n):

@@ -105,7 +105,7 @@ def _run_status(h5_path: Path) -> str | None:
 
 def _task(ledger: Path, settings: dict, body) -> dict:
     """Run ``body()`` with the piece's ledger kept: running -> done | failed (physics) | error."""
-    from ..driver.simulation import PhysicsError
+    from ..errors import PhysicsError
 
     previous = read_ledger(ledger) or {}
     record = {"state": "running", "settings": settings, "host": socket.gethostname(), "pid": os.getpid(),
@@ -131,7 +131,7 @@ def _task(ledger: Path, settings: dict, body) -> dict:
 def advance_run(run_dir: str, config: dict, settings: dict) -> dict:
     """Dask task: bring the point's run to 'finished'. Resumes from checkpoints/latest.h5 when an
     earlier attempt left one; starts afresh otherwise. Returns the slips kept with checkpoints."""
-    from .fork import slip_catalog
+    from ..io.runfile import slip_catalog
     from .run import resume_run, run_scene
 
     run_dir = Path(run_dir)

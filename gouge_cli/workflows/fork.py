@@ -21,26 +21,11 @@ from ..io import provenance
 from ..io.checkpoint import read_checkpoint
 from ..config import Config, ConfigError, build_config
 from ..driver.slips import lead_time
-from ..io.runfile import RunFile
+from ..io.runfile import RunFile, slip_catalog
 from ..model.preflight import check_config
-from ..io.rundir import RunDirError, RunLock, check_run_dir, open_run_file, refuse_if_in_progress
-from .run import load_phase
+from ..io.rundir import RunDirError, RunLock, check_run_dir, refuse_if_in_progress
+from ..driver.phases import load_phase
 from ..driver.simulation import Simulation
-
-
-def slip_catalog(run_dir: Path) -> list[dict]:
-    """The run's slip catalog (one dict of attributes per slip, in order)."""
-    with open_run_file(Path(run_dir) / "run.h5") as h5:
-        if "slips" not in h5:
-            return []
-        out = []
-        for name in sorted(h5["slips"]):
-            g = h5["slips"][name]
-            entry = {k: (v.item() if hasattr(v, "item") else v) for k, v in g.attrs.items()}
-            entry["subevent_time"] = g["subevent_time"][...].tolist()
-            entry["subevent_velocity"] = g["subevent_velocity"][...].tolist()
-            out.append(entry)
-        return out
 
 
 def branch_name(perm: float | None) -> str:

@@ -3,29 +3,24 @@ outputs, slip checkpoints, periodic checkpoints and clean stops."""
 
 from __future__ import annotations
 
-import math
-import signal
 import sys
-import threading
 import time
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 
 from ..io import provenance
-from ..io.checkpoint import CheckpointError, read_checkpoint, remove_stale_temps, snapshot_of, write_checkpoint
+from ..io.checkpoint import CheckpointError, read_checkpoint, remove_stale_temps
 from ..config import Config, dump_config, load_config
 from ..errors import hdf5_os_error
-from ..driver.slips import SlipRecorder
-from ..driver.guards import guard_callbacks
-from ..kernels import step as K
+from ..kernels import layout as L
 from ..io.runfile import RunFile
 from ..model.preflight import check_config
-from ..driver.progress import ProgressReport, SettleReport
-from ..io.rundir import (RunDirError, RunLock, check_run_dir, ensure_space, latest_run, open_run_file,
+from ..driver.phases import compaction_phase, load_phase
+from ..io.rundir import (RunDirError, RunLock, check_run_dir, latest_run, open_run_file,
                      prepare_run_dir)
-from ..driver.simulation import Every, PhysicsError, Simulation
+from ..driver.simulation import Simulation
+from ..errors import PhysicsError
 
 
 @dataclass
@@ -43,150 +38,6 @@ def default_run_dir(config: Config, runs_root: Path = Path("runs")) -> Path:
     return runs_root / config.name
 
 
-def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float, *, live=None,
-               quiet=False, label="loading", resume_from=None,
-               checkpoints: bool = True, stop_after_slip: bool = False) -> tuple[str, SlipRecorder]:
-    """Shear until sim time reaches end_time, firing the output, guard, slip and checkpoint
-    callbacks. `resume_from`: the Checkpoint (latest.h5) whose callback states (slip
-    recorder with its ring, energy guard) carry on. Returns (status, recorder); raises
-    PhysicsError after recording it."""
-    config = sim.config
-    ck_dir = out_dir / "checkpoints" if checkpoints else None
-    saved = resume_from.extra if resume_from is not None else {}
-    recorder = SlipRecorder(config, sim, writer, ck_dir, saved.get("slip_recorder"),
-                            resume_from.attached if resume_from is not None else None)
-    guards = guard_callbacks(sim)
-    guards[0].action.load_state_dict(saved.get("guards", {}))
-    progress = None if quiet else ProgressReport(label, end_time - sim.state.time, sim.state.n, live=live)
-    t_begin = sim.state.time
-    stop = {"now": False}
-
-    need = 2.0 * (config.slips.ring + 2) * _state_bytes(sim)
-
-    def record(s: Simulation):
-        ensure_space(out_dir, need)
-        row = s.observe()
-        writer.append(row)
-        slip = recorder.observe(row)
-        if slip is not None and stop_after_slip:
-            stop["now"] = True
-        if progress:
-            progress.update(s.state.time - t_begin, s.state.step,
-                            info=f"tau/sigma {row['tau_over_sigma']:.3f}, slips {recorder.count}")
-
-    def latest(s: Simulation):
-        if ck_dir is not None:
-            writer.flush()
-            rec_state, ring = recorder.full_state()
-            write_checkpoint(ck_dir / "latest.h5", snapshot_of(
-                s, {"phase": "loading", "slip_recorder": rec_state, "guards": guards[0].action.state_dict()}, ring))
-
-    callbacks = guards + slip_frame_callbacks(sim, writer, recorder) + [
-                 Every(sim.steps_for(config.output.series_interval), record),
-                 Every(sim.steps_for(config.output.snapshot_interval), writer.snapshot),
-                 Every(recorder.ring_every, recorder.keep),
-                 Every(sim.steps_for(config.output.checkpoint_interval), latest)]
-    status = "finished"
-    try:
-        with _deferred_interrupt() as interrupted:
-            if sim.state.time < end_time:
-                sim.run(end_time - sim.state.time, callbacks, should_stop=lambda: stop["now"] or interrupted())
-            if interrupted():
-                status = "interrupted"
-            latest(sim)
-    except KeyboardInterrupt:       # a second Ctrl-C, or one outside the step loop
-        status = "interrupted"
-        latest(sim)
-    except PhysicsError as err:
-        writer.close(f"failed: {err}", provenance.sim_hash(sim))
-        raise
-    finally:
-        if progress:
-            progress.close()
-    return status, recorder
-
-
-def slip_frame_callbacks(sim: Simulation, writer: RunFile, recorder: SlipRecorder) -> list[Every]:
-    """Dense snapshots while the top wall slips: output.slip_frames per predicted slip duration
-    pi sqrt(m_b/k) (thesis Eq. 3), written whenever v_w >= slips.end_factor V_s; none if 0."""
-    frames = sim.config.output.slip_frames
-    if not frames or sim.wall_mass_per_length <= 0:
-        return []
-    period = math.pi * math.sqrt(sim.wall_mass_per_length / sim.config.loading.spring_constant)
-    writer.set_attr("snapshot_dense_interval", period / frames)
-
-    def dense(s: Simulation):
-        if s.state.wall[K.W_VX] >= recorder.lo:
-            writer.snapshot(s)
-
-    return [Every(sim.steps_for(period / frames), dense)]
-
-
-@contextmanager
-def _deferred_interrupt():
-    """Ctrl-C (SIGINT) sets a flag that the step loop reads between chunks, after every
-    callback of the current step has run, so that the checkpoint written on stopping lines up
-    with the series (an interrupt inside a callback could lose a row). A second Ctrl-C
-    interrupts at once. Yields a function telling whether Ctrl-C was pressed."""
-    flag = {"set": False}
-    if threading.current_thread() is not threading.main_thread():
-        yield lambda: False
-        return
-    previous = signal.getsignal(signal.SIGINT)
-    previous = signal.default_int_handler if previous is None else previous
-
-    def handler(signum, frame):
-        flag["set"] = True
-        signal.signal(signal.SIGINT, previous)
-
-    signal.signal(signal.SIGINT, handler)
-    try:
-        yield lambda: flag["set"]
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
-def _state_bytes(sim: Simulation) -> int:
-    """Bytes of one checkpointed state (grains, contacts, fluid grid)."""
-    fluid = sim.fluid.arrays() if sim.fluid is not None else {}
-    return sum(a.nbytes for a in sim.state.arrays().values()) + sum(a.nbytes for a in fluid.values())
-
-
-def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False,
-                     start: tuple[float, int] | None = None):
-    """Simulation.compact with checkpoints/latest.h5 written every output.checkpoint_interval of
-    compaction (on its 100 t0 checks) and on Ctrl-C, so that `gouge resume` continues a
-    compaction too. Progress is shown toward the settling criterion (progress.SettleReport)."""
-    config = sim.config
-    latest = out_dir / "checkpoints" / "latest.h5"
-    chunk = sim.steps_for(100.0)
-    every = max(1, int(round(config.output.checkpoint_interval / 100.0)))
-
-    need = 2.0 * _state_bytes(sim)
-
-    def save(s: Simulation):
-        ensure_space(out_dir, need)
-        write_checkpoint(latest, snapshot_of(s, {"phase": "compaction", "compaction_start": list(s.compaction_start)}))
-
-    progress = None if quiet else SettleReport(config.compaction.max_time, sim.state.n, live=live)
-
-    def on_chunk(s: Simulation, elapsed: float):
-        if progress:
-            progress.update(s.settling, s.state.step)
-        if ((s.state.step - s.compaction_start[1]) // chunk) % every == 0:
-            save(s)
-
-    try:
-        sim.compact(on_chunk=on_chunk, start=start)
-    except KeyboardInterrupt:
-        if sim.compaction_start is not None:
-            save(sim)
-        raise
-    finally:
-        if progress:
-            progress.close()
-
-
 def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=False, label="loading",
            resume_from=None) -> RunResult:
     """Compaction (if the state is still compacting) then loading to the run's end; closes the
@@ -196,7 +47,7 @@ def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=
     n, steps0 = sim.state.n, sim.state.step
     recorder = None
     try:
-        if sim.phase == K.COMPACTION:
+        if sim.phase == L.COMPACTION:
             start = None
             if resume_from is not None and "compaction_start" in resume_from.extra:
                 t0, step0 = resume_from.extra["compaction_start"]
@@ -286,7 +137,7 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
         if note:
             print(note, file=sys.stderr, flush=True)
         sim = Simulation(ck.config, arrays=ck.state, fluid_arrays=ck.fluid)
-        if sim.phase == K.COMPACTION:       # run.h5 holds nothing but its attributes yet: written anew
+        if sim.phase == L.COMPACTION:       # run.h5 holds nothing but its attributes yet: written anew
             writer = _fresh_run_file(sim, run_dir)
         else:
             with open_run_file(run_dir / "run.h5") as h5:
@@ -300,5 +151,5 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
                       resume_from=ck)
 
 
-__all__ = ["RunDirError", "RunResult", "run_scene", "resume_run", "load_phase", "latest_run",
-           "check_run_dir", "CheckpointError", "compaction_phase"]
+__all__ = ["RunDirError", "RunResult", "run_scene", "resume_run", "latest_run",
+           "check_run_dir", "CheckpointError"]

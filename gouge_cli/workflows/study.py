@@ -34,7 +34,8 @@ from ..analysis.report import analyze_run, write_analysis
 from ..analysis.study import STUDY_COLUMNS, study_rows, study_summary, summary_lines, transient_slips
 from ..io.checkpoint import read_checkpoint
 from ..config import ConfigError, load_config
-from .fork import branch_name, check_perms, run_branch, slip_catalog
+from ..io.runfile import slip_catalog
+from .fork import branch_name, check_perms, run_branch
 from .run import RunDirError, check_run_dir, default_run_dir, resume_run, run_scene
 from ..io.filedoc import json_safe
 from .pairs import branch_status, write_pair_json
@@ -82,7 +83,7 @@ def branch_task(run_dir: str, slip: int, perm: float | None, duration: float, st
     _one_thread()
     import numba
 
-    from ..driver.simulation import PhysicsError
+    from ..errors import PhysicsError
 
     numba.set_num_threads(1)
     t0 = time.perf_counter()

@@ -12,7 +12,8 @@ import yaml
 from typer.testing import CliRunner
 
 from gouge_cli.analysis.report import CATALOG_COLUMNS, FIT_COLUMNS, PAIR_COLUMNS
-from gouge_cli.cli.main import EXIT_BAD_INPUT, app
+from gouge_cli.cli.main import app
+from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.plots import DPI, FIGSIZE
 from gouge_cli.plots.snapshot import snapshot_pixels
 

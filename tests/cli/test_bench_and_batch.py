@@ -13,6 +13,7 @@ import yaml
 import numpy as np
 
 from gouge_cli.studies.bench import footprint_profile, prepare, run_benchmark, sub_system
+from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K
 
 REPO = Path(__file__).resolve().parents[2]
@@ -38,7 +39,7 @@ def test_benchmark_runs_on_a_tiny_scene():
 def test_footprint_sub_systems_are_the_first_rows_of_the_packing():
     sim, start = prepare(600, 0.89, 0.2)
     s, p = sim.state, sim.params.copy()
-    p[K.THREADS] = 1
+    p[L.THREADS] = 1
     whole = sub_system(s, s.n)          # every pair: the contact pass gives the run's own forces, bit for bit
     K.contact_forces(*whole, p)
     K.compute_forces(s.grains(), s.lists(), s.pairs(), s.wall, p, np.zeros(0), np.zeros(0))

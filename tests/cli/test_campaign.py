@@ -18,8 +18,9 @@ import yaml
 from typer.testing import CliRunner
 
 from gouge_cli.io.checkpoint import read_checkpoint
-from gouge_cli.cli.main import EXIT_BAD_INPUT, app
-from gouge_cli.workflows.fork import slip_catalog
+from gouge_cli.cli.main import app
+from gouge_cli.errors import EXIT_BAD_INPUT
+from gouge_cli.io.runfile import slip_catalog
 from gouge_cli.workflows.campaign import read_ledger, run_campaign, status_lines, survey
 from gouge_cli.workflows.campaign_spec import load_spec
 from gouge_cli.workflows.executors import ClusterOptions, local_cluster, slurm_cluster

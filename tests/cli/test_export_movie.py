@@ -13,7 +13,8 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from gouge_cli.cli.main import EXIT_BAD_INPUT, app
+from gouge_cli.cli.main import app
+from gouge_cli.errors import EXIT_BAD_INPUT
 
 SCENE = {
     "name": "tinywet",

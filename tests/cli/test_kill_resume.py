@@ -26,7 +26,7 @@ from typer.testing import CliRunner
 
 from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.cli.main import app
-from gouge_cli.workflows.fork import slip_catalog
+from gouge_cli.io.runfile import slip_catalog
 
 SCENE = {
     "name": "kill",

@@ -247,7 +247,8 @@ def test_tiny_wall_mass_refused_before_writing(scene_file, tmp_path):
 def test_guard_names_the_damping(scene_file):
     """A runaway overlap at a step close to the dashpot's own limit blames material.damping."""
     from gouge_cli.driver.guards import OverlapGuard, Scan
-    from gouge_cli.driver.simulation import PhysicsError, Simulation
+    from gouge_cli.driver.simulation import Simulation
+    from gouge_cli.errors import PhysicsError
 
     data = dict(yaml.safe_load(scene_file.read_text()), material={"damping": 10.0}, numerics={"dt_safety": 0.15})
     sim = Simulation(build_config(data))

@@ -17,8 +17,9 @@ import yaml
 from PIL import Image
 from typer.testing import CliRunner
 
-from gouge_cli.cli.main import EXIT_BAD_INPUT, app
-from gouge_cli.workflows.fork import slip_catalog
+from gouge_cli.cli.main import app
+from gouge_cli.errors import EXIT_BAD_INPUT
+from gouge_cli.io.runfile import slip_catalog
 
 SCENE = {
     "name": "tiny_study",

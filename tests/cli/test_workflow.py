@@ -16,8 +16,10 @@ import yaml
 from typer.testing import CliRunner
 
 from gouge_cli.io.checkpoint import CheckpointError, read_checkpoint, snapshot_of, write_checkpoint
-from gouge_cli.cli.main import EXIT_BAD_INPUT, app
-from gouge_cli.workflows.fork import run_fork, slip_catalog
+from gouge_cli.cli.main import app
+from gouge_cli.errors import EXIT_BAD_INPUT
+from gouge_cli.io.runfile import slip_catalog
+from gouge_cli.workflows.fork import run_fork
 from gouge_cli.driver.simulation import Simulation
 
 SCENE = {

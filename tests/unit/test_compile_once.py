@@ -20,6 +20,7 @@ import gouge_cli.kernels
 from gouge_cli.studies import bench
 from gouge_cli.io.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.config import build_config
+from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K
 from gouge_cli.driver.simulation import Simulation
 from gouge_cli.model.state import State
@@ -44,7 +45,7 @@ def contact_forces_args(sim: Simulation) -> tuple:
     """kernels.step.contact_forces arguments exactly as compute_forces passes them (one thread)."""
     s = sim.state
     params = sim.params.copy()
-    params[K.THREADS] = 1
+    params[L.THREADS] = 1
     return (*s.grains()[:7], s.start, s.index, s.shear, s.cross_i, s.cross_k, s.cross_in, *s.pairs(),
             s.force_x, s.force_z, s.torque, *sim.drag, s.layout, s.new_start, params)
 

@@ -11,7 +11,8 @@ import yaml
 from typer.testing import CliRunner
 
 from gouge_cli import __version__
-from gouge_cli.cli.main import EXIT_BAD_INPUT, app
+from gouge_cli.cli.main import app
+from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.config import Config, FluidConfig, build_config
 from gouge_cli.config_doc import commented_defaults, json_schema, split_description
 

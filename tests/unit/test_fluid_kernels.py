@@ -1,4 +1,4 @@
-"""Unit tests of the pore-fluid kernels and FluidGrid (gouge_cli/kernels/fluid.py, gouge_cli/fluid.py)."""
+"""Unit tests of the pore-fluid kernels and FluidGrid (gouge_cli/kernels/deposit.py, pressure.py, drag.py, fluid_update.py; gouge_cli/model/fluid.py)."""
 
 import math
 
@@ -9,7 +9,11 @@ import scipy.sparse.linalg as spla
 
 from gouge_cli.config import FluidConfig
 from gouge_cli.model.fluid import FluidGrid
-from gouge_cli.kernels import fluid as kernels
+from gouge_cli.kernels import layout as L
+from gouge_cli.kernels import deposit as KD
+from gouge_cli.kernels import drag as KG
+from gouge_cli.kernels import fluid_update as KF
+from gouge_cli.kernels import pressure as KP
 
 
 def numeric_cap(h, r):
@@ -20,25 +24,25 @@ def numeric_cap(h, r):
 
 def test_segment_and_in_domain_area():
     r = 0.6
-    assert kernels.segment_area(r, r) == 0.0
-    assert kernels.segment_area(-r, r) == pytest.approx(math.pi * r * r)
-    assert kernels.segment_area(0.0, r) == pytest.approx(0.5 * math.pi * r * r)
-    assert kernels.segment_area(0.23, r) == pytest.approx(numeric_cap(0.23, r), rel=1e-4)
-    assert kernels.in_domain_area(5.0, r, 0.0, 10.0) == pytest.approx(math.pi * r * r)
-    assert kernels.in_domain_area(0.0, r, 0.0, 10.0) == pytest.approx(0.5 * math.pi * r * r)
-    assert kernels.in_domain_area(10.0 + r, r, 0.0, 10.0) == pytest.approx(0.0, abs=1e-15)
-    assert kernels.in_domain_area(10.0 + 2 * r, r, 0.0, 10.0) == 0.0
-    assert kernels.in_domain_area(-0.1, r, 0.0, 10.0) == pytest.approx(numeric_cap(0.1, r), rel=1e-4)
+    assert KD.segment_area(r, r) == 0.0
+    assert KD.segment_area(-r, r) == pytest.approx(math.pi * r * r)
+    assert KD.segment_area(0.0, r) == pytest.approx(0.5 * math.pi * r * r)
+    assert KD.segment_area(0.23, r) == pytest.approx(numeric_cap(0.23, r), rel=1e-4)
+    assert KD.in_domain_area(5.0, r, 0.0, 10.0) == pytest.approx(math.pi * r * r)
+    assert KD.in_domain_area(0.0, r, 0.0, 10.0) == pytest.approx(0.5 * math.pi * r * r)
+    assert KD.in_domain_area(10.0 + r, r, 0.0, 10.0) == pytest.approx(0.0, abs=1e-15)
+    assert KD.in_domain_area(10.0 + 2 * r, r, 0.0, 10.0) == 0.0
+    assert KD.in_domain_area(-0.1, r, 0.0, 10.0) == pytest.approx(numeric_cap(0.1, r), rel=1e-4)
 
 
 def test_cell_weights_periodic_and_clamped():
-    i0, i1, j0, fx, fz, slope = kernels.cell_weights(-0.25, 0.0, 1.0, 1.0, 0.0, 4, 3)
+    i0, i1, j0, fx, fz, slope = KD.cell_weights(-0.25, 0.0, 1.0, 1.0, 0.0, 4, 3)
     assert (i0, i1) == (3, 0) and fx == pytest.approx(0.25)
     assert (j0, fz, slope) == (0, 0.0, 0.0)
-    i0, i1, j0, fx, fz, slope = kernels.cell_weights(8.5, 2.9, 1.0, 1.0, 0.0, 4, 3)
+    i0, i1, j0, fx, fz, slope = KD.cell_weights(8.5, 2.9, 1.0, 1.0, 0.0, 4, 3)
     assert (i0, i1, fx) == (0, 1, 0.0)
     assert (j0, fz, slope) == (1, 1.0, 0.0)
-    _, _, j0, _, fz, slope = kernels.cell_weights(0.5, 1.25, 1.0, 0.5, 0.0, 4, 3)
+    _, _, j0, _, fz, slope = KD.cell_weights(0.5, 1.25, 1.0, 0.5, 0.0, 4, 3)
     assert (j0, fz, slope) == (0, pytest.approx(0.125), 0.5)
 
 
@@ -61,27 +65,27 @@ def test_grouped_deposit_and_cached_drag():
     rng = np.random.default_rng(4)
     vx, vz = rng.normal(0, 1e-3, x.size), rng.normal(0, 1e-3, x.size)
     serial = [np.empty((5, 4)) for _ in range(5)]
-    kernels.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *serial)
+    KD.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *serial)
     grouped = []
-    corners = np.zeros((kernels.N_CORNERS, x.size))
+    corners = np.zeros((L.N_CORNERS, x.size))
     for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
         numba.set_num_threads(threads)
         out = [np.empty((5, 4)) for _ in range(5)]
-        partial = np.zeros((kernels.DEPOSIT_GROUPS, 20, kernels.N_MOMENTS))
-        kernels.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial)
+        partial = np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS))
+        KD.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial)
         grouped.append(out)
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     for a, b in zip(grouped[0], grouped[1]):
         assert a.tobytes() == b.tobytes()
     for a, b in zip(serial, grouped[0]):
         assert np.allclose(a, b, rtol=1e-13, atol=1e-15 * np.abs(a).max())
-    assert np.sum(corners[0] < 0) == np.sum([kernels.in_domain_area(zk, rk, z_bot, z_top) <= 0
+    assert np.sum(corners[0] < 0) == np.sum([KD.in_domain_area(zk, rk, z_bot, z_top) <= 0
                                              for zk, rk in zip(z, radius)]) > 0
     fx, fz = rng.normal(size=(2, 5, 4))
     expected = np.zeros((2, x.size))
     cached = np.zeros((2, x.size))
-    kernels.grain_drag(x, z, radius, x.size, width, z_bot, z_top, fx, fz, expected[0], expected[1])
-    kernels.grain_drag_at(corners, x.size, fx, fz, cached[0], cached[1])
+    KG.grain_drag(x, z, radius, x.size, width, z_bot, z_top, fx, fz, expected[0], expected[1])
+    KG.grain_drag_at(corners, x.size, fx, fz, cached[0], cached[1])
     assert expected.tobytes() == cached.tobytes() and np.abs(expected).max() > 0
 
 
@@ -90,7 +94,6 @@ def test_grouped_deposit_reuses_its_scratch_and_takes_owed_kicks():
     after one from grains elsewhere gives the bits of a fresh scratch. With grain_kick, the
     velocities are the whole-step ones (closing half kick for free grains, the wall velocity
     for top-wall grains, bottom-wall grains as stored): the bits of closing first."""
-    from gouge_cli.kernels import step
 
     width, z_bot, z_top = 12.0, 0.5, 10.5
     x, z, radius = _grains(seed=5, n=400)
@@ -98,27 +101,27 @@ def test_grouped_deposit_reuses_its_scratch_and_takes_owed_kicks():
     vx, vz, fx, fz = rng.normal(0, 1e-3, (4, x.size))
     inv_mass = rng.uniform(1.0, 3.0, x.size)
     body = np.zeros(x.size, np.int8)
-    body[:20] = step.TOP
-    body[20:40] = step.BOTTOM
+    body[:20] = L.TOP
+    body[20:40] = L.BOTTOM
     half, damp, wall_v = 0.05, 0.3, (2e-3, -1e-3)
 
     def run(partial, xs, grain_kick=None, u=vx, w=vz):
         out = [np.empty((5, 4)) for _ in range(5)]
-        corners = np.zeros((kernels.N_CORNERS, x.size))
-        kernels.deposit(xs, z, u, w, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial,
+        corners = np.zeros((L.N_CORNERS, x.size))
+        KD.deposit(xs, z, u, w, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial,
                         grain_kick)
         return b"".join(a.tobytes() for a in out)
 
-    fresh = run(np.zeros((kernels.DEPOSIT_GROUPS, 20, kernels.N_MOMENTS)), x)
-    reused = np.zeros((kernels.DEPOSIT_GROUPS, 20, kernels.N_MOMENTS))
+    fresh = run(np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS)), x)
+    reused = np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS))
     run(reused, np.sort(x)[::-1] + 0.37 * width)           # groups in other columns first
     assert run(reused, x) == fresh
     closed_x, closed_z = vx.copy(), vz.copy()
-    free = body == step.FREE
+    free = body == L.FREE
     closed_x[free] = vx[free] + half * (fx[free] * inv_mass[free] - damp * vx[free])
     closed_z[free] = vz[free] + half * (fz[free] * inv_mass[free] - damp * vz[free])
-    closed_x[body == step.TOP], closed_z[body == step.TOP] = wall_v
-    partial = np.zeros((kernels.DEPOSIT_GROUPS, 20, kernels.N_MOMENTS))
+    closed_x[body == L.TOP], closed_z[body == L.TOP] = wall_v
+    partial = np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS))
     owed = run(partial, x, (True, fx, fz, inv_mass, body, half, damp, *wall_v))
     assert owed == run(partial, x, u=closed_x, w=closed_z) != fresh
     assert run(partial, x, (False, fx, fz, inv_mass, body, half, damp, *wall_v)) == fresh
@@ -129,14 +132,14 @@ def test_deposit_conserves_area_and_is_periodic():
     x, z, radius = _grains()
     v = np.full(x.size, 2e-3)
     s, ux, uz, gx, gz = (np.empty((5, 4)) for _ in range(5))
-    kernels.deposit(x, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
+    KD.deposit(x, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
     cell_area = width / 5 * (z_top - z_bot) / 4
-    total = sum(kernels.in_domain_area(zk, rk, z_bot, z_top) for zk, rk in zip(z, radius))
+    total = sum(KD.in_domain_area(zk, rk, z_bot, z_top) for zk, rk in zip(z, radius))
     assert (s * cell_area).sum() == pytest.approx(total, rel=1e-12)
     np.testing.assert_allclose(ux, 2e-3, rtol=1e-12)
     np.testing.assert_allclose(uz, -2e-3, rtol=1e-12)
     shifted = np.empty_like(s)
-    kernels.deposit(x + width, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, shifted, ux, uz, gx, gz)
+    KD.deposit(x + width, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, shifted, ux, uz, gx, gz)
     np.testing.assert_allclose(shifted, s, rtol=1e-12)
 
 
@@ -147,13 +150,13 @@ def test_solid_fraction_gradient_is_the_derivative_of_the_deposit():
     x, z, radius = x[inside], z[inside], radius[inside]
     v = np.zeros_like(x)
     s, ux, uz, gx, gz = (np.empty((5, 4)) for _ in range(5))
-    kernels.deposit(x, z, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
+    KD.deposit(x, z, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
     shift = 1e-7
     for dxk, dzk, slope in ((shift, 0.0, gx), (0.0, shift, gz)):
         s_plus, s_minus = np.empty((5, 4)), np.empty((5, 4))
         scratch = [np.empty((5, 4)) for _ in range(4)]
-        kernels.deposit(x + dxk, z + dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_plus, *scratch)
-        kernels.deposit(x - dxk, z - dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_minus, *scratch)
+        KD.deposit(x + dxk, z + dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_plus, *scratch)
+        KD.deposit(x - dxk, z - dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_minus, *scratch)
         # moving every grain by +delta is moving the cells by -delta
         np.testing.assert_allclose(-(s_plus - s_minus) / (2 * shift), slope, atol=1e-6)
 
@@ -164,7 +167,7 @@ def test_deposit_velocity_is_relative_to_the_stretching_grid():
     rate = 1e-3
     vz = rate * (z - z_bot)
     s, ux, uz, gx, gz = (np.empty((5, 4)) for _ in range(5))
-    kernels.deposit(x, z, 0 * x, vz, radius, x.size, width, z_bot, z_top, 0.0, rate * (z_top - z_bot),
+    KD.deposit(x, z, 0 * x, vz, radius, x.size, width, z_bot, z_top, 0.0, rate * (z_top - z_bot),
                     s, ux, uz, gx, gz)
     assert np.abs(uz).max() < 1e-15
 
@@ -176,9 +179,9 @@ def _random_system(nx=7, nz=5, seed=1):
     pressure = rng.normal(0, 1e-3, (nx, nz))
     perm = np.empty((nx, nz))
     capacity = np.empty((nx, nz))
-    kernels.permeability_field(s, 1e-3, 0.05, 0.9, perm, capacity, beta)
+    KP.permeability_field(s, 1e-3, 0.05, 0.9, perm, capacity, beta)
     tx, tz, tb = (np.empty((nx, nz)) for _ in range(3))
-    kernels.face_conductances(pressure, perm, 2.0, 1.7, beta, eta, tx, tz, tb)
+    KP.face_conductances(pressure, perm, 2.0, 1.7, beta, eta, tx, tz, tb)
     return pressure, capacity, tx, tz, tb
 
 
@@ -210,8 +213,8 @@ def test_conjugate_gradient_matches_sparse_direct_solve():
     diag = matrix.diagonal().reshape(nx, nz).copy()
     rhs = capacity / dt * pressure
     solution = pressure.copy()
-    work = np.zeros((kernels.N_WORK, nx, nz))
-    iterations, residual, converged = kernels.conjugate_gradient(solution, rhs, diag, tx, tz, work, 1e-12, 500)
+    work = np.zeros((L.N_GRID_WORK, nx, nz))
+    iterations, residual, converged = KP.conjugate_gradient(solution, rhs, diag, tx, tz, work, 1e-12, 500)
     assert converged and residual <= 1e-12 and iterations > 1
     exact = spla.spsolve(matrix.tocsc(), rhs.ravel()).reshape(nx, nz)
     np.testing.assert_allclose(solution, exact, rtol=1e-9, atol=1e-9 * np.abs(exact).max())
@@ -219,10 +222,10 @@ def test_conjugate_gradient_matches_sparse_direct_solve():
 
 def test_explicit_diffusion_matches_implicit_for_small_steps():
     pressure, capacity, tx, tz, tb = _random_system()
-    bound = kernels.explicit_bound(capacity, tx, tz, tb)
+    bound = KP.explicit_bound(capacity, tx, tz, tb)
     total = 20 * bound
     explicit = pressure.copy()
-    kernels.explicit_diffusion(explicit, capacity, tx, tz, tb, total / 4000, 4000, np.empty_like(pressure))
+    KP.explicit_diffusion(explicit, capacity, tx, tz, tb, total / 4000, 4000, np.empty_like(pressure))
     matrix = _sparse_operator(capacity / total * 0, tx, tz, tb).toarray()
     from scipy.linalg import expm
 
@@ -236,13 +239,13 @@ def test_explicit_bound_equals_ftcs_formula_for_uniform_diffusivity():
     beta, eta, kappa_c, phi = 36.0, 1.43e-7, 1e-5, 0.15
     s = np.full((nx, nz), 1 - phi)
     perm, capacity = np.empty((nx, nz)), np.empty((nx, nz))
-    kernels.permeability_field(s, kappa_c, 0.05, 0.9, perm, capacity, beta)
+    KP.permeability_field(s, kappa_c, 0.05, 0.9, perm, capacity, beta)
     tx, tz, tb = (np.empty((nx, nz)) for _ in range(3))
-    kernels.face_conductances(np.zeros((nx, nz)), perm, dx, dz, beta, eta, tx, tz, tb)
+    KP.face_conductances(np.zeros((nx, nz)), perm, dx, dz, beta, eta, tx, tz, tb)
     diffusivity = kappa_c * phi**3 / (1 - phi) ** 2 / (eta * beta * phi)
     assert diffusivity == pytest.approx(0.0605, rel=1e-3)
     formula = 1.0 / (2.0 * diffusivity * (1 / dx**2 + 1 / dz**2))
-    assert kernels.explicit_bound(capacity, tx, tz, tb) == pytest.approx(formula, rel=1e-12)
+    assert KP.explicit_bound(capacity, tx, tz, tb) == pytest.approx(formula, rel=1e-12)
     grid = FluidGrid(nx, nz, nx * dx, 0.0, nz * dz, 1, kappa_c, beta, eta)
     grid.permeability[:] = perm
     grid.solid_fraction[:] = 1 - phi
@@ -254,13 +257,13 @@ def test_from_config_and_kernel_args():
     grid = FluidGrid.from_config(FluidConfig(), 200.0, 1.0, 51.0, 10_000)
     assert (grid.nx, grid.nz) == (80, 20)
     assert grid.pressure.shape == (80, 20) and grid.drag_x.shape == (10_000,)
-    assert grid.params[kernels.P_KAPPA_C] == 1e-5
-    assert grid.params[kernels.P_SOLVER] == kernels.SOLVER_IMPLICIT
+    assert grid.params[L.P_KAPPA_C] == 1e-5
+    assert grid.params[L.P_SOLVER] == L.SOLVER_IMPLICIT
     assert len(grid.kernel_args()) == 14
     thin = FluidGrid.from_config(FluidConfig(cell_size=20.0), 5.0, 0.0, 3.0, 4)
     assert (thin.nx, thin.nz) == (1, 2)
     explicit = FluidGrid.from_config(FluidConfig(solver="explicit"), 20.0, 0.0, 10.0, 4)
-    assert explicit.params[kernels.P_SOLVER] == kernels.SOLVER_EXPLICIT
+    assert explicit.params[L.P_SOLVER] == L.SOLVER_EXPLICIT
 
 
 def test_status_codes():
@@ -268,19 +271,19 @@ def test_status_codes():
     x, z, radius = _grains()
     v = np.zeros_like(x)
     grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-3, 36.0, 1.43e-7, solver="explicit", max_substeps=2)
-    assert grid.init(x, z, v, v, radius, z_bot, z_top) == kernels.STATUS_OK
+    assert grid.init(x, z, v, v, radius, z_bot, z_top) == L.STATUS_OK
     grid.pressure[:] = 1e-5
-    assert grid.update(x, z, v, v, radius, z_bot, z_top, 1e4) == kernels.STATUS_SOLVER
-    assert grid.state[kernels.S_SUBSTEPS] > 2
-    assert grid.update(x, z, v, v, radius, z_bot, z_top, -1.0) == kernels.STATUS_SOLVER
+    assert grid.update(x, z, v, v, radius, z_bot, z_top, 1e4) == L.STATUS_SOLVER
+    assert grid.state[L.S_SUBSTEPS] > 2
+    assert grid.update(x, z, v, v, radius, z_bot, z_top, -1.0) == L.STATUS_SOLVER
     bad = v.copy()
     bad[3] = np.nan
     grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-3, 36.0, 1.43e-7)
     grid.init(x, z, v, v, radius, z_bot, z_top)
-    assert grid.update(x, z, bad, v, radius, z_bot, z_top, 1.0) == kernels.STATUS_NONFINITE
+    assert grid.update(x, z, bad, v, radius, z_bot, z_top, 1.0) == L.STATUS_NONFINITE
     assert np.abs(grid.drag_x).max() == 0.0
-    for position, expected in ((np.nan, kernels.STATUS_NONFINITE), (np.inf, kernels.STATUS_OK),
-                               (-np.inf, kernels.STATUS_OK)):
+    for position, expected in ((np.nan, L.STATUS_NONFINITE), (np.inf, L.STATUS_OK),
+                               (-np.inf, L.STATUS_OK)):
         lost = z.copy()
         lost[5] = position
         grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-3, 36.0, 1.43e-7)
@@ -294,9 +297,9 @@ def test_fluid_update_callable_from_njit():
 
     @njit
     def loop(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, steps, *args):
-        status = kernels.fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, *args)
+        status = KF.fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, *args)
         for _ in range(steps):
-            status = max(status, kernels.fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, *args))
+            status = max(status, KF.fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, *args))
         return status
 
     width, z_bot, z_top = 12.0, 0.5, 10.5
@@ -304,7 +307,7 @@ def test_fluid_update_callable_from_njit():
     v = np.zeros_like(x)
     grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-5, 36.0, 1.43e-7)
     assert loop(x, z, v, v, radius, x.size, width, z_bot, z_top, 1.0, 3, *grid.kernel_args()) == 0
-    assert grid.state[kernels.S_UPDATES] == 3
+    assert grid.state[L.S_UPDATES] == 3
 
 
 def test_restart_from_checkpoint_arrays_is_bit_for_bit():

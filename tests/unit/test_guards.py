@@ -11,9 +11,9 @@ import pytest
 from gouge_cli.config import build_config
 from gouge_cli.driver.guards import (FluidSubstepGuard, Guards, KineticEnergyGuard, NonFiniteGuard, OverlapGuard, Scan,
                               guard_callbacks)
-from gouge_cli.kernels import fluid as FK
-from gouge_cli.kernels import step as K
-from gouge_cli.driver.simulation import PhysicsError, Simulation
+from gouge_cli.kernels import layout as L
+from gouge_cli.driver.simulation import Simulation
+from gouge_cli.errors import PhysicsError
 from gouge_cli.model.timestep import stability_bound
 
 SCENE = {"packing": {"n_grains": 200, "width": 12}, "seed": 4,
@@ -69,7 +69,7 @@ def test_nan_in_a_velocity(loaded):
 
 def test_infinite_wall_velocity(loaded):
     sim = fresh(loaded)
-    sim.state.wall[K.W_VX] = np.inf
+    sim.state.wall[L.W_VX] = np.inf
     with pytest.raises(PhysicsError, match="non-finite state \\(the top wall\\)"):
         NonFiniteGuard()(sim)
 
@@ -107,7 +107,7 @@ def test_spring_release_is_not_a_blow_up(loaded):
     of magnitude, but stays inside what the spring supplied, so the guard keeps quiet."""
     sim = fresh(loaded)
     k0 = Scan.of(sim).kinetic
-    sim.state.clock[K.C_DRIVE_TIME] += 1.5 / sim.config.loading.velocity   # spring stretched by 1.5 d more
+    sim.state.clock[L.C_DRIVE_TIME] += 1.5 / sim.config.loading.velocity   # spring stretched by 1.5 d more
     guard = KineticEnergyGuard()
     top = 0.0
     for _ in range(100):
@@ -115,16 +115,16 @@ def test_spring_release_is_not_a_blow_up(loaded):
         sim.advance(20)
         top = max(top, Scan.of(sim).kinetic)
     guard(sim)
-    assert top > 1e3 * k0 and sim.state.wall[K.W_X] > 0.5
+    assert top > 1e3 * k0 and sim.state.wall[L.W_X] > 0.5
 
 
 def test_unstable_step_is_stopped_before_nan_spreads(loaded):
     """A step 4x the stability bound (forced past the config check): the guards, every 10
     steps, stop the run with a message naming the time-step setting."""
     sim = fresh(loaded)
-    sim.params[K.DT] = 4.0 * stability_bound(sim.config).bound
+    sim.params[L.DT] = 4.0 * stability_bound(sim.config).bound
     with pytest.raises(PhysicsError, match="numerics.dt_safety") as info:
-        sim.run(2000 * sim.params[K.DT], [guard_callbacks(sim, interval=10 * sim.dt)[0]])
+        sim.run(2000 * sim.params[L.DT], [guard_callbacks(sim, interval=10 * sim.dt)[0]])
     assert any(word in str(info.value) for word in ("non-finite", "kinetic-energy blow-up", "runaway overlap"))
 
 
@@ -140,7 +140,7 @@ def explicit_wet(loaded):
 def test_explicit_fluid_substeps_above_limit(explicit_wet):
     sim = Simulation(*explicit_wet)
     sim.advance(4 * sim.fluid_interval)
-    substeps = int(sim.fluid.state[FK.S_SUBSTEPS])
+    substeps = int(sim.fluid.state[L.S_SUBSTEPS])
     assert substeps > 100
     FluidSubstepGuard()(sim)
     with pytest.raises(PhysicsError, match="explicit pressure step above its bound") as info:
@@ -148,13 +148,13 @@ def test_explicit_fluid_substeps_above_limit(explicit_wet):
     message = str(info.value)
     assert f"needs {substeps} sub-steps per update (limit 10)" in message
     assert "fluid.solver=implicit" in message and "fluid.cell_size" in message
-    bound = sim.fluid.state[FK.S_DT_MAX]
+    bound = sim.fluid.state[L.S_DT_MAX]
     assert f"FTCS bound {bound:.3g} t0" in message and math.isfinite(bound)
 
 
 def test_explicit_fluid_kernel_limit_stops_the_run(explicit_wet):
     sim = Simulation(*explicit_wet)
-    sim.fluid.params[FK.P_MAX_SUBSTEPS] = 5
+    sim.fluid.params[L.P_MAX_SUBSTEPS] = 5
     with pytest.raises(PhysicsError, match=r"explicit pressure step needs \d+ sub-steps .* above the limit 5"):
         sim.advance(2 * sim.fluid_interval)
 

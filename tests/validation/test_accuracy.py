@@ -15,7 +15,8 @@ from typer.testing import CliRunner
 
 from gouge_cli.studies.accuracy import (analytic_ladders, fit_order, prepare_start, run_accuracy, run_scene_ladders,
                                 scene_ladders)
-from gouge_cli.cli.main import EXIT_BAD_INPUT, app
+from gouge_cli.cli.main import app
+from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.config import build_config
 
 TINY = {"name": "tiny", "seed": 11, "packing": {"n_grains": 300, "width": 15},

@@ -1,4 +1,4 @@
-"""Rigid block on a spring: the top-wall integrator alone (kernels.step._wall_kick) with an
+"""Rigid block on a spring: the top-wall integrator alone (kernels.step.wall_kick) with an
 imposed Coulomb friction, physics.md sections 1, 3 and 7.
 
 Per unit wall length: mass m (params WALL_MASS holds the total m L), spring k, normal stress
@@ -20,12 +20,14 @@ import pytest
 from numba import njit
 from scipy.optimize import brentq
 
+from gouge_cli.kernels import layout as L
+
 from gouge_cli.kernels import step as K
 
-W_X, W_Z, W_VX, W_VZ, W_FX, W_FZ = K.W_X, K.W_Z, K.W_VX, K.W_VZ, K.W_FX, K.W_FZ
-DT, WIDTH, SIGMA, SPRING, V_LOAD = K.DT, K.WIDTH, K.SIGMA, K.SPRING, K.V_LOAD
-C_TIME, C_DRIVE_TIME = K.C_TIME, K.C_DRIVE_TIME
-wall_kick = K._wall_kick
+W_X, W_Z, W_VX, W_VZ, W_FX, W_FZ = L.W_X, L.W_Z, L.W_VX, L.W_VZ, L.W_FX, L.W_FZ
+DT, WIDTH, SIGMA, SPRING, V_LOAD = L.DT, L.WIDTH, L.SIGMA, L.SPRING, L.V_LOAD
+C_TIME, C_DRIVE_TIME = L.C_TIME, L.C_DRIVE_TIME
+wall_kick = K.wall_kick
 
 
 @njit
@@ -74,10 +76,10 @@ def stick_slip(wall, clock, params, mu_s, mu_d, nsteps, events):
 
 
 def make_params(dt, length, sigma, k, v_load, m):
-    p = np.zeros(K.N_PARAMS)
+    p = np.zeros(L.N_PARAMS)
     p[DT], p[WIDTH], p[SIGMA], p[SPRING], p[V_LOAD] = dt, length, sigma, k, v_load
-    p[K.WALL_MASS] = m * length       # total mass m_b L_x
-    p[K.DRIVE] = 1.0
+    p[L.WALL_MASS] = m * length       # total mass m_b L_x
+    p[L.DRIVE] = 1.0
     return p
 
 
@@ -101,7 +103,7 @@ def test_block_slider(length):
     m, k, sigma, mu_s, mu_d, v_load, dt = 1.0, 1e-2, 1e-2, 0.6, 0.5, 1e-5, 0.02
     dmu = mu_s - mu_d
     params = make_params(dt, length, sigma, k, v_load, m)
-    wall, clock = np.zeros(K.N_WALL), np.zeros(K.N_CLOCK)
+    wall, clock = np.zeros(L.N_WALL), np.zeros(L.N_CLOCK)
     events = np.zeros((3, 5))
     t_end = (mu_s * sigma + 2.5 * 2 * dmu * sigma) / (k * v_load)     # three slips
     n = stick_slip(wall, clock, params, mu_s, mu_d, int(t_end / dt), events)
@@ -127,8 +129,8 @@ def test_free_fall_under_normal_stress():
     """No grain force: M z'' = -sigma L, M = m L (exact for a constant force in Verlet)."""
     m, sigma, length, dt = 0.7, 3e-4, 12.0, 0.1
     params = make_params(dt, length, sigma, 1e-3, 0.0, m)
-    params[K.DRIVE] = 0.0        # compaction: no spring, no motion along x
-    wall, clock = np.zeros(K.N_WALL), np.zeros(K.N_CLOCK)
+    params[L.DRIVE] = 0.0        # compaction: no spring, no motion along x
+    wall, clock = np.zeros(L.N_WALL), np.zeros(L.N_CLOCK)
     wall[W_VX] = 1.0
     for _ in range(1000):
         wall_kick(wall, clock, params)

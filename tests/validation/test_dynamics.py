@@ -18,7 +18,7 @@ from scipy.special import beta
 
 from gouge_cli.studies.accuracy import closed_box
 from gouge_cli.config import build_config
-from gouge_cli.kernels.step import K_NEEDED_CAPACITY, K_REBUILDS, K_STEP, W_VX
+from gouge_cli.kernels.layout import K_NEEDED_CAPACITY, K_REBUILDS, K_STEP, W_VX
 from gouge_cli.model.timestep import contact_constants
 
 M_STAR = math.pi / 12.0                    # reduced mass of two d = 1 grains (rho = 1)

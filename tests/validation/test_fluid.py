@@ -10,7 +10,9 @@ import pytest
 
 from gouge_cli.config import FluidConfig
 from gouge_cli.model.fluid import FluidGrid
-from gouge_cli.kernels import fluid as kernels
+from gouge_cli.kernels import layout as L
+from gouge_cli.kernels import deposit as KD
+from gouge_cli.kernels import drag as KG
 
 BETA = 36.0
 ETA = 1.43e-7
@@ -61,7 +63,7 @@ def run_terzaghi(nz, solver, ratio=0.5, thickness=10.0, p0=1e-6):
     x, z, radius = lattice(nx, nz, h, z_bot, 0.15)
     v = np.zeros_like(x)
     grid = FluidGrid(nx, nz, nx * h, z_bot, z_top, x.size, 1e-5, BETA, ETA, solver=solver)
-    assert grid.init(x, z, v, v, radius, z_bot, z_top) == kernels.STATUS_OK
+    assert grid.init(x, z, v, v, radius, z_bot, z_top) == L.STATUS_OK
     np.testing.assert_allclose(grid.porosity, 0.15, rtol=0, atol=1e-12)
     diffusivity = grid.mean_diffusivity()
     grid.pressure[:] = p0
@@ -70,7 +72,7 @@ def run_terzaghi(nz, solver, ratio=0.5, thickness=10.0, p0=1e-6):
     out = {}
     for step in range(1, max(steps_per_target) + 1):
         status = grid.update(x, z, v, v, radius, z_bot, z_top, delta_T * thickness**2 / diffusivity)
-        assert status == kernels.STATUS_OK
+        assert status == L.STATUS_OK
         if step in steps_per_target:
             profile = grid.pressure[0] / p0
             out[steps_per_target[step]] = (profile.mean(), 0.5 * (profile[nz // 2 - 1] + profile[nz // 2]))
@@ -120,13 +122,13 @@ def affine_compaction(strain, n_steps, solver="implicit", permeability=1e-12, to
     grid = FluidGrid(10, 8, 20.0, z_bot0, z_top0, x.size, permeability, BETA, ETA, solver=solver)
     zero = np.zeros_like(x)
     vz = strain * z0 / total_time
-    assert grid.init(x, z0, zero, vz, radius, z_bot0, z_top0) == kernels.STATUS_OK
+    assert grid.init(x, z0, zero, vz, radius, z_bot0, z_top0) == L.STATUS_OK
     porosity0 = grid.porosity.copy()
     dt = total_time / n_steps
     for step in range(1, n_steps + 1):
         factor = 1.0 + strain * step / n_steps
         status = grid.update(x, z0 * factor, zero, vz, radius, z_bot0 * factor, z_top0 * factor, dt)
-        assert status == kernels.STATUS_OK
+        assert status == L.STATUS_OK
     return grid, porosity0
 
 
@@ -190,7 +192,7 @@ def test_drag_equals_minus_integral_of_uniform_gradient():
     x, z, radius = random_layer(width=width, z_bot=z_bot, z_top=z_top)
     v = np.zeros_like(x)
     grid = FluidGrid.from_config(FluidConfig(), width, z_bot, z_top, x.size)
-    assert grid.init(x, z, v, v, radius, z_bot, z_top) == kernels.STATUS_OK
+    assert grid.init(x, z, v, v, radius, z_bot, z_top) == L.STATUS_OK
     assert (grid.solid_fraction > 0).all()
     nx, nz = grid.nx, grid.nz
     dx, dz = grid.dx, grid.dz
@@ -199,21 +201,21 @@ def test_drag_equals_minus_integral_of_uniform_gradient():
     slope = 2.5e-5
     z_centres = (np.arange(nz) + 0.5) * dz
     pressure = np.tile(slope * z_centres, (nx, 1))
-    kernels.pressure_gradient(pressure, dx, dz, 0.0, slope * (z_top - z_bot), gx, gz)
+    KG.pressure_gradient(pressure, dx, dz, 0.0, slope * (z_top - z_bot), gx, gz)
     np.testing.assert_allclose(gz, slope, rtol=1e-12)
     assert np.abs(gx).max() == 0.0
     gx[:] = -0.7 * slope
     drag_x = np.empty(x.size)
     drag_z = np.empty(x.size)
     fx, fz = np.empty_like(gx), np.empty_like(gz)
-    kernels.drag_density(gx, gz, grid.solid_fraction, fx, fz)
-    kernels.grain_drag(x, z, radius, x.size, width, z_bot, z_top, fx, fz, drag_x, drag_z)
+    KG.drag_density(gx, gz, grid.solid_fraction, fx, fz)
+    KG.grain_drag(x, z, radius, x.size, width, z_bot, z_top, fx, fz, drag_x, drag_z)
     area = width * (z_top - z_bot)
     # sum_k a_k sum_c W_kc / s_c = sum_c dx dz: the total drag is -grad P times the domain area
     assert drag_z.sum() == pytest.approx(-slope * area, rel=1e-10)
     assert drag_x.sum() == pytest.approx(0.7 * slope * area, rel=1e-10)
     # the in-domain grain area, divided cell by cell by the solid fraction, is that area
-    in_domain = np.array([kernels.in_domain_area(zk, rk, z_bot, z_top) for zk, rk in zip(z, radius)])
+    in_domain = np.array([KD.in_domain_area(zk, rk, z_bot, z_top) for zk, rk in zip(z, radius)])
     assert in_domain.sum() == pytest.approx((grid.solid_fraction * dx * dz).sum(), rel=1e-12)
 
 
@@ -227,8 +229,8 @@ def test_drag_uniform_porosity_is_volume_over_solid_fraction():
     drag_x = np.empty(x.size)
     drag_z = np.empty(x.size)
     fx, fz = np.empty_like(gx), np.empty_like(gz)
-    kernels.drag_density(gx, gz, grid.solid_fraction, fx, fz)
-    kernels.grain_drag(x, z, radius, x.size, 20.0, 2.0, 18.0, fx, fz, drag_x, drag_z)
+    KG.drag_density(gx, gz, grid.solid_fraction, fx, fz)
+    KG.grain_drag(x, z, radius, x.size, 20.0, 2.0, 18.0, fx, fz, drag_x, drag_z)
     volume = np.pi * radius**2
     np.testing.assert_allclose(drag_z, -3e-6 * volume / (1.0 - 0.15), rtol=1e-12)
     assert drag_z.sum() == pytest.approx(-3e-6 * volume.sum() / 0.85, rel=1e-10)
@@ -248,7 +250,7 @@ def test_total_drag_of_solved_pressure_is_zero():
     vz = rng.normal(0, 1e-4, x.size)
     dt = 10.0
     status = grid.update(x + vx * dt, z + vz * dt, vx, vz, radius, z_bot, z_top, dt)
-    assert status == kernels.STATUS_OK
+    assert status == L.STATUS_OK
     assert np.abs(grid.pressure).max() > 0.0
     scale = np.abs(grid.drag_z).sum() + np.abs(grid.drag_x).sum()
     assert scale > 0.0
@@ -266,17 +268,17 @@ def test_uniform_pressure_gives_no_drag():
     pressure = np.full((grid.nx, grid.nz), 4e-5)
     gx = np.empty_like(pressure)
     gz = np.empty_like(pressure)
-    kernels.pressure_gradient(pressure, grid.dx, grid.dz, 4e-5, 4e-5, gx, gz)
+    KG.pressure_gradient(pressure, grid.dx, grid.dz, 4e-5, 4e-5, gx, gz)
     drag_x = np.ones(x.size)
     drag_z = np.ones(x.size)
     fx, fz = np.empty_like(gx), np.empty_like(gz)
-    kernels.drag_density(gx, gz, grid.solid_fraction, fx, fz)
-    kernels.grain_drag(x, z, radius, x.size, width, z_bot, z_top, fx, fz, drag_x, drag_z)
+    KG.drag_density(gx, gz, grid.solid_fraction, fx, fz)
+    KG.grain_drag(x, z, radius, x.size, width, z_bot, z_top, fx, fz, drag_x, drag_z)
     assert np.abs(drag_x).max() == 0.0
     assert np.abs(drag_z).max() == 0.0
     # frozen grains at P = 0: the fluid step leaves P = 0 and no drag
     for _ in range(3):
-        assert grid.update(x, z, v, v, radius, z_bot, z_top, 5.0) == kernels.STATUS_OK
+        assert grid.update(x, z, v, v, radius, z_bot, z_top, 5.0) == L.STATUS_OK
     assert np.abs(grid.pressure).max() == 0.0
     assert np.abs(grid.drag_x).max() == 0.0
     assert np.abs(grid.drag_z).max() == 0.0
@@ -304,7 +306,7 @@ def test_rigid_translation_generates_almost_no_pressure():
         grid = FluidGrid.from_config(FluidConfig(permeability=1e-12), 40.0, 0.0, 20.0, x0.size)
         grid.init(x0, z0, vx, vz, radius, 0.0, 20.0)
         for k in range(1, steps + 1):
-            assert grid.update(x0 + speed * dt * k, z0, vx, vz, radius, 0.0, 20.0, dt) == kernels.STATUS_OK
+            assert grid.update(x0 + speed * dt * k, z0, vx, vz, radius, 0.0, 20.0, dt) == L.STATUS_OK
         strain[steps] = np.abs(grid.pressure).max() * BETA * 0.15
     assert strain[100] < 5e-3
     assert strain[400] < strain[100] / 2.0

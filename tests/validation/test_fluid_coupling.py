@@ -11,7 +11,7 @@ import pytest
 from gouge_cli.io.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.config import build_config
 from gouge_cli.workflows.fork import branch_config
-from gouge_cli.kernels.step import K_REBUILDS
+from gouge_cli.kernels.layout import K_REBUILDS
 from gouge_cli.driver.simulation import Simulation
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}, "seed": 3,
@@ -145,8 +145,9 @@ sim.advance(200)
 row = sim.observe()
 assert sim.fluid is None and sim.drag[0].size == 0
 assert not any(k.startswith("pressure") for k in row)
-print("fluid modules:", sorted(m for m in sys.modules if m in ("gouge_cli.model.fluid", "gouge_cli.kernels.fluid",
-                                                                 "gouge_cli.kernels.coupled")))
+print("fluid modules:", sorted(m for m in sys.modules if m in ("gouge_cli.model.fluid", "gouge_cli.kernels.fluid_update",
+                                                                 "gouge_cli.kernels.coupled", "gouge_cli.kernels.deposit",
+                                                                 "gouge_cli.kernels.pressure", "gouge_cli.kernels.drag")))
 """
 
 

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from gouge_cli.config import build_config
+from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K
 from gouge_cli.driver.simulation import Simulation
 
@@ -53,7 +54,7 @@ def test_list_equals_brute_force(free_grains, single_thread, width):
     body = rng.choice([0, 0, 1, 2], n)   # free, bottom-wall, top-wall grains mixed: no stepping here
     sim = free_grains(x, z, radius, body=body, width=width)
     st = sim.state
-    assert brute_force_pairs(st, width, sim.params[K.SKIN]) == set(listed_pairs(st))
+    assert brute_force_pairs(st, width, sim.params[L.SKIN]) == set(listed_pairs(st))
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +68,7 @@ def compacted():
 
 def brute_force_forces(st, params, shear_of):
     """All-pairs numpy evaluation of hertz_mindlin; shear_of(i, j) -> history of the pair."""
-    width = params[K.WIDTH]
+    width = params[L.WIDTH]
     i, j, dx, dz, interacting = all_pairs(st, width)
     r = np.sqrt(dx * dx + dz * dz)      # as the kernel: xi = rsum - r amplifies round-off
     rsum = st.radius[i] + st.radius[j]
@@ -82,10 +83,10 @@ def brute_force_forces(st, params, shear_of):
     v_n = dvx * nx + dvz * nz
     arm_i, arm_j = st.radius[i] - 0.5 * xi, st.radius[j] - 0.5 * xi     # contact-point lever arms
     v_t = -dvx * nz + dvz * nx - (arm_i * st.spin[i] + arm_j * st.spin[j])
-    f_n = np.maximum(params[K.C_NORMAL] * root * xi - params[K.DAMPING] * m_ij * v_n, 0.0)
-    k_s = params[K.C_TANGENTIAL] * root
-    ds = np.array([shear_of(a, b) for a, b in zip(i, j)]) + v_t * params[K.DT]
-    limit = params[K.FRICTION] * f_n
+    f_n = np.maximum(params[L.C_NORMAL] * root * xi - params[L.DAMPING] * m_ij * v_n, 0.0)
+    k_s = params[L.C_TANGENTIAL] * root
+    ds = np.array([shear_of(a, b) for a, b in zip(i, j)]) + v_t * params[L.DT]
+    limit = params[L.FRICTION] * f_n
     f_s = np.clip(-k_s * ds, -limit, limit)
     fx, fz = f_n * nx - f_s * nz, f_n * nz + f_s * nx
     n = st.n
@@ -122,8 +123,8 @@ def test_forces_equal_brute_force(compacted, history):
     assert np.all(np.abs(st.torque - torque) <= 1e-12 * scale * st.radius + 1e-300)
     assert np.abs(st.force_x).max() > 1e-3 * scale.max()
     top = st.top
-    assert st.wall[K.W_FX] == pytest.approx(fx[top].sum(), rel=1e-12, abs=1e-12 * scale[top].sum())
-    assert st.wall[K.W_FZ] == pytest.approx(fz[top].sum(), rel=1e-12)
+    assert st.wall[L.W_FX] == pytest.approx(fx[top].sum(), rel=1e-12, abs=1e-12 * scale[top].sum())
+    assert st.wall[L.W_FZ] == pytest.approx(fz[top].sum(), rel=1e-12)
     # Newton's third law over the whole scene
     assert abs(st.force_x.sum()) < 1e-12 * scale.sum()
     assert abs(st.force_z.sum()) < 1e-12 * scale.sum()
@@ -135,20 +136,20 @@ def test_verlet_skin_rebuilds_rarely_and_misses_nothing(compacted):
     are all listed: no contact is ever missed between rebuilds."""
     sim = compacted
     st = sim.state
-    before = int(st.counters[K.K_REBUILDS])
+    before = int(st.counters[L.K_REBUILDS])
     checks = 0
-    while checks < 20 or (int(st.counters[K.K_REBUILDS]) - before < 2 and checks < 400):
+    while checks < 20 or (int(st.counters[L.K_REBUILDS]) - before < 2 and checks < 400):
         sim.advance(25)
         checks += 1
-        i, j, dx, dz, interacting = all_pairs(st, sim.params[K.WIDTH])
+        i, j, dx, dz, interacting = all_pairs(st, sim.params[L.WIDTH])
         touching = (np.hypot(dx, dz) < st.radius[i] + st.radius[j]) & interacting
         assert set(zip(i[touching].tolist(), j[touching].tolist())) <= set(listed_pairs(st))
-    rebuilds = int(st.counters[K.K_REBUILDS]) - before
+    rebuilds = int(st.counters[L.K_REBUILDS]) - before
     assert rebuilds >= 2 and 25 * checks / rebuilds > 10, (rebuilds, checks)   # rebuilt, but rarely
     # every grain is still within skin/2 of where the list was built
     moved = np.hypot(st.x - st.x_build, st.z - st.z_build)
     moved = np.minimum(moved, np.hypot(st.width - np.abs(st.x - st.x_build), st.z - st.z_build))
-    assert moved.max() <= 0.5 * sim.params[K.SKIN]
+    assert moved.max() <= 0.5 * sim.params[L.SKIN]
 
 
 def test_forces_bitwise_for_any_block_count(compacted):
@@ -157,18 +158,18 @@ def test_forces_bitwise_for_any_block_count(compacted):
     sim = compacted
     st, p = sim.state, sim.params.copy()
     shear0 = np.random.default_rng(3).normal(0.0, 1e-3, st.shear.shape)
-    st.pair_buf = np.zeros((16, K.N_BUF, K.PAIR_BUF))    # a chunk buffer per block (16 > threads here)
+    st.pair_buf = np.zeros((16, L.N_BUF, L.PAIR_BUF))    # a chunk buffer per block (16 > threads here)
     results = []
     for blocks in (1, 2, 3, 7, 16):
-        p[K.THREADS] = blocks
+        p[L.THREADS] = blocks
         st.shear[:] = shear0
         K.compute_forces(st.grains(), st.lists(), st.pairs(), st.wall, p, *sim.drag)
         results.append([a.copy() for a in (st.force_x, st.force_z, st.torque, st.shear, st.wall)])
         if blocks > 1:
-            bounds = st.layout[K.L_ROWS:K.L_ROWS + blocks + 1]
+            bounds = st.layout[L.L_ROWS:L.L_ROWS + blocks + 1]
             crossing = sum(int(np.sum(st.index[st.start[lo]:st.start[hi]] >= hi))
                            for lo, hi in zip(bounds[:-1], bounds[1:]))
-            assert crossing == st.layout[K.L_OUT + blocks] > 0      # the stored-pair path was exercised
+            assert crossing == st.layout[L.L_OUT + blocks] > 0      # the stored-pair path was exercised
             incoming = st.cross_in[:crossing]
             assert sorted(incoming.tolist(), key=lambda k: (st.index[k], k)) == incoming.tolist()
     for other in results[1:]:
@@ -191,7 +192,7 @@ def test_shear_history_survives_rebuild(compacted):
     st.x[moved] = (st.x[moved] + rng.uniform(-0.6, 0.6, moved.size)) % st.width
     assert K.rebuild(st.grains(), st.lists(), p, st.counters, *sim.drag)
     after = listed_pairs(st)
-    assert brute_force_pairs(st, st.width, p[K.SKIN]) == set(after)
+    assert brute_force_pairs(st, st.width, p[L.SKIN]) == set(after)
     kept = set(before) & set(after)
     new = set(after) - set(before)
     assert len(kept) > 0.9 * len(before) and new and set(before) - set(after)
@@ -208,7 +209,7 @@ def test_renumbering_moves_grains_with_their_pairs_and_history(compacted):
     to round-off (the sums run in a new order). Runs last: it re-numbers the shared packing."""
     sim = compacted
     st, p = sim.state, sim.params.copy()
-    p[K.SORT_EVERY] = 1
+    p[L.SORT_EVERY] = 1
     rng = np.random.default_rng(5)
     st.shear[:st.start[-1]] = rng.normal(0.0, 1e-3, st.start[-1])
     history = {tuple(sorted((int(st.id[i]), int(st.id[j])))): st.shear[k] for (i, j), k in listed_pairs(st).items()}
@@ -220,12 +221,12 @@ def test_renumbering_moves_grains_with_their_pairs_and_history(compacted):
     # scramble the numbering first (as long shear would), so that renumbering has work to do
     K.renumber(st.grains(), st.lists(), *sim.drag, 7.0)          # (strips of a narrower box: another order)
     assert not np.array_equal(st.id, np.arange(st.n))
-    st.counters[K.K_REBUILDS] = 0
+    st.counters[L.K_REBUILDS] = 0
     assert K.rebuild(st.grains(), st.lists(), p, st.counters, *sim.drag)
     assert sorted(st.id.tolist()) == list(range(st.n))
-    np.testing.assert_array_equal(st.top, np.flatnonzero(st.body == K.TOP))
+    np.testing.assert_array_equal(st.top, np.flatnonzero(st.body == L.TOP))
     pairs = listed_pairs(st)
-    assert brute_force_pairs(st, st.width, p[K.SKIN]) == set(pairs)
+    assert brute_force_pairs(st, st.width, p[L.SKIN]) == set(pairs)
     assert {tuple(sorted((int(st.id[i]), int(st.id[j])))): st.shear[k] for (i, j), k in pairs.items()} == history
     K.compute_forces(st.grains(), st.lists(), st.pairs(), st.wall, p, *sim.drag)
     for name in ("x", "z", "vx", "radius", "mass", "inv_inertia", "body"):

@@ -14,11 +14,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from gouge_cli.cli.main import EXIT_BAD_INPUT, EXIT_PHYSICS, app
+from gouge_cli.cli.main import app
+from gouge_cli.errors import EXIT_BAD_INPUT, EXIT_PHYSICS
 from gouge_cli.config import ConfigError, load_config
 from gouge_cli.driver.guards import guarded_run
-from gouge_cli.kernels import fluid as FK
-from gouge_cli.driver.simulation import PhysicsError, Simulation
+from gouge_cli.kernels import layout as L
+from gouge_cli.driver.simulation import Simulation
+from gouge_cli.errors import PhysicsError
 
 STRESS = Path(__file__).resolve().parents[2] / "configs" / "stress"
 
@@ -82,7 +84,7 @@ def check_high_permeability(sim, s):
 
 def check_high_permeability_explicit(sim, s):
     check_high_permeability(sim, s)
-    assert 100 < sim.fluid.state[FK.S_SUBSTEPS] < 10_000
+    assert 100 < sim.fluid.state[L.S_SUBSTEPS] < 10_000
 
 
 def check_low_permeability(sim, s):

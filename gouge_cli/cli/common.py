@@ -1,0 +1,50 @@
+"""What every `gouge` command shares: the consoles, `fail` (message + exit code) and `guarded`,
+the one place where exceptions become exit codes (via gouge_cli.errors.describe, which owns the
+codes: 0 done, 2 bad input, 3 physics failure or full disk, 130 interrupted)."""
+
+from __future__ import annotations
+
+import functools
+import sys
+
+import typer
+from rich.console import Console
+from rich.markup import escape
+
+from ..errors import EXIT_BAD_INPUT, InputError, PhysicsFailure, bounded, describe
+
+
+_WIDE = None if sys.stdout.isatty() else 200
+
+
+
+err = Console(stderr=True, soft_wrap=True, width=_WIDE)
+
+
+
+out = Console(soft_wrap=True, width=_WIDE)
+
+
+
+def fail(message: str, code: int = EXIT_BAD_INPUT):
+    err.print(f"[bold red]error:[/] {escape(bounded(message))}", highlight=False)
+    raise typer.Exit(code)
+
+
+
+def guarded(command):
+    """Run a command with the exit-code mapping of gouge_cli.errors.describe: bad input 2,
+    physics failure or a full disk 3, Ctrl-C 130, each with a short message naming the key or path."""
+
+    @functools.wraps(command)
+    def wrapper(*args, **kwargs):
+        try:
+            return command(*args, **kwargs)
+        except (InputError, PhysicsFailure, OSError, RuntimeError, KeyboardInterrupt) as e:
+            where = next((kwargs[k] for k in ("run_dir", "out_dir", "config", "run_dirs") if kwargs.get(k)), None)
+            described = describe(e, str(where) if where is not None else None)
+            if described is None:
+                raise
+            fail(*described)
+
+    return wrapper

@@ -1,0 +1,426 @@
+"""Grain -> grid deposit of the pore-fluid model: solid fraction s, solid velocity and grad s
+(thesis Appendix E, the solid fraction of Eq. 14; physics.md section 4).
+
+Grid
+----
+Cell-centred, ``nx`` cells across the periodic width ``Lx`` and ``nz`` cells
+between the wall planes ``z_bot`` and ``z_top``; cell (i, j) has its centre at
+``((i + 1/2) dx, z_bot + (j + 1/2) dz)`` with ``dx = Lx / nx`` and
+``dz = (z_top - z_bot) / nz``. The grid stretches with the layer: a cell keeps
+its index and moves affinely with the two wall planes, so pressure and solid
+fraction are attached to cells that follow the affine part of the solid motion.
+P = 0 on both wall planes (half a cell from the boundary centres), periodic in x.
+
+Deposit
+-------
+Grain k of radius R_k contributes its *in-domain area* a_k: pi R_k^2 minus the
+circular segments lying below ``z_bot`` or above ``z_top`` (a wall grain centred
+on its plane counts half). a_k goes to the four nearest cell centres with
+bilinear weights W_kc (periodic in x; in z a centre below the first or above the
+last cell centre puts all its z-weight on that boundary cell). Then
+s_c = sum_k a_k W_kc / (dx dz) and phi_c = 1 - s_c. The solid velocity is the
+a W weighted mean grain velocity *relative to the grid*,
+u_rel = v_k - w(z_k), w(z) = w_bot + (z - z_bot)/(z_top - z_bot) (w_top - w_bot),
+where w_bot, w_top are the plane velocities over the last fluid step. The
+gradient of s is taken from the same deposit, grad s_c = -sum_k a_k dW_kc/dx_k
+/ (dx dz) (the derivative of s_c with respect to the cell position), not by
+differencing s between cells: only this one cancels the change of s when the
+packing slides rigidly through the grid.
+
+Arrays and indices: :mod:`gouge_cli.kernels.layout` (CR_* corner rows, M_* moments).
+"""
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+from . import NUMBA_CACHE
+from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_DFZ, DEPOSIT_GROUPS, M_FLAG, M_G, M_S, M_U, M_W,
+                     N_MOMENTS, N_SUMMED)
+from .step import closed_velocity
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def segment_area(h, radius):
+    """Area of a disc beyond a line at signed distance h from its centre.
+
+    h > 0: the centre is on the kept side. Returns 0 for h >= radius and
+    pi radius^2 for h <= -radius; R^2 (a - sin a)/2 with a the subtended
+    angle, by its series for small a (no cancellation near tangency).
+    """
+    if h >= radius:
+        return 0.0
+    if h <= -radius:
+        return math.pi * radius * radius
+    angle = 2.0 * math.atan2(math.sqrt((radius - h) * (radius + h)), h)
+    if angle < 0.1:
+        a2 = angle * angle
+        angle_minus_sine = angle * a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0)))
+    else:
+        angle_minus_sine = angle - math.sin(angle)
+    return 0.5 * radius * radius * angle_minus_sine
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def in_domain_area(z, radius, z_bot, z_top):
+    """Area [d^2] of a disc (centre height z) between the planes z_bot and z_top.
+
+    The area above z_bot minus the area above z_top, each from the small
+    segment side so that a nearly tangent plane loses no precision.
+    """
+    full = math.pi * radius * radius
+    h = z - z_bot
+    above_bot = full - segment_area(h, radius) if h >= 0.0 else segment_area(-h, radius)
+    h = z_top - z
+    above_top = segment_area(h, radius) if h >= 0.0 else full - segment_area(-h, radius)
+    area = above_bot - above_top
+    if area < 0.0:
+        return 0.0
+    return area
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def grain_area(z, radius, z_bot, z_top):
+    """In-domain area [d^2] with a fast path for a grain clear of both planes."""
+    if z - z_bot >= radius and z_top - z >= radius:
+        return math.pi * radius * radius
+    return in_domain_area(z, radius, z_bot, z_top)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def cell_weights(x, z, inv_dx, inv_dz, z_bot, nx, nz):
+    """Bilinear (cloud-in-cell) weights of a point; inv_dx = 1/dx, inv_dz = 1/dz.
+
+    Returns (i0, i1, j0, fx, fz, slope_z): the point spreads (1-fx)(1-fz) on
+    (i0, j0), fx(1-fz) on (i1, j0), (1-fx) fz on (i0, j0+1) and fx fz on
+    (i1, j0+1). Periodic in x; in z a point outside the span of cell centres puts
+    all its weight on the nearest boundary cell, where the weights do not vary
+    with z: slope_z = d fz / dz is inv_dz inside and 0 there (a non-finite z
+    also lands there, so indices stay in range). Requires nz >= 2.
+    """
+    xi = x * inv_dx - 0.5
+    fi = math.floor(xi)
+    fx = xi - fi
+    i0 = int(fi)
+    if i0 < 0 or i0 >= nx:
+        i0 = i0 % nx
+    i1 = i0 + 1
+    if i1 == nx:
+        i1 = 0
+    zeta = (z - z_bot) * inv_dz - 0.5
+    fj = math.floor(zeta)
+    if fj >= nz - 1:
+        return i0, i1, nz - 2, fx, 1.0, 0.0
+    if fj >= 0.0:
+        return i0, i1, int(fj), fx, zeta - fj, inv_dz
+    return i0, i1, 0, fx, 0.0, 0.0
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def corner_shares(area, i0, i1, j0, fx, fz, nz):
+    """Flat indices of the four cells around a point and the area each receives (same weights
+    for the deposit and the drag): (c00, c10, c01, c11, a00, a10, a01, a11)."""
+    c00 = np.uint64(i0 * nz + j0)
+    c10 = np.uint64(i1 * nz + j0)
+    a0 = area * (1.0 - fz)
+    a1 = area * fz
+    return (c00, c10, c00 + np.uint64(1), c10 + np.uint64(1),
+            a0 * (1.0 - fx), a0 * fx, a1 * (1.0 - fx), a1 * fx)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
+            corners=None, partial=None, grain_kick=None):
+    """Solid fraction, its kernel-consistent gradient and the grid-relative solid velocity.
+
+    x, z, vx, vz, radius : float64[>= n] grain centres [d], velocities [v0], radii [d]
+    w_bot, w_top : plane velocities [v0] defining the grid velocity w(z)
+    s : float64[nx, nz] out, s_c = sum_k a_k G_kc / (dx dz) = 1 - phi [-]
+    ux, uz_rel : float64[nx, nz] out, a W weighted mean of vx and of vz - w(z_k)
+                 [v0] (0 in cells without solid)
+    grad_s_x, grad_s_z : float64[nx, nz] out, -sum_k a_k dW_kc/dx_k / (dx dz)
+                 [1/d]: the derivative of s_c with respect to the cell position,
+                 so that moving every grain by delta changes s by -delta . grad_s
+                 to first order (a rigid translation generates no source).
+    corners : float64[N_CORNERS, >= n] out (rows C_*), per grain: flat indices c00, c10 of its
+                 corner cells, the areas a00, a10, a01, a11 they receive (c00 = -1 for a
+                 grain outside the layer) and d fz/dz; reused by grain_drag_at for the drag.
+    partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS] scratch. With corners and partial,
+                 the fast form: a vectorised pass for the cells and areas (_corners_range),
+                 then each grain adds 14 moments to the record of its cell c00
+                 (_moments_range), in DEPOSIT_GROUPS fixed groups of grains (in parallel)
+                 summed in group order, and one pass over the cells collects the four shares
+                 (_expand): the same sums regrouped (equal to round-off), the same bits for
+                 any thread count. Without partial, the direct serial form, the definition:
+                 every grain adds to its four cells (the tests' reference).
+    grain_kick : (fast form only) None, or (owed, force_x, force_z, inv_mass, body, half, damp,
+                 wall_vx, wall_vz): grain forces, inverse masses and kinds, half a time step,
+                 the background damping and the top wall's velocity (kernels.step). If owed,
+                 each grain's velocity is taken after the second half kick it still owes
+                 (kernels.step.closed_velocity): the same bits as closing the step first,
+                 without a pass over the grains.
+    """
+    nx, nz = s.shape
+    size = nx * nz
+    if partial is None:
+        if grain_kick is not None:
+            raise ValueError("deposit: grain_kick needs the fast form (corners and partial)")
+        _deposit_range(x, z, vx, vz, radius, 0, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz,
+                       s.reshape(size), ux.reshape(size), uz_rel.reshape(size), grad_s_x.reshape(size),
+                       grad_s_z.reshape(size), corners)
+        _normalise(nx, nz, Lx, z_bot, z_top, s.reshape(size), ux.reshape(size), uz_rel.reshape(size),
+                   grad_s_x.reshape(size), grad_s_z.reshape(size))
+        return
+    _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
+                     corners, partial, grain_kick)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
+def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
+                     corners, partial, grain_kick):
+    """deposit's fast form: cells and moments in DEPOSIT_GROUPS fixed groups (in parallel), summed
+    in group order into partial[0], collected per cell."""
+    nx, nz = s.shape
+    size = nx * nz
+    for g in prange(DEPOSIT_GROUPS):
+        first = g * n // DEPOSIT_GROUPS
+        last = (g + 1) * n // DEPOSIT_GROUPS
+        _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
+        _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, partial[g], corners, nz, grain_kick)
+    total = partial[0]
+    for i in prange(nx):                 # the groups' columns (a group's grains are nearby), in group order
+        head = i * nz
+        for g in range(1, DEPOSIT_GROUPS):
+            if partial[g, head, M_FLAG] == 0.0:
+                continue                 # all +0.0 there, and x + (+0.0) is x (sums are never -0.0)
+            total[head, M_FLAG] = 1.0
+            for c in range(head, head + nz):
+                for m in range(N_SUMMED):
+                    total[c, m] += partial[g, c, m]
+    solid = s.reshape(size)
+    momentum_x = ux.reshape(size)
+    momentum_z = uz_rel.reshape(size)
+    slope_x = grad_s_x.reshape(size)
+    slope_z = grad_s_z.reshape(size)
+    _expand(total, nx, nz, nx / Lx, solid, momentum_x, momentum_z, slope_x, slope_z)
+    _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x, slope_z)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners):
+    """corners[:, first:last]: grain_area, cell_weights and corner_shares, the same values.
+    A loop without calls or branches (SIMD) for grains clear of both planes with x in
+    [dx/2 - Lx, Lx + dx/2) (one periodic wrap at most); it marks the others (d fz/dz = -1),
+    which then take the scalar path."""
+    inv_dx = nx / Lx
+    inv_dz = nz / (z_top - z_bot)
+    fnx = float(nx)
+    fnz = float(nz)
+    c00, c10, a00, a10, a01, a11, dfz = (corners[CR_00], corners[CR_10], corners[CR_A00], corners[CR_A10],
+                                         corners[CR_A01], corners[CR_A11], corners[CR_DFZ])
+    for kk in range(first, last):
+        k = np.uint64(kk)
+        zk = z[k]
+        r = radius[k]
+        area = math.pi * r * r
+        xi = x[k] * inv_dx - 0.5
+        fi = math.floor(xi)
+        fx = xi - fi
+        fi = fi + fnx if fi < 0.0 else fi
+        f1 = fi + 1.0
+        f1 = 0.0 if f1 == fnx else f1
+        zeta = (zk - z_bot) * inv_dz - 0.5
+        fj = math.floor(zeta)
+        inside = (fj >= 0.0) & (fj < fnz - 1.0)
+        top = fj >= fnz - 1.0
+        j0 = fj if inside else (fnz - 2.0 if top else 0.0)
+        fz = zeta - fj if inside else (1.0 if top else 0.0)
+        a0 = area * (1.0 - fz)
+        a1 = area * fz
+        c00[k] = fi * fnz + j0
+        c10[k] = f1 * fnz + j0
+        a00[k] = a0 * (1.0 - fx)
+        a10[k] = a0 * fx
+        a01[k] = a1 * (1.0 - fx)
+        a11[k] = a1 * fx
+        odd = (zk - z_bot < r) | (z_top - zk < r) | (fi < 0.0) | (fi >= fnx)
+        dfz[k] = -1.0 if odd else (inv_dz if inside else 0.0)
+    for k in range(first, last):
+        if dfz[k] >= 0.0:
+            continue
+        area = grain_area(z[k], radius[k], z_bot, z_top)
+        if area <= 0.0:
+            c00[k] = -1.0
+            dfz[k] = 0.0
+            continue
+        i0, i1, j0, fx, fz, slope = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
+        c00[k], c10[k], _, _, a00[k], a10[k], a01[k], a11[k] = corner_shares(area, i0, i1, j0, fx, fz, nz)
+        dfz[k] = slope
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz, grain_kick):
+    """moments (nx * nz, N_MOMENTS) of grains first:last from their corners, flagging (M_FLAG)
+    the grid columns they add to. Zeroes the columns flagged by the previous call first, so
+    the rest of moments must be zero on entry (a zeroed allocation keeps it so). grain_kick:
+    see deposit (velocities after the owed half kick when its first item is true)."""
+    if grain_kick is None:                  # (the arrays after False are not read)
+        _moments_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz,
+                      (False, vx, vz, vx, vx, 0.0, 0.0, 0.0, 0.0))
+    else:
+        _moments_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz, grain_kick)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _moments_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz, grain_kick):
+    """_moments_range with a grain_kick tuple."""
+    owed, force_x, force_z, inv_mass, body, half, damp, wall_vx, wall_vz = grain_kick
+    grid_strain_rate = (w_top - w_bot) / (z_top - z_bot)
+    for head in range(0, moments.shape[0], nz):
+        if moments[head, M_FLAG] != 0.0:
+            for c in range(head, head + nz):
+                for m in range(N_MOMENTS):
+                    moments[c, m] = 0.0
+    flat = moments.reshape(moments.size)
+    c00, a00s, a10s, a01s, a11s, dfz = (corners[CR_00], corners[CR_A00], corners[CR_A10], corners[CR_A01],
+                                         corners[CR_A11], corners[CR_DFZ])
+    inv_nz = 1.0 / nz
+    column = np.uint64(nz) * np.uint64(N_MOMENTS)
+    for kk in range(first, last):
+        k = np.uint64(kk)
+        if c00[k] < 0.0:
+            continue
+        r = np.uint64(c00[k]) * np.uint64(N_MOMENTS)
+        a00 = a00s[k]
+        a10 = a10s[k]
+        a01 = a01s[k]
+        a11 = a11s[k]
+        if owed:
+            u, v = closed_velocity(body[k], vx[k], vz[k], force_x[k] * inv_mass[k], force_z[k] * inv_mass[k],
+                                   half, damp, wall_vx, wall_vz)
+        else:
+            u = vx[k]
+            v = vz[k]
+        w = v - (w_bot + (z[k] - z_bot) * grid_strain_rate)
+        flat[r + M_S] += a00
+        flat[r + M_S + 1] += a10
+        flat[r + M_S + 2] += a01
+        flat[r + M_S + 3] += a11
+        flat[r + M_U] += a00 * u
+        flat[r + M_U + 1] += a10 * u
+        flat[r + M_U + 2] += a01 * u
+        flat[r + M_U + 3] += a11 * u
+        flat[r + M_W] += a00 * w
+        flat[r + M_W + 1] += a10 * w
+        flat[r + M_W + 2] += a01 * w
+        flat[r + M_W + 3] += a11 * w
+        flat[r + M_G] += (a00 + a01) * dfz[k]
+        flat[r + M_G + 1] += (a10 + a11) * dfz[k]
+        # column of c00 = i nz + j (j < nz): floor((i nz + j) / nz) with 1/nz rounded is still i
+        flat[np.uint64(math.floor(c00[k] * inv_nz)) * column + np.uint64(M_FLAG)] = 1.0
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _expand(moments, nx, nz, inv_dx, solid, momentum_x, momentum_z, slope_x, slope_z):
+    """Raw sums per cell (as _deposit_range leaves them) from the moment records of the grains
+    whose cell c00 is this one (share 00), the one to its left (10), below (01), left-below (11)."""
+    for i in range(nx):
+        il = i - 1 if i > 0 else nx - 1
+        for j in range(nz):
+            c = i * nz + j
+            own = moments[c]
+            left = moments[il * nz + j]
+            a = own[M_S] + left[M_S + 1]
+            b = own[M_U] + left[M_U + 1]
+            e = own[M_W] + left[M_W + 1]
+            gx = (own[M_S] + own[M_S + 1]) - (left[M_S] + left[M_S + 1])
+            gz = own[M_G] + left[M_G + 1]
+            if j > 0:
+                below = moments[c - 1]
+                corner = moments[il * nz + j - 1]
+                a += below[M_S + 2] + corner[M_S + 3]
+                b += below[M_U + 2] + corner[M_U + 3]
+                e += below[M_W + 2] + corner[M_W + 3]
+                gx += (below[M_S + 2] + below[M_S + 3]) - (corner[M_S + 2] + corner[M_S + 3])
+                gz -= below[M_G] + corner[M_G + 1]
+            solid[c] = a
+            momentum_x[c] = b
+            momentum_z[c] = e
+            slope_x[c] = gx * inv_dx
+            slope_z[c] = gz
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w_top, nx, nz,
+                   solid, momentum_x, momentum_z, slope_x, slope_z, corners):
+    """Raw sums of grains first:last into the flat (nx * nz,) grids (zeroed first), each grain
+    adding to its four cells (the direct form of the deposit)."""
+    thickness = z_top - z_bot
+    inv_dx = nx / Lx
+    inv_dz = nz / thickness
+    grid_strain_rate = (w_top - w_bot) / thickness
+    for c in range(nx * nz):
+        solid[c] = 0.0
+        momentum_x[c] = 0.0
+        momentum_z[c] = 0.0
+        slope_x[c] = 0.0
+        slope_z[c] = 0.0
+    for k in range(first, last):
+        area = grain_area(z[k], radius[k], z_bot, z_top)
+        if area <= 0.0:
+            if corners is not None:
+                corners[CR_00, k] = -1.0
+            continue
+        i0, i1, j0, fx, fz, dfz = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
+        c00, c10, c01, c11, a00, a10, a01, a11 = corner_shares(area, i0, i1, j0, fx, fz, nz)
+        if corners is not None:
+            corners[CR_00, k] = c00
+            corners[CR_10, k] = c10
+            corners[CR_A00, k] = a00
+            corners[CR_A10, k] = a10
+            corners[CR_A01, k] = a01
+            corners[CR_A11, k] = a11
+            corners[CR_DFZ, k] = dfz
+        a0 = area * (1.0 - fz)
+        a1 = area * fz
+        vxk = vx[k]
+        vzk = vz[k] - (w_bot + (z[k] - z_bot) * grid_strain_rate)
+        solid[c00] += a00
+        solid[c10] += a10
+        solid[c01] += a01
+        solid[c11] += a11
+        momentum_x[c00] += a00 * vxk
+        momentum_x[c10] += a10 * vxk
+        momentum_x[c01] += a01 * vxk
+        momentum_x[c11] += a11 * vxk
+        momentum_z[c00] += a00 * vzk
+        momentum_z[c10] += a10 * vzk
+        momentum_z[c01] += a01 * vzk
+        momentum_z[c11] += a11 * vzk
+        gx0 = a0 * inv_dx
+        gx1 = a1 * inv_dx
+        slope_x[c00] += gx0
+        slope_x[c10] -= gx0
+        slope_x[c01] += gx1
+        slope_x[c11] -= gx1
+        gz0 = area * (1.0 - fx) * dfz
+        gz1 = area * fx * dfz
+        slope_z[c00] += gz0
+        slope_z[c01] -= gz0
+        slope_z[c10] += gz1
+        slope_z[c11] -= gz1
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x, slope_z):
+    """Raw sums -> s, mean velocities and slopes (see deposit)."""
+    inv_area = nx / Lx * nz / (z_top - z_bot)
+    for c in range(nx * nz):
+        if solid[c] > 0.0:
+            momentum_x[c] /= solid[c]
+            momentum_z[c] /= solid[c]
+        solid[c] *= inv_area
+        slope_x[c] *= inv_area
+        slope_z[c] *= inv_area
+

@@ -1,0 +1,239 @@
+"""Pore-fluid kernels on the Goren pressure grid (thesis Eqs. 12, 14-20; physics.md section 4).
+
+Pure compute (``error_model="numpy"``: IEEE inf/NaN instead of ZeroDivisionError, so loops
+vectorise), no allocation: every array is allocated once by :class:`gouge_cli.model.fluid.FluidGrid`
+and passed in. Everything is dimensionless (d = E = rho_s = 1): lengths [d], time [t0],
+pressure [E], permeability [d^2], viscosity [E t0], compressibility [1/E].
+
+Grid
+----
+Cell-centred, ``nx`` cells across the periodic width ``Lx`` and ``nz`` cells
+between the wall planes ``z_bot`` and ``z_top``; cell (i, j) has its centre at
+``((i + 1/2) dx, z_bot + (j + 1/2) dz)`` with ``dx = Lx / nx`` and
+``dz = (z_top - z_bot) / nz``. The grid stretches with the layer: a cell keeps
+its index and moves affinely with the two wall planes, so pressure and solid
+fraction are attached to cells that follow the affine part of the solid motion.
+P = 0 on both wall planes (half a cell from the boundary centres), periodic in x.
+
+One fluid update = deposit (deposit.py) -> source and pressure solve (pressure.py, Eqs. 14-20)
+-> pressure gradient and grain drag (drag.py, Eqs. 12-13); this module orders them.
+
+Array layouts
+-------------
+params : float64[N_PARAMS]  indices P_* (kernels.layout) (see FluidGrid.from_config)
+state  : float64[N_STATE]   indices S_* (kernels.layout); S_Z_BOT/S_Z_TOP are the planes at
+                            the last update and must be checkpointed with P and s
+P, s, s_old, ux, uz, permeability, div_u : float64[nx, nz]
+work   : float64[N_WORK, nx, nz]   scratch, rows G_* of kernels.layout
+corners : float64[N_CORNERS, N]    per-grain deposit cells and areas (see deposit), reused for the drag
+partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit);
+                            allocate it zeroed: between calls it is zero outside the columns flagged
+                            in it (M_FLAG)
+drag_x, drag_z : float64[N]        force on each grain [E d^2]
+
+Status: STATUS_OK 0; STATUS_SOLVER 1 (CG not converged in max_iter: P is the
+last iterate; explicit sub-steps above max_substeps: P = P*, no diffusion; a
+non-positive dt_f or layer thickness: nothing done); STATUS_NONFINITE 2 (P not
+finite; drag is then set to zero). A status other than 0 should stop the run.
+"""
+
+import math
+
+from numba import njit
+
+from . import NUMBA_CACHE
+from .layout import (G_CAPACITY, G_DIAG, G_FX, G_FZ, G_GX, G_GZ, G_Q, G_RHS, G_SX, G_SZ, G_TB, G_TX, G_TZ, P_BETA, P_ETA,
+                     P_KAPPA_C, P_MAX_ITER, P_MAX_SUBSTEPS, P_PHI_MAX, P_PHI_MIN, P_SAFETY, P_SOLVER,
+                     P_TOL, SOLVER_EXPLICIT, STATUS_NONFINITE, STATUS_OK, STATUS_SOLVER, S_DT_MAX,
+                     S_ITERATIONS, S_RESIDUAL, S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
+from .deposit import deposit
+from .drag import drag_density, grain_drag_at, pressure_gradient
+from .pressure import (conjugate_gradient, explicit_bound, explicit_diffusion, face_conductances,
+                       permeability_field, undrained_source)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _all_finite(P):
+    nx, nz = P.shape
+    for i in range(nx):
+        for j in range(nz):
+            if not math.isfinite(P[i, j]):
+                return False
+    return True
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _finish_grid(Lx, z_bot, z_top, P, s, uz, work, w_bot, w_top):
+    """Absolute uz, finiteness check, gradient and drag density; returns a status."""
+    nx, nz = P.shape
+    dx = Lx / nx
+    dz = (z_top - z_bot) / nz
+    for i in range(nx):
+        for j in range(nz):
+            uz[i, j] += w_bot + (j + 0.5) / nz * (w_top - w_bot)
+    if not _all_finite(P):
+        return STATUS_NONFINITE
+    pressure_gradient(P, dx, dz, 0.0, 0.0, work[G_GX], work[G_GZ])
+    drag_density(work[G_GX], work[G_GZ], s, work[G_FX], work[G_FZ])
+    return STATUS_OK
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def fluid_drag(n, work, corners, drag_x, drag_z, status):
+    """Third part of fluid_update: the drag on every grain from the drag density, at the positions
+    of the deposit (corners); zero after a non-finite pressure (status STATUS_NONFINITE)."""
+    if status == STATUS_NONFINITE:
+        for k in range(n):
+            drag_x[k] = 0.0
+            drag_z[k] = 0.0
+        return
+    grain_drag_at(corners, n, work[G_FX], work[G_FZ], drag_x, drag_z)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
+               params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z):
+    """Deposit the initial solid fraction and set the drag of the current P.
+
+    Call once before the first fluid_update (and after a restart that does not
+    restore s and state). P is left as given (zeros for a fresh run).
+    Arguments as fluid_update without dt_f. Returns a status.
+    """
+    if not (z_top > z_bot):
+        return STATUS_SOLVER
+    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, 0.0, 0.0, s, ux, uz, work[G_SX], work[G_SZ], corners, partial)
+    nx, nz = s.shape
+    for i in range(nx):
+        for j in range(nz):
+            s_old[i, j] = s[i, j]
+            div_u[i, j] = 0.0
+    permeability_field(s, params[P_KAPPA_C], params[P_PHI_MIN], params[P_PHI_MAX],
+                       permeability, work[G_CAPACITY], params[P_BETA])
+    state[S_Z_BOT] = z_bot
+    state[S_Z_TOP] = z_top
+    state[S_ITERATIONS] = 0.0
+    state[S_RESIDUAL] = 0.0
+    state[S_SUBSTEPS] = 0.0
+    state[S_UPDATES] = 0.0
+    status = _finish_grid(Lx, z_bot, z_top, P, s, uz, work, 0.0, 0.0)
+    fluid_drag(n, work, corners, drag_x, drag_z, status)
+    return status
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
+                 params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z,
+                 grain_kick=None):
+    """Advance the pore pressure by one fluid step and set the drag on every grain.
+
+    x, z, vx, vz, radius : float64[>= n] grain state (x may lie outside [0, Lx))
+    n : number of grains;  Lx : periodic width [d]
+    z_bot, z_top : wall planes now [d] (mean z of the wall-grain centres)
+    dt_f : time since the last fluid update [t0]
+    params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial : see module doc
+        (FluidGrid.kernel_args() returns them in this order, followed by drag_x, drag_z)
+    drag_x, drag_z : out, float64[>= n] fluid force per grain [E d^2], to be added
+        to the contact forces until the next update.
+    grain_kick : None, or (owed, ...) as in deposit, when the grains may still owe their second
+        half kick: the deposit then takes the whole-step velocities without storing them.
+
+    Order: deposit s^{n+1} and u_rel (keeping each grain's corner cells and areas in
+    corners); exact undrained source -> P*; Carman-Kozeny permeability from s^{n+1};
+    conductances with (1 + beta P^n); implicit or explicit diffusion over dt_f; grad P and
+    drag. Returns a status (module doc). In three parts, fluid_begin (reads the grains),
+    fluid_solve (the grid only) and fluid_drag, so that a caller can move the grains while
+    the grid is solved.
+    """
+    status = fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old, ux, uz, work, corners,
+                         partial, grain_kick)
+    if status != STATUS_OK:
+        return status
+    status = fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, permeability, div_u, work)
+    fluid_drag(n, work, corners, drag_x, drag_z, status)
+    return status
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _plane_velocities(state, z_bot, z_top, dt_f):
+    """[v0] velocities of the bottom and top planes since the last update (grid velocity w(z))."""
+    return (z_bot - state[S_Z_BOT]) / dt_f, (z_top - state[S_Z_TOP]) / dt_f
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old, ux, uz, work, corners, partial,
+                grain_kick):
+    """First part of fluid_update (same arguments): s^n kept, deposit s^{n+1} and u_rel, the
+    only part that reads the grains' positions and velocities. Returns a status."""
+    if not (z_top - z_bot > 0.0 and dt_f > 0.0):
+        return STATUS_SOLVER
+    nx, nz = s.shape
+    w_bot, w_top = _plane_velocities(state, z_bot, z_top, dt_f)
+    for i in range(nx):
+        for j in range(nz):
+            s_old[i, j] = s[i, j]
+    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[G_SX], work[G_SZ], corners, partial,
+            grain_kick)
+    return STATUS_OK
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, permeability, div_u, work):
+    """Second part of fluid_update, on the grid only (serial): source, permeability, diffusion,
+    gradient and drag density. Returns a status."""
+    nx, nz = P.shape
+    dx = Lx / nx
+    dz = (z_top - z_bot) / nz
+    beta = params[P_BETA]
+    w_bot, w_top = _plane_velocities(state, z_bot, z_top, dt_f)
+    p_star = work[G_RHS]
+    undrained_source(P, s, s_old, ux, uz, work[G_SX], work[G_SZ], dt_f, beta,
+                     1.0 - params[P_PHI_MAX], 1.0 - params[P_PHI_MIN], p_star, div_u)
+    capacity = work[G_CAPACITY]
+    permeability_field(s, params[P_KAPPA_C], params[P_PHI_MIN], params[P_PHI_MAX],
+                       permeability, capacity, beta)
+    tx = work[G_TX]
+    tz = work[G_TZ]
+    tb = work[G_TB]
+    face_conductances(P, permeability, dx, dz, beta, params[P_ETA], tx, tz, tb)
+    dt_max = explicit_bound(capacity, tx, tz, tb)
+    state[S_DT_MAX] = dt_max
+    status = STATUS_OK
+    if params[P_SOLVER] == SOLVER_EXPLICIT:
+        substeps = max(1.0, math.ceil(dt_f / (params[P_SAFETY] * dt_max)))
+        for i in range(nx):
+            for j in range(nz):
+                P[i, j] = p_star[i, j]
+        state[S_ITERATIONS] = 0.0
+        state[S_SUBSTEPS] = substeps
+        if not substeps <= params[P_MAX_SUBSTEPS]:
+            status = STATUS_SOLVER
+        else:
+            n_sub = int(substeps)
+            explicit_diffusion(P, capacity, tx, tz, tb, dt_f / n_sub, n_sub, work[G_Q])
+    else:
+        diag = work[G_DIAG]
+        for i in range(nx):
+            im = (i - 1) % nx
+            for j in range(nz):
+                c = capacity[i, j] / dt_f
+                d = c + tx[i, j] + tx[im, j] + tb[i, j] + tz[i, j]
+                if j > 0:
+                    d += tz[i, j - 1]
+                diag[i, j] = d
+                P[i, j] = p_star[i, j]
+                p_star[i, j] *= c
+        iterations, residual, converged = conjugate_gradient(
+            P, p_star, diag, tx, tz, work, params[P_TOL], int(params[P_MAX_ITER]))
+        state[S_ITERATIONS] = iterations
+        state[S_RESIDUAL] = residual
+        state[S_SUBSTEPS] = 1.0
+        if not converged:
+            status = STATUS_SOLVER
+    state[S_Z_BOT] = z_bot
+    state[S_Z_TOP] = z_top
+    state[S_UPDATES] += 1.0
+    finish = _finish_grid(Lx, z_bot, z_top, P, s, uz, work, w_bot, w_top)
+    if finish != STATUS_OK:
+        return finish
+    return status
+

@@ -1,0 +1,132 @@
+"""Named indices of every array the kernels share with Python: the parameter vectors, the wall,
+clock and counter records, the pair-list layout, the fluid grid's parameters, state and work rows,
+the deposit's per-grain records, the observables, and the status codes the kernels return.
+
+Every index has one name with one meaning: the DEM step's vectors (params ``N_PARAMS``, wall
+``W_*``, clock ``C_*``, counters ``K_*``) and the fluid grid's (``P_*`` / ``N_FLUID_PARAMS``,
+state ``S_*`` / ``N_FLUID_STATE``, work rows ``G_*`` / ``N_GRID_WORK``, corner rows ``CR_*``)
+are distinct names. Shapes of the fluid arrays (kernels.fluid_update):
+
+params : float64[N_PARAMS]  indices P_* below (see FluidGrid.from_config)
+state  : float64[N_STATE]   indices S_* below; S_Z_BOT/S_Z_TOP are the planes at
+                            the last update and must be checkpointed with P and s
+P, s, s_old, ux, uz, permeability, div_u : float64[nx, nz]
+work   : float64[N_WORK, nx, nz]   scratch, indices W_* below
+corners : float64[N_CORNERS, N]    per-grain deposit cells and areas (see deposit), reused for the drag
+partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit);
+                            allocate it zeroed: between calls it is zero outside the columns flagged
+                            in it (M_FLAG)
+drag_x, drag_z : float64[N]        force on each grain [E d^2]
+
+Status: STATUS_OK 0; STATUS_SOLVER 1 (CG not converged in max_iter: P is the
+last iterate; explicit sub-steps above max_substeps: P = P*, no diffusion; a
+non-positive dt_f or layer thickness: nothing done); STATUS_NONFINITE 2 (P not
+finite; drag is then set to zero). A status other than 0 should stop the run.
+"""
+
+# ---- DEM step (kernels.step, kernels.coupled) --------------------------------------------------
+
+# params: float64 array
+DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \
+    WALL_MASS, BG_DAMPING, DRIVE, THREADS, SORT_EVERY = range(15)
+N_PARAMS = 15
+# body codes (state.body)
+FREE, BOTTOM, TOP = 0, 1, 2
+# wall: float64 array, the top body
+W_X, W_Z, W_VX, W_VZ, W_FX, W_FZ = range(6)
+N_WALL = 6
+# clock: float64 array (C_ANCHOR: spring stretch at the start of loading [d])
+C_TIME, C_DRIVE_TIME, C_ANCHOR = range(3)
+N_CLOCK = 3
+# counters: int64 array
+K_STEP, K_REBUILDS, K_PAIRS, K_NEED_REBUILD, K_NEEDED_CAPACITY, K_PHASE = range(6)
+N_COUNTERS = 6
+# counters[K_NEED_REBUILD]: 0, 1 (rebuild after the next drift) or MID_STEP (drifted, rebuild pending)
+MID_STEP = 2
+# phases (counters[K_PHASE])
+COMPACTION, LOADING = 0, 1
+# return codes of advance
+OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
+
+
+MAX_BLOCKS = 256    # most row blocks of the force pass
+# layout: int64 (N_LAYOUT,): row bounds of the blocks, offsets of each block's outgoing
+# and incoming crossing pairs, and the block count it was built for (-1: stale, rebuild it)
+L_ROWS, L_OUT, L_IN, L_BUILT = 0, MAX_BLOCKS + 1, 2 * MAX_BLOCKS + 2, 3 * MAX_BLOCKS + 3
+N_LAYOUT = 3 * MAX_BLOCKS + 4
+# positions in the lists tuple (state.LIST_FIELDS); cell_of is rebuild scratch, and between
+# rebuilds holds the per-grain flags of the skin check
+L_X_BUILD, L_Z_BUILD, L_CELL_OF = 6, 7, 12
+# pair_buf: float64 (blocks, N_BUF, PAIR_BUF), per-block chunk of pair inputs and results
+B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ, B_RI, B_RJ, B_MI, B_MJ, B_SHEAR, B_FX, B_FZ, B_TI, B_TJ = range(15)
+N_BUF = 15
+PAIR_BUF = 256
+
+# ---- fluid grid (kernels.deposit, pressure, drag, fluid_update; model.fluid.FluidGrid) ----------
+# fluid params: float64 (N_FLUID_PARAMS,); fluid state: float64 (N_FLUID_STATE,);
+# work: float64 (N_GRID_WORK, nx, nz) scratch rows
+P_KAPPA_C = 0        # Carman-Kozeny prefactor kappa_c [d^2]
+P_BETA = 1           # fluid compressibility beta [1/E]
+P_ETA = 2            # fluid viscosity eta [E t0]
+P_SOLVER = 3         # SOLVER_IMPLICIT or SOLVER_EXPLICIT
+P_SAFETY = 4         # fraction of the FTCS bound per explicit sub-step [-]
+P_TOL = 5            # CG relative residual tolerance [-]
+P_MAX_ITER = 6       # CG iteration limit
+P_PHI_MIN = 7        # porosity clamp, lower (0.05)
+P_PHI_MAX = 8        # porosity clamp, upper (0.9)
+P_MAX_SUBSTEPS = 9   # explicit sub-step limit per fluid update
+N_FLUID_PARAMS = 10
+
+SOLVER_IMPLICIT = 0
+SOLVER_EXPLICIT = 1
+
+S_Z_BOT = 0          # bottom plane at the last update [d]
+S_Z_TOP = 1          # top plane at the last update [d]
+S_ITERATIONS = 2     # CG iterations of the last update
+S_RESIDUAL = 3       # final relative residual of the last CG solve
+S_SUBSTEPS = 4       # explicit sub-steps of the last update
+S_DT_MAX = 5         # explicit stability bound of the last update [t0]
+S_UPDATES = 6        # number of fluid updates since fluid_init
+N_FLUID_STATE = 8
+
+G_TX = 0             # conductance of face (i+1/2, j)
+G_TZ = 1             # conductance of face (i, j+1/2), j < nz-1
+G_TB = 2             # conductance of the Dirichlet wall face of a boundary cell
+G_CAPACITY = 3       # beta phi
+G_DIAG = 4           # diagonal of C/dt + L
+G_RHS = 5            # right-hand side; P* before the solve
+G_R = 6              # CG residual
+G_Z = 7              # preconditioned residual
+G_P = 8              # CG direction
+G_Q = 9              # operator times direction; explicit scratch
+G_CP = 10            # tridiagonal factor: modified upper coefficient
+G_DINV = 11          # tridiagonal factor: inverse pivot
+G_GX = 12            # dP/dx at cell centres
+G_GZ = 13            # dP/dz at cell centres
+G_FX = 14            # drag per unit grain area, -(dP/dx)/s
+G_FZ = 15            # drag per unit grain area, -(dP/dz)/s
+G_SX = 16            # ds/dx consistent with the deposit
+G_SZ = 17            # ds/dz consistent with the deposit
+N_GRID_WORK = 18
+
+STATUS_OK = 0
+STATUS_SOLVER = 1
+STATUS_NONFINITE = 2
+
+DEPOSIT_GROUPS = 4     # grains deposit in this many fixed groups, summed in group order
+# corners rows: flat indices of a grain's cells (i0, j0) and (i1, j0), the areas its four cells
+# receive, and d fz / dz (see cell_weights)
+CR_00, CR_10, CR_A00, CR_A10, CR_A01, CR_A11, CR_DFZ = range(7)
+N_CORNERS = 7
+# moments a grain adds to the record of its cell c00: its four shares a00, a10, a01, a11, the
+# same times vx and times vz - w(z), and the z-slope terms (a00 + a01) dfz, (a10 + a11) dfz
+M_S, M_U, M_W, M_G = 0, 4, 8, 12
+M_FLAG = 15            # in the first record of a grid column: 1 if the group added to that column
+N_MOMENTS = 16         # (14 moments and the flag; padded so that a record is two cache lines)
+N_SUMMED = 14
+
+# ---- observables (kernels.measure) --------------------------------------------------------------
+# observables: float64 (N_OBSERVABLES,), the vector measure.observe fills
+KINETIC, COORDINATION, MAX_OVERLAP, POROSITY, THICKNESS, Z_BOTTOM, Z_TOP, BOTTOM_FX, BOTTOM_FZ, \
+    NONFINITE, CONTACT_ENERGY, WORST_I, WORST_J = range(13)
+N_OBSERVABLES = 13
