@@ -9,7 +9,6 @@ import sys
 from pathlib import Path
 
 import numba
-import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -34,29 +33,9 @@ def single_thread():
 
 @pytest.fixture
 def free_grains():
-    """Factory: a Simulation of free grains (body 0 unless given) with no top wall.
+    """Factory: gouge_cli.studies.analytic.free_grains (a Simulation of free grains, no top wall).
 
-    free_grains(x, z, radius, vx=..., vz=..., spin=..., body=..., width=100, dt=..., **material)
-    material keys go to config section ``material`` (damping defaults to 0); background
-    (compaction) damping is always 0 so the dynamics are Newtonian."""
-    from gouge_cli.config import build_config
-    from gouge_cli.driver.simulation import Simulation
-    from gouge_cli.model.state import State
+    free_grains(x, z, radius, vx=..., vz=..., spin=..., body=..., width=100, dt=..., **material)"""
+    from gouge_cli.studies.analytic import free_grains
 
-    def make(x, z, radius, *, vx=None, vz=None, spin=None, body=None, width=100.0, dt=0.01,
-             normal_stress=None, **material):
-        material.setdefault("damping", 0.0)
-        data = {"numerics": {"dt": dt}, "compaction": {"damping": 0.0}, "material": material}
-        if normal_stress is not None:
-            data["loading"] = {"normal_stress": normal_stress}
-        cfg = build_config(data)
-        x = np.asarray(x, float)
-        n = x.shape[0]
-        st = State(x=x.copy(), z=np.asarray(z, float).copy(), radius=np.asarray(radius, float).copy(),
-                   body=np.zeros(n) if body is None else np.asarray(body), density=1.0, width=width)
-        for name, value in (("vx", vx), ("vz", vz), ("spin", spin)):
-            if value is not None:
-                getattr(st, name)[:] = value
-        return Simulation(cfg, state=st)
-
-    return make
+    return free_grains

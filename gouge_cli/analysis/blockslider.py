@@ -26,6 +26,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from scipy.optimize import curve_fit
 
+from ..model.timestep import half_period
+
 __all__ = [
     "BlockSliderFit",
     "fit_block_slider",
@@ -48,7 +50,7 @@ _NAN = float("nan")
 
 def block_slider_duration(m: float, k: float) -> float:
     """Slip duration (half period) ``pi sqrt(m / k)``."""
-    return math.pi * math.sqrt(m / k)
+    return half_period(m, k)
 
 
 def block_slider_peak_velocity(dmu: float, sigma: float, k: float, m: float) -> float:

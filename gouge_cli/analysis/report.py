@@ -35,6 +35,7 @@ from .. import __version__
 from ..errors import InputError
 from ..driver.detector import WallSeries, detect_slips
 from ..io.filedoc import document_analysis, json_safe
+from ..model.timestep import half_period
 from .blockslider import BlockSliderFit, fit_block_slider
 from .friction import dynamic_friction, estimate_natural_frequency, mean_dynamic_friction
 from .pairs import PairDefinition, PairResult, campaign_summary, classify_pair
@@ -107,7 +108,7 @@ class RunInfo:
     @property
     def predicted_half_period(self) -> float:
         """Block-slider slip duration pi sqrt(m_b / k) (thesis Eq. 3) [t0]."""
-        return math.pi * math.sqrt(self.m_b / self.k)
+        return half_period(self.m_b, self.k)
 
     @property
     def is_fork(self) -> bool:

@@ -6,7 +6,6 @@ accuracy study alike."""
 
 from __future__ import annotations
 
-import math
 import signal
 import threading
 from contextlib import contextmanager
@@ -17,6 +16,7 @@ from ..io.checkpoint import snapshot_of, write_checkpoint
 from ..io.rundir import ensure_space
 from ..io.runfile import RunFile
 from ..kernels import layout as L
+from ..model.timestep import slip_duration
 from .guards import guard_callbacks
 from .progress import ProgressReport, SettleReport
 from ..errors import PhysicsError
@@ -95,7 +95,7 @@ def slip_frame_callbacks(sim: Simulation, writer: RunFile, recorder: SlipRecorde
     frames = sim.config.output.slip_frames
     if not frames or sim.wall_mass_per_length <= 0:
         return []
-    period = math.pi * math.sqrt(sim.wall_mass_per_length / sim.config.loading.spring_constant)
+    period = slip_duration(sim.config, sim.wall_mass_per_length)
     writer.set_attr("snapshot_dense_interval", period / frames)
 
     def dense(s: Simulation):

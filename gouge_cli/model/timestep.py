@@ -68,3 +68,13 @@ def choose_dt(config: Config) -> float:
             f"or leave it unset (default {config.numerics.dt_safety:g} x bound)"
         )
     return dt
+
+
+def half_period(m: float, k: float) -> float:
+    """Block-slider slip duration (half period) pi sqrt(m / k) (thesis Eq. 3) [t0]; m [rho_s d^2], k [E]."""
+    return math.pi * math.sqrt(m / k)
+
+
+def slip_duration(config: Config, wall_mass_per_length: float) -> float:
+    """Predicted slip duration pi sqrt(m_b / k) of a scene (thesis Eq. 3) [t0]."""
+    return half_period(wall_mass_per_length, config.loading.spring_constant)

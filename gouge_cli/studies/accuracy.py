@@ -47,16 +47,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from numba import njit
 
-from .. import NUMBA_CACHE
 from ..io.checkpoint import read_checkpoint
 from ..config import Config, ConfigError, build_config
 from ..driver.guards import Guards
 from ..kernels import layout as L
-from ..kernels import step as K
 from ..driver.simulation import Simulation
 from ..errors import PhysicsError
+from ..model.timestep import slip_duration
+from ..plots.accuracy import plot_work_precision
+from .analytic import AnalyticRow, block_slider_errors, energy_drift, head_on, hertz_reference, terzaghi_error
 
 DT_SAFETY = (0.8, 0.4, 0.2, 0.1, 0.05, 0.025)
 CELL_SIZE = (4.0, 3.0, 2.5, 2.0)
@@ -101,11 +101,6 @@ class LevelResult:
     series: dict = field(default_factory=dict)
     errors: dict = field(default_factory=dict)
     measures: dict = field(default_factory=dict)
-
-
-def slip_duration(config: Config, wall_mass_per_length: float) -> float:
-    """Block-slider slip duration pi sqrt(m_b / k) [t0]."""
-    return math.pi * math.sqrt(wall_mass_per_length / config.loading.spring_constant)
 
 
 def slip_end(path: Path, extra: dict) -> float | None:
@@ -384,205 +379,58 @@ def run_scene_ladders(start: Start, levels: list[Level], samples: int = 400, on_
 
 # ---- analytic cases ---------------------------------------------------------------------
 
-@dataclass
-class AnalyticRow:
-    case: str
-    parameter: str
-    value: float
-    wall_seconds: float
-    errors: dict
+
+# ---- outputs ----------------------------------------------------------------------------
+
+def write_csv(path: Path, scene: dict | None, analytic: dict | None):
+    """One row per level: kind, case/ladder, setting, value, run time, steps, status, errors."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    names = sorted({*SCENE_ERRORS, *(k for r in (analytic or {}).get("rows", []) for k in r.errors)})
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["kind", "case", "setting", "value", "dt", "wall_seconds", "steps", "status", "reference",
+                    "stress_drop", "peak_velocity", *[f"error_{n}" for n in names]])
+        for r in (scene or {}).get("results", []):
+            w.writerow(["scene", r.level.ladder, r.level.setting, f"{order_value(r):.6g}", f"{r.dt:.6g}",
+                        f"{r.wall_seconds:.4f}", r.steps, r.status, int(r.level.reference),
+                        *[f"{r.measures.get(k, float('nan')):.6g}" for k in ("stress_drop", "peak_velocity")],
+                        *[f"{r.errors[n]:.4g}" if n in r.errors else "" for n in names]])
+        for r in (analytic or {}).get("rows", []):
+            w.writerow(["analytic", r.case, f"{r.parameter}={r.value:.4g}", f"{r.value:.6g}", "",
+                        f"{r.wall_seconds:.4f}", "", "ok", 0, "", "",
+                        *[f"{r.errors[n]:.4g}" if n in r.errors else "" for n in names]])
 
 
-def _free_grains(x, z, radius, vx, dt, width=100.0, body=None, **material):
-    """Simulation of free grains without walls (compaction damping 0, given material)."""
-    from ..model.state import State
-
-    material.setdefault("damping", 0.0)
-    cfg = build_config({"numerics": {"dt": dt}, "compaction": {"damping": 0.0}, "material": material})
-    n = len(x)
-    st = State(x=np.asarray(x, float).copy(), z=np.asarray(z, float).copy(), radius=np.asarray(radius, float).copy(),
-               body=np.zeros(n) if body is None else np.asarray(body), density=1.0, width=width)
-    for name, value in vx.items():
-        getattr(st, name)[:] = value
-    return Simulation(cfg, state=st)
-
-
-def hertz_reference(v: float) -> tuple[float, float]:
-    """(contact time, max overlap) of two d = 1 grains meeting at relative speed v (gamma = 0)."""
-    from scipy.special import beta
-
-    from ..model.timestep import contact_constants
-
-    k = contact_constants(build_config({}))[0] * math.sqrt(0.5)
-    m_star = math.pi / 12.0
-    xi_max = (1.25 * m_star * v * v / k) ** 0.4
-    return 0.8 * beta(0.4, 0.5) * xi_max / v, xi_max
-
-
-def head_on(v: float, steps_per_contact: int) -> tuple[float, float]:
-    """(contact time, max overlap) of the engine's head-on collision at dt = t_c / steps."""
-    t_c, _ = hertz_reference(v)
-    dt = t_c / steps_per_contact
-    gap = 3.5 * v * dt
-    sim = _free_grains([10.0, 11.0 + gap], [0.0, 0.0], [0.5, 0.5], {"vx": [0.5 * v, -0.5 * v]}, dt)
-    st = sim.state
-    overlap = [1.0 - (st.x[1] - st.x[0])]
-    while not (overlap[-1] < 0.0 and max(overlap) > 0.0) and len(overlap) < 5 * steps_per_contact:
-        sim.advance(1)
-        overlap.append(1.0 - (st.x[1] - st.x[0]))
-    xi = np.array(overlap)
-    inside = np.flatnonzero(xi > 0.0)
-    a, b = inside[0], inside[-1]
-    t_in = (a - 1) + xi[a - 1] / (xi[a - 1] - xi[a])
-    t_out = b + xi[b] / (xi[b] - xi[b + 1])
-    return (t_out - t_in) * dt, float(xi.max())
+def run_accuracy(config: Config | None, out_dir: Path, checkpoint: Path | None = None, quick: bool = False,
+                 interval: float | None = None, samples: int = 400, analytic: bool = True, scene: bool = True,
+                 fluid: bool = True, on_level=None) -> dict:
+    """Scene ladders (from `checkpoint`, or from the first slip of `config`) and analytic ladders;
+    writes out_dir/accuracy.csv and out_dir/accuracy.png. Returns {"start", "scene", "analytic"}."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    start = scene_result = None
+    if scene:
+        if checkpoint is not None:
+            start = start_from_checkpoint(checkpoint, config, interval)
+        elif config is not None:
+            start = prepare_start(config, out_dir / "prepare", interval)
+        else:
+            raise ConfigError("give a config or a checkpoint for the scene ladders")
+        try:
+            Simulation(start.config, arrays=start.state)
+        except ValueError as err:
+            raise ConfigError(f"the config does not fit the checkpoint's packing: {err}") from None
+        levels = scene_ladders(start.config, quick, fluid)
+        scene_result = run_scene_ladders(start, levels, samples, on_level)
+    analytic_result = analytic_ladders(quick) if analytic else None
+    write_csv(out_dir / "accuracy.csv", scene_result, analytic_result)
+    plot_work_precision(out_dir / "accuracy.png", scene_result, analytic_result, SCENE_ERRORS)
+    return {"start": start, "scene": scene_result, "analytic": analytic_result}
 
 
-def closed_box(seed=3, width=10.0, nx=8, nz=12, spacing=1.25, v_rms=1e-2) -> dict:
-    """Free grains between two rows of fixed grains (one body: they never pair), periodic in x,
-    random velocities and spins: a closed conservative system (gamma = mu = 0)."""
-    rng = np.random.default_rng(seed)
-    xs = (np.arange(nx) + 0.5) * width / nx
-    gx, gz = np.meshgrid(xs, 1.25 + np.arange(nz) * spacing)
-    x_free = gx.ravel() + rng.uniform(-0.02, 0.02, gx.size)
-    z_free = gz.ravel()
-    r_free = rng.uniform(0.4, 0.6, x_free.size)
-    n_wall = int(width)
-    x_wall = (np.arange(n_wall) + 0.5) * width / n_wall
-    x = np.concatenate([x_wall, x_free, x_wall])
-    z = np.concatenate([np.zeros(n_wall), z_free, np.full(n_wall, z_free.max() + 1.25)])
-    radius = np.concatenate([np.full(n_wall, 0.5), r_free, np.full(n_wall, 0.5)])
-    body = np.concatenate([np.ones(n_wall), np.zeros(x_free.size), np.ones(n_wall)])
-    free = body == 0
-    velocities = {name: np.where(free, rng.normal(0.0, v_rms, x.size), 0.0) for name in ("vx", "vz", "spin")}
-    return dict(x=x, z=z, radius=radius, body=body, velocities=velocities, width=width)
-
-
-def total_energy(sim: Simulation) -> float:
-    """Kinetic + Hertz energy sum 0.4 c_n sqrt(R_ij) xi^2.5 over touching pairs (same-wall excluded)."""
-    st = sim.state
-    inertia = st.mass * (2.0 * st.radius) ** 2 / 10.0
-    kinetic = 0.5 * np.sum(st.mass * (st.vx ** 2 + st.vz ** 2) + inertia * st.spin ** 2)
-    i, j = np.triu_indices(st.n, 1)
-    dx = st.x[j] - st.x[i]
-    dx -= st.width * np.round(dx / st.width)
-    xi = st.radius[i] + st.radius[j] - np.hypot(dx, st.z[j] - st.z[i])
-    touching = (xi > 0.0) & ~((st.body[i] == st.body[j]) & (st.body[i] > 0))
-    r_ij = 2.0 * st.radius[i] * st.radius[j] / (st.radius[i] + st.radius[j])
-    return float(kinetic + np.sum(0.4 * sim.params[L.C_NORMAL] * np.sqrt(r_ij[touching]) * xi[touching] ** 2.5))
-
-
-def energy_drift(dt: float, duration: float = 200.0, sample: float = 0.32) -> tuple[float, float]:
-    """(largest |E - E0| / E0, seconds spent stepping) of the closed box (gamma = mu = 0) over
-    `duration` [t0]; the energy is evaluated every `sample` t0 (untimed)."""
-    box = closed_box()
-    sim = _free_grains(box["x"], box["z"], box["radius"], box["velocities"], dt, width=box["width"],
-                       body=box["body"], friction=0.0)
-    e0 = total_energy(sim)
-    worst, seconds = 0.0, 0.0
-    per = max(1, int(round(sample / dt)))
-    for _ in range(int(round(duration / (per * dt)))):
-        t0 = time.perf_counter()
-        sim.advance(per)
-        seconds += time.perf_counter() - t0
-        worst = max(worst, abs(total_energy(sim) - e0))
-    return worst / e0, seconds
-
-
-def terzaghi_error(nz: int, solver: str = "implicit", ratio: float = 0.5, thickness: float = 10.0) -> float:
-    """Largest error of mean and mid-plane P/P0 at T = 0.01, 0.05, 0.1, 0.2, 0.5 on a frozen
-    uniform packing (phi = 0.15, two discs per lattice site), fluid steps Delta T = ratio / nz^2."""
-    from ..model.fluid import FluidGrid
-
-    targets = (0.01, 0.05, 0.1, 0.2, 0.5)
-    m = np.arange(1, 8000, 2)
-
-    def mean(T):
-        return float(np.sum(8.0 / (m * np.pi) ** 2 * np.exp(-(m * np.pi) ** 2 * T)))
-
-    def mid(T):
-        return float(np.sum(4.0 / (m * np.pi) * np.sin(m * np.pi * 0.5) * np.exp(-(m * np.pi) ** 2 * T)))
-
-    nx, h, z_bot = 2, thickness / nz, 1.0
-    xs = (np.arange(nx) + 0.5) * h
-    zs = z_bot + (np.arange(nz) + 0.5) * h
-    X, Z = np.meshgrid(xs, zs, indexing="ij")
-    x, z = np.repeat(X.ravel(), 2), np.repeat(Z.ravel(), 2)
-    radius = np.full(x.size, h * np.sqrt(0.85 / (2.0 * np.pi)))
-    v = np.zeros_like(x)
-    grid = FluidGrid(nx, nz, nx * h, z_bot, z_bot + thickness, x.size, 1e-5, 36.0, 1.43e-7, solver=solver)
-    grid.init(x, z, v, v, radius, z_bot, z_bot + thickness)
-    diffusivity = grid.mean_diffusivity()
-    grid.pressure[:] = 1.0e-6
-    delta = ratio / nz ** 2
-    due = {round(T / delta): T for T in targets}
-    worst = 0.0
-    for step in range(1, max(due) + 1):
-        if grid.update(x, z, v, v, radius, z_bot, z_bot + thickness, delta * thickness ** 2 / diffusivity) != L.STATUS_OK:
-            return float("nan")
-        if step in due:
-            T = due[step]
-            profile = grid.pressure[0] / 1.0e-6
-            worst = max(worst, abs(profile.mean() - mean(T)),
-                        abs(0.5 * (profile[nz // 2 - 1] + profile[nz // 2]) - mid(T)))
-    return worst
-
-
-@njit(cache=NUMBA_CACHE)
-def _block_slip(wall, clock, params, mu_s, mu_d, nsteps, out):
-    """The top-wall integrator (kernels.step.wall_kick, _step's order) with imposed Coulomb
-    friction; out = (t start, t end, x start, x end, peak v) of the first complete slip.
-    Returns 1 if a slip completed."""
-    dt = params[L.DT]
-    length = params[L.WIDTH]
-    sigma = params[L.SIGMA]
-    sliding = False
-    peak = 0.0
-    for _ in range(nsteps):
-        K.wall_kick(wall, clock, params)
-        wall[L.W_X] += dt * wall[L.W_VX]
-        clock[L.C_TIME] += dt
-        clock[L.C_DRIVE_TIME] += dt
-        spring = params[L.SPRING] * length * (params[L.V_LOAD] * clock[L.C_DRIVE_TIME] - wall[L.W_X])
-        if sliding and wall[L.W_VX] <= 0.0:
-            out[1] = clock[L.C_TIME]
-            out[3] = wall[L.W_X]
-            out[4] = peak
-            return 1
-        if not sliding and spring > mu_s * sigma * length:
-            sliding = True
-            out[0] = clock[L.C_TIME]
-            out[2] = wall[L.W_X]
-        wall[L.W_FX] = -mu_d * sigma * length if sliding else -spring
-        wall[L.W_FZ] = sigma * length
-        K.wall_kick(wall, clock, params)
-        if sliding:
-            peak = max(peak, wall[L.W_VX])
-    return 0
-
-
-def block_slider_errors(dt: float, m=1.0, k=1e-2, sigma=1e-2, mu_s=0.6, mu_d=0.5, v_load=1e-5) -> dict:
-    """Relative errors of the first slip's duration, slip and peak velocity against the exact
-    solution with loading during the slip (see tests/validation/test_block_slider.py)."""
-    from scipy.optimize import brentq
-
-    p = np.zeros(L.N_PARAMS)
-    p[L.DT], p[L.WIDTH], p[L.SIGMA], p[L.SPRING], p[L.V_LOAD] = dt, 1.0, sigma, k, v_load
-    p[L.WALL_MASS], p[L.DRIVE] = m, 1.0
-    wall, clock, out = np.zeros(L.N_WALL), np.zeros(L.N_CLOCK), np.zeros(5)
-    t_end = (mu_s * sigma / k) / v_load + 3.0 * math.pi * math.sqrt(m / k)
-    if not _block_slip(wall, clock, p, mu_s, mu_d, int(t_end / dt), out):
-        return {"duration": float("nan"), "slip": float("nan"), "peak_velocity": float("nan")}
-    w, a = math.sqrt(k / m), (mu_s - mu_d) * sigma / k
-
-    def speed(th):
-        return w * a * math.sin(th) + v_load * (1.0 - math.cos(th))
-    end = brentq(speed, math.pi, 1.5 * math.pi, xtol=1e-15)
-    peak_th = brentq(lambda th: w * a * math.cos(th) + v_load * math.sin(th), 0.0, math.pi, xtol=1e-15)
-    exact = {"duration": end / w, "slip": a * (1.0 - math.cos(end)) + v_load * (end - math.sin(end)) / w,
-             "peak_velocity": speed(peak_th)}
-    got = {"duration": out[1] - out[0], "slip": out[3] - out[2], "peak_velocity": out[4]}
-    return {key: abs(got[key] - exact[key]) / exact[key] for key in exact}
+__all__ = ["Start", "Level", "LevelResult", "scene_ladders", "run_scene_ladders", "run_level", "level_errors",
+           "fit_order", "order_flag", "analytic_ladders", "run_accuracy", "prepare_start", "start_from_checkpoint"]
 
 
 def _timed(fn, *args):
@@ -621,120 +469,3 @@ def analytic_ladders(quick: bool = False) -> dict:
         orders[case] = {name: fit_order(values, [r.errors[name] for r in group]) for name in group[0].errors}
         flags[case] = {name: order_flag(values, [r.errors[name] for r in group]) for name in group[0].errors}
     return {"rows": rows, "orders": orders, "order_flags": flags}
-
-
-# ---- outputs ----------------------------------------------------------------------------
-
-def write_csv(path: Path, scene: dict | None, analytic: dict | None):
-    """One row per level: kind, case/ladder, setting, value, run time, steps, status, errors."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    names = sorted({*SCENE_ERRORS, *(k for r in (analytic or {}).get("rows", []) for k in r.errors)})
-    with path.open("w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["kind", "case", "setting", "value", "dt", "wall_seconds", "steps", "status", "reference",
-                    "stress_drop", "peak_velocity", *[f"error_{n}" for n in names]])
-        for r in (scene or {}).get("results", []):
-            w.writerow(["scene", r.level.ladder, r.level.setting, f"{order_value(r):.6g}", f"{r.dt:.6g}",
-                        f"{r.wall_seconds:.4f}", r.steps, r.status, int(r.level.reference),
-                        *[f"{r.measures.get(k, float('nan')):.6g}" for k in ("stress_drop", "peak_velocity")],
-                        *[f"{r.errors[n]:.4g}" if n in r.errors else "" for n in names]])
-        for r in (analytic or {}).get("rows", []):
-            w.writerow(["analytic", r.case, f"{r.parameter}={r.value:.4g}", f"{r.value:.6g}", "",
-                        f"{r.wall_seconds:.4f}", "", "ok", 0, "", "",
-                        *[f"{r.errors[n]:.4g}" if n in r.errors else "" for n in names]])
-
-
-def plot_work_precision(path: Path, scene: dict | None, analytic: dict | None):
-    """Error vs run time (log-log), one panel per ladder and per analytic case."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import FuncFormatter, LogLocator
-
-    panels = []
-    for r in (scene or {}).get("results", []):
-        if r.level.ladder not in panels:
-            panels.append(r.level.ladder)
-    cases = list(dict.fromkeys(r.case for r in (analytic or {}).get("rows", [])))
-    total = len(panels) + len(cases)
-    if total == 0:
-        return
-    cols = min(3, total)
-    rows = math.ceil(total / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(5 * cols, 4 * rows), squeeze=False)
-    flat = list(axes.ravel())
-    for ax, ladder in zip(flat, panels):
-        group = [r for r in scene["results"] if r.level.ladder == ladder and r.errors]
-        for name in SCENE_ERRORS:
-            pts = [(r.wall_seconds, r.errors[name], r.level.setting) for r in group
-                   if r.errors.get(name, 0) > 0 and math.isfinite(r.errors[name]) and r.wall_seconds > 0]
-            if pts:
-                ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=name)
-                for p in pts:
-                    ax.annotate(p[2].split("=")[-1], (p[0], p[1]), fontsize=7, alpha=0.7)
-        ax.set_title(f"scene: {ladder}")
-    for ax, case in zip(flat[len(panels):], cases):
-        group = [r for r in analytic["rows"] if r.case == case]
-        for name in group[0].errors:
-            pts = [(r.wall_seconds, r.errors[name], r.value) for r in group
-                   if r.errors[name] > 0 and math.isfinite(r.errors[name]) and r.wall_seconds > 0]
-            if pts:
-                ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=name)
-                for p in pts:
-                    ax.annotate(f"{p[2]:.3g}", (p[0], p[1]), fontsize=7, alpha=0.7)
-        ax.set_title(f"analytic: {case} ({group[0].parameter})")
-    for ax in flat[:total]:
-        if not ax.lines:                          # every error exactly 0 (or no timing): nothing to draw
-            ax.text(0.5, 0.5, "errors all zero", ha="center", va="center", transform=ax.transAxes)
-            continue
-        lo, hi = ax.get_xlim()
-        if hi < 3.0 * lo:                        # at least one 1, 2 or 5 x 10^k inside: a labelled tick
-            centre = math.sqrt(lo * hi)
-            ax.set_xlim(centre / 1.8, centre * 1.8)
-        ax.xaxis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 5.0)))
-        ax.xaxis.set_minor_formatter(FuncFormatter(lambda value, _: f"{value:.2g}"))
-        ax.set_xlabel("run time [s]")
-        ax.set_ylabel("relative error")
-        ax.grid(True, which="both", alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=8)
-    for ax in flat[total:]:
-        ax.axis("off")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def run_accuracy(config: Config | None, out_dir: Path, checkpoint: Path | None = None, quick: bool = False,
-                 interval: float | None = None, samples: int = 400, analytic: bool = True, scene: bool = True,
-                 fluid: bool = True, on_level=None) -> dict:
-    """Scene ladders (from `checkpoint`, or from the first slip of `config`) and analytic ladders;
-    writes out_dir/accuracy.csv and out_dir/accuracy.png. Returns {"start", "scene", "analytic"}."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    start = scene_result = None
-    if scene:
-        if checkpoint is not None:
-            start = start_from_checkpoint(checkpoint, config, interval)
-        elif config is not None:
-            start = prepare_start(config, out_dir / "prepare", interval)
-        else:
-            raise ConfigError("give a config or a checkpoint for the scene ladders")
-        try:
-            Simulation(start.config, arrays=start.state)
-        except ValueError as err:
-            raise ConfigError(f"the config does not fit the checkpoint's packing: {err}") from None
-        levels = scene_ladders(start.config, quick, fluid)
-        scene_result = run_scene_ladders(start, levels, samples, on_level)
-    analytic_result = analytic_ladders(quick) if analytic else None
-    write_csv(out_dir / "accuracy.csv", scene_result, analytic_result)
-    plot_work_precision(out_dir / "accuracy.png", scene_result, analytic_result)
-    return {"start": start, "scene": scene_result, "analytic": analytic_result}
-
-
-__all__ = ["Start", "Level", "LevelResult", "scene_ladders", "run_scene_ladders", "run_level", "level_errors",
-           "fit_order", "order_flag", "analytic_ladders", "run_accuracy", "prepare_start", "start_from_checkpoint"]

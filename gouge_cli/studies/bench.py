@@ -35,12 +35,11 @@ import numpy as np
 
 from .. import __version__
 from ..io import provenance
-from .accuracy import slip_duration
 from ..config import build_config, find_config, load_config
 from ..kernels import layout as L
 from ..kernels import step as K
 from ..driver.simulation import Simulation
-from ..model.timestep import choose_dt
+from ..model.timestep import choose_dt, slip_duration
 
 CACHE = Path("runs/bench/cache")
 DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "kernels/reorder.py", "model/packing.py",

@@ -56,7 +56,8 @@ def test_start_moves_up_to_the_capped_lead(start, tmp_path):
 
     import h5py
 
-    from gouge_cli.studies.accuracy import MAX_LEAD_SLIPS, slip_duration, start_from_checkpoint
+    from gouge_cli.model.timestep import slip_duration
+    from gouge_cli.studies.accuracy import MAX_LEAD_SLIPS, start_from_checkpoint
     from gouge_cli.io.checkpoint import read_checkpoint
     from gouge_cli.driver.simulation import Simulation
     ck = read_checkpoint(start.source)

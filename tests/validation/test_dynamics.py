@@ -16,7 +16,7 @@ import pytest
 from scipy.integrate import quad, solve_ivp
 from scipy.special import beta
 
-from gouge_cli.studies.accuracy import closed_box
+from gouge_cli.studies.analytic import closed_box
 from gouge_cli.config import build_config
 from gouge_cli.kernels.layout import K_NEEDED_CAPACITY, K_REBUILDS, K_STEP, W_VX
 from gouge_cli.model.timestep import contact_constants
@@ -142,7 +142,7 @@ def test_restitution_at_physics_md_speed():
 # ---- energy: many grains, gamma = 0, mu = 0 ------------------------------------------------
 
 def _closed_box():
-    """gouge_cli.studies.accuracy.closed_box (free grains closed in z by two rows of fixed grains, body 1
+    """gouge_cli.studies.analytic.closed_box (free grains closed in z by two rows of fixed grains, body 1
     both: they never pair, never move, do no work) with its velocities as keyword arrays."""
     box = closed_box()
     box.update(box.pop("velocities"))
