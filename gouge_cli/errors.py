@@ -104,3 +104,27 @@ class PhysicsError(PhysicsFailure):
         self.cause, self.fix, self.time = cause, fix, time
         at = f" at t = {time:.6g} t0" if time is not None else ""
         super().__init__(f"{cause}{at}. {fix}")
+
+
+class AnalysisError(InputError):
+    """A run cannot be analysed as asked; the message says why and what to do."""
+
+
+
+class NotARunError(AnalysisError):
+    """The path is not a gouge run directory (no readable run.h5 with series)."""
+
+
+
+class RunStillRunningError(AnalysisError):
+    """The run or fork file still has status 'running'."""
+
+
+
+class NoSlipsError(AnalysisError):
+    """The run has no slip events to analyse."""
+
+
+
+class SlipNotFoundError(AnalysisError):
+    """No slip with the requested number."""

@@ -12,8 +12,10 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .report import (PAIR_COLUMNS, ForkPair, RunReader, _write_csv, catalog_table, classify_fork, read_catalog,
-                     summary_statistics)
+from .catalog import catalog_table, read_catalog, summary_statistics
+from .forkpairs import classify_fork, ForkPair, PAIR_COLUMNS
+from .report import _write_csv
+from ..io.runfile import RunReader
 
 PHASE_COLUMNS = ("x", "y", "n_pairs", "n_unclassified", "n_complex", "n_type_I", "n_type_II", "frac_complex",
                  "frac_type_II")

@@ -33,6 +33,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 import numpy as np
 
 from .blockslider import BlockSliderFit, fit_block_slider
+from ..config import SLIP_END_FACTOR, SLIP_START_FACTOR
 from ..driver.detector import Slip, WallSeries, detect_slips
 
 __all__ = ["PairDefinition", "PairResult", "classify_pair", "complexity_criteria", "campaign_summary",
@@ -59,8 +60,8 @@ class PairDefinition:
 
     main: str = "first"
     strength_tol: float = 1e-3
-    start_factor: float = 10.0
-    end_factor: float = 2.0
+    start_factor: float = SLIP_START_FACTOR
+    end_factor: float = SLIP_END_FACTOR
     min_duration: float = 0.0
     min_slip: float = 0.0
     merge_gap: float = 0.0
@@ -168,7 +169,7 @@ def complexity_criteria(
     fit: BlockSliderFit | None,
     V_s: float,
     *,
-    start_factor: float = 10.0,
+    start_factor: float = SLIP_START_FACTOR,
     max_subevents: int = 1,
     restart_factor: float | None = None,
     creep_low_factor: float = 0.5,

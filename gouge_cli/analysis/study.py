@@ -13,7 +13,9 @@ import statistics
 
 import numpy as np
 
-from .report import ForkPair, RunReader, fit_slip, read_catalog
+from .catalog import fit_slip, read_catalog
+from .forkpairs import ForkPair
+from ..io.runfile import RunReader
 
 __all__ = ["STUDY_COLUMNS", "THESIS", "TRANSIENT_TOL", "DURATION_TOL", "GOOD_R2",
            "transient_slips", "study_rows", "study_summary", "summary_lines"]

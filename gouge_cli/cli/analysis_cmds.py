@@ -113,7 +113,9 @@ def register(app: typer.Typer) -> None:
 
         Writes RUN/analysis/{catalog,fits,pairs}.csv and summary.json, and /analysis in run.h5.
         """
-        from ..analysis.report import AnalysisError, analyze_run, campaign, write_analysis
+        from ..analysis.forkpairs import campaign
+        from ..analysis.report import analyze_run, write_analysis
+        from ..errors import AnalysisError
         from ..errors import describe_os_error
         from ..errors import EXIT_BAD_INPUT
         from .common import err, fail, out

@@ -14,7 +14,7 @@ import typer
 
 def _branches(run_dir: Path, fork: Optional[str]) -> list[Path]:
     """The run directory, or with --fork the branch directories it names under RUN/forks."""
-    from ..analysis.report import NotARunError
+    from ..errors import NotARunError
 
     if fork is None:
         return [run_dir]
@@ -44,7 +44,7 @@ def register(app: typer.Typer) -> None:
     ):
         """Write a run's (or fork branch's) snapshots as one time-dependent VTKHDF file for ParaView:
         grains, contacts (normal and tangential force), walls, pressure grid; time in t0 since loading began."""
-        from ..analysis.report import AnalysisError
+        from ..errors import AnalysisError
         from ..export.vtkhdf import export_run
         from .common import fail, out as console
 
@@ -75,7 +75,7 @@ def register(app: typer.Typer) -> None:
     ):
         """MP4 of one slip, drained and undrained side by side from the same packing: force chains,
         pore pressure P/sigma on a fixed colour scale, time since onset, v_w/V_s with a moving marker."""
-        from ..analysis.report import AnalysisError
+        from ..errors import AnalysisError
         from ..plots.movie import make_movie
         from .common import fail, out as console
 
@@ -92,7 +92,8 @@ _CLOCK_KEYS = ("onset_time", "end_time", "peak_time", "checkpoint_time")
 def catalog_since_loading(run_dir: Path, slip_catalog) -> tuple[list[dict], float]:
     """The run's slip catalog (``slip_catalog(run_dir)``) with every time in t0 since loading
     began and NaN as None (valid JSON); returns (catalog, the clock at which loading began)."""
-    from ..analysis.report import AnalysisError, RunReader
+    from ..errors import AnalysisError
+    from ..io.runfile import RunReader
     from ..workflows.run import RunDirError
     from ..io.filedoc import json_safe
 

@@ -25,7 +25,7 @@ def register(app: typer.Typer) -> None:
         quiet: bool = typer.Option(False, "--quiet"),
     ):
         """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
-        from ..analysis.report import AnalysisError
+        from ..errors import AnalysisError
         from ..analysis.study import STUDY_COLUMNS, summary_lines
         from ..io.checkpoint import CheckpointError
         from ..config import ConfigError

@@ -44,6 +44,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..config import SLIP_END_FACTOR, SLIP_START_FACTOR
+
 __all__ = [
     "SubEvent",
     "Slip",
@@ -225,8 +227,8 @@ def detect_slips(
     t,
     v_wall,
     V_s: float,
-    start_factor: float = 10.0,
-    end_factor: float = 2.0,
+    start_factor: float = SLIP_START_FACTOR,
+    end_factor: float = SLIP_END_FACTOR,
     min_duration: float = 0.0,
     min_slip: float = 0.0,
     merge_gap: float = 0.0,
@@ -331,8 +333,8 @@ class SlipDetector:
     def __init__(
         self,
         V_s: float,
-        start_factor: float = 10.0,
-        end_factor: float = 2.0,
+        start_factor: float = SLIP_START_FACTOR,
+        end_factor: float = SLIP_END_FACTOR,
         min_duration: float = 0.0,
         min_slip: float = 0.0,
         merge_gap: float = 0.0,

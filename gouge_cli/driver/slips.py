@@ -22,7 +22,6 @@ import numpy as np
 from ..io.checkpoint import Checkpoint, snapshot_of, write_checkpoint
 from ..config import Config
 from .detector import Slip, SlipDetector
-from ..io.filedoc import document_slip
 from ..kernels.layout import W_VX
 
 
@@ -157,10 +156,4 @@ class SlipRecorder:
             entry["checkpoint_time"] = self.pending.time
         self.slips.append(entry)
         if self.run_file is not None:
-            group = self.run_file.h5.require_group("slips").create_group(f"{self.count:03d}")
-            for key, value in entry.items():
-                group.attrs[key] = value
-            group.create_dataset("subevent_time", data=np.array([s["time"] for s in subevents], float))
-            group.create_dataset("subevent_velocity", data=np.array([s["velocity"] for s in subevents], float))
-            document_slip(group)
-            self.run_file.h5.flush()
+            self.run_file.add_slip(self.count, entry, subevents)

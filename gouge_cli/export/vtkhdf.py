@@ -44,7 +44,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..analysis.report import AnalysisError, RunReader
+from ..errors import AnalysisError
+from ..io.runfile import RunReader
 from ..io.filedoc import BODY_CODES, TIME_ORIGIN
 
 VERSION = (2, 2)

@@ -1,4 +1,7 @@
-"""HDF5 run file: self-describing time series, grain snapshots and provenance.
+"""The run file ``run.h5``: the only code that writes or reads it (RunFile writes while a run goes
+on, add_slip its slip catalog, write_analysis_tables the tables of `gouge analyze`; RunReader,
+read_slips and slip_catalog read it). Self-describing time series, grain snapshots, slips,
+analysis tables and provenance.
 
 Layout of ``run.h5``::
 
@@ -11,6 +14,14 @@ Layout of ``run.h5``::
                  attrs time, load_time, step; optional pressure/porosity [nx, nz] fields when the
                  scene has fluid (attrs origin, spacing, axis_order); grains in their original
                  (packing) order, contact_i/j in those numbers
+    /slips/NNN   one group per slip recorded while running (driver.slips.SlipRecorder), NNN from 001:
+                 attrs = driver.detector.Slip fields (onset_time, end_time, duration, slip,
+                 peak_velocity, stress drop, ...) plus number, deborah, checkpoint (path of
+                 checkpoints/slip_NNN.h5 or ""), checkpoint_time; datasets subevent_time [t0],
+                 subevent_velocity [v0] (S,)
+    /analysis    written by `gouge analyze` (replaced on each call): attrs created, version, notch,
+                 summary (JSON); groups catalog, fits[, pairs], one dataset per column
+                 (analysis.catalog CATALOG_COLUMNS / FIT_COLUMNS, analysis.forkpairs PAIR_COLUMNS)
     Every dataset has unit and description attributes; attribute_units (JSON) documents the
     attributes of each group (gouge_cli.io.filedoc).
 
@@ -20,17 +31,24 @@ most the rows since the last flush and never corrupts earlier ones.
 
 from __future__ import annotations
 
+import bisect
 import json
+import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
 import numpy as np
+import yaml
 
 from .. import __version__
 from . import provenance
-from ..config import Config, dump_config
-from .filedoc import SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, document_run_file, grid_geometry
+from ..config import SLIP_END_FACTOR, SLIP_START_FACTOR, Config, dump_config
+from ..errors import NotARunError, RunStillRunningError
+from ..model.timestep import half_period
+from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, document_analysis, document_run_file,
+                      document_slip, grid_geometry)
 from ..kernels import layout as L
 from ..kernels import measure as M
 from .rundir import open_run_file
@@ -162,6 +180,17 @@ class RunFile:
         describe_attributes(grp, SNAPSHOT_ATTRS)
         self.h5.flush()
 
+    def add_slip(self, number: int, entry: dict, subevents: list[dict]):
+        """Write slip `number` as /slips/NNN: `entry` as attributes, subevent_time and
+        subevent_velocity (S,) datasets [t0, v0]; flushed at once."""
+        group = self.h5.require_group("slips").create_group(f"{number:03d}")
+        for key, value in entry.items():
+            group.attrs[key] = value
+        group.create_dataset("subevent_time", data=np.array([s["time"] for s in subevents], float))
+        group.create_dataset("subevent_velocity", data=np.array([s["velocity"] for s in subevents], float))
+        document_slip(group)
+        self.h5.flush()
+
     def set_attr(self, key: str, value):
         self.h5.attrs[key] = value
 
@@ -186,15 +215,253 @@ def read_series(path: Path) -> dict[str, np.ndarray]:
 
 
 def slip_catalog(run_dir: Path) -> list[dict]:
-    """The run's slip catalog (one dict of attributes per slip, in order)."""
+    """The run's slip catalog (one dict of attributes per slip, in order; [] if none)."""
     with open_run_file(Path(run_dir) / "run.h5") as h5:
-        if "slips" not in h5:
-            return []
-        out = []
-        for name in sorted(h5["slips"]):
-            g = h5["slips"][name]
-            entry = {k: (v.item() if hasattr(v, "item") else v) for k, v in g.attrs.items()}
-            entry["subevent_time"] = g["subevent_time"][...].tolist()
-            entry["subevent_velocity"] = g["subevent_velocity"][...].tolist()
-            out.append(entry)
+        return read_slips(h5) or []
+
+
+_NAN = float("nan")
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """What one run file says about itself (dimensionless units).
+
+    k: spring constant per length; V_s: loading velocity; sigma: normal stress;
+    m_b: top-wall mass per length; slip_params: the detector thresholds of the run.
+    Forks also carry branch ('drained' or 'perm_K'), parent_run and fork_slip.
+    """
+
+    run_dir: Path
+    h5_path: Path
+    config: dict
+    status: str
+    dt: float
+    k: float
+    V_s: float
+    sigma: float
+    m_b: float
+    width: float
+    n_grains: int
+    load_start_time: float
+    has_fluid: bool
+    permeability: float | None
+    slip_params: dict
+    n_samples: int
+    series_names: tuple
+    branch: str | None = None
+    parent_run: str | None = None
+    fork_slip: int | None = None
+
+    @property
+    def predicted_half_period(self) -> float:
+        """Block-slider slip duration pi sqrt(m_b / k) (thesis Eq. 3) [t0]."""
+        return half_period(self.m_b, self.k)
+
+    @property
+    def is_fork(self) -> bool:
+        return self.branch is not None
+
+    def describe(self) -> str:
+        if self.is_fork:
+            return f"fork {self.run_dir} (branch {self.branch} of slip {self.fork_slip})"
+        return f"run {self.run_dir}"
+
+
+
+def attr_value(attrs, key, default=None):
+    if key not in attrs:
+        return default
+    value = attrs[key]
+    if isinstance(value, bytes):
+        return value.decode()
+    return value.item() if hasattr(value, "item") else value
+
+
+
+def _locate(path: Path) -> tuple[Path, Path]:
+    path = Path(path)
+    if path.is_file():
+        return path.parent, path
+    if not path.exists():
+        raise NotARunError(f"{path} does not exist")
+    h5_path = path / "run.h5"
+    if not h5_path.is_file():
+        raise NotARunError(f"{path} is not a gouge run directory (no run.h5 in it); "
+                           "give the directory that `gouge run --out` or `gouge restart` wrote")
+    return path, h5_path
+
+
+
+class RunReader:
+    """Open run file with sliced series access. Use as a context manager.
+
+    ``allow_running=False`` raises :class:`RunStillRunningError` for status 'running'.
+    """
+
+    def __init__(self, path: Path | str, allow_running: bool = False):
+        run_dir, h5_path = _locate(Path(path))
+        try:
+            self.h5 = h5py.File(h5_path, "r")
+        except OSError as exc:
+            raise NotARunError(f"{h5_path} cannot be read as HDF5 ({exc}); "
+                               "if its run is still going, wait for it to finish") from exc
+        try:
+            self.info = self._read_info(run_dir, h5_path)
+            if self.info.status == "running" and not allow_running:
+                what = self.info.describe()
+                hint = ("wait for `gouge restart` to finish, or run it again with --force"
+                        if self.info.is_fork else
+                        "wait for it to finish, or `gouge resume` it if it was killed")
+                raise RunStillRunningError(f"{what} has status 'running': {hint}")
+        except Exception:
+            self.h5.close()
+            raise
+        self._time = self.h5["series"]["time"]
+
+    def _read_info(self, run_dir: Path, h5_path: Path) -> RunInfo:
+        h5 = self.h5
+        if "series" not in h5 or "time" not in h5["series"] or "config" not in h5.attrs:
+            raise NotARunError(f"{h5_path} is not a gouge run file (no config attribute or /series/time)")
+        cfg = yaml.safe_load(attr_value(h5.attrs, "config")) or {}
+        loading = cfg.get("loading") or {}
+        fluid = cfg.get("fluid")
+        slips = cfg.get("slips") or {}
+        m_b = attr_value(h5.attrs, "wall_mass_per_length")
+        if m_b is None:
+            m_b = loading.get("wall_mass")
+        if m_b is None:
+            raise NotARunError(f"{h5_path} has no wall_mass_per_length attribute")
+        series = h5["series"]
+        slip_params = {
+            "start_factor": float(slips.get("start_factor", SLIP_START_FACTOR)),
+            "end_factor": float(slips.get("end_factor", SLIP_END_FACTOR)),
+            "min_duration": float(slips.get("min_duration", 0.0)),
+            "min_slip": float(slips.get("min_slip", 0.0)),
+            "merge_gap": float(slips.get("merge_gap", 0.0)),
+        }
+        fork_slip = attr_value(h5.attrs, "fork_slip")
+        return RunInfo(
+            run_dir=run_dir, h5_path=h5_path, config=cfg,
+            status=str(attr_value(h5.attrs, "status", "unknown")),
+            dt=float(attr_value(h5.attrs, "dt", _NAN)),
+            k=float(loading.get("spring_constant", _NAN)),
+            V_s=float(loading.get("velocity", _NAN)),
+            sigma=float(loading.get("normal_stress", _NAN)),
+            m_b=float(m_b),
+            width=float(attr_value(h5.attrs, "width", _NAN)),
+            n_grains=int(attr_value(h5.attrs, "n_grains", 0)),
+            load_start_time=float(attr_value(h5.attrs, "load_start_time", _NAN)),
+            has_fluid=bool(fluid),
+            permeability=float(fluid["permeability"]) if fluid and "permeability" in fluid else None,
+            slip_params=slip_params,
+            n_samples=int(series["time"].shape[0]),
+            series_names=tuple(sorted(series.keys())),
+            branch=attr_value(h5.attrs, "branch"),
+            parent_run=attr_value(h5.attrs, "parent_run"),
+            fork_slip=None if fork_slip is None else int(fork_slip),
+        )
+
+    def __enter__(self) -> "RunReader":
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    def close(self):
+        if self.h5.id.valid:
+            self.h5.close()
+
+    # series ---------------------------------------------------------------
+    def has(self, name: str) -> bool:
+        return name in self.h5["series"]
+
+    def series(self, names, start: int = 0, stop: int | None = None) -> dict[str, np.ndarray | None]:
+        """Samples ``start:stop`` of each named series, shape (stop - start,); None if absent."""
+        group = self.h5["series"]
+        stop = self.info.n_samples if stop is None else stop
+        return {n: (group[n][start:stop].astype(float) if n in group else None) for n in names}
+
+    def index_at_or_after(self, t: float) -> int:
+        """First sample index with time >= t (bisection on the dataset, no full read)."""
+        return bisect.bisect_left(self._time, t)
+
+    def index_at_or_before(self, t: float) -> int:
+        """Last sample index with time <= t."""
+        return bisect.bisect_right(self._time, t) - 1
+
+    def time_offset(self) -> float:
+        """time - load_time (the absolute time at which the driver started) [t0]."""
+        if self.has("load_time") and self.info.n_samples:
+            return float(self._time[0] - self.h5["series"]["load_time"][0])
+        return self.info.load_start_time if math.isfinite(self.info.load_start_time) else 0.0
+
+    # snapshots ------------------------------------------------------------
+    def snapshot_names(self) -> list[str]:
+        return sorted(self.h5["snapshots"].keys()) if "snapshots" in self.h5 else []
+
+    def snapshot_times(self) -> list[float]:
+        return [float(self.h5["snapshots"][n].attrs["time"]) for n in self.snapshot_names()]
+
+    def snapshot(self, name: str) -> dict:
+        """One snapshot group as arrays (grains, contacts, optional pressure/porosity fields)."""
+        grp = self.h5["snapshots"][name]
+        out = {key: grp[key][...] for key in grp.keys()}
+        out["time"] = float(grp.attrs["time"])
+        out["step"] = int(grp.attrs["step"])
+        if "pressure" in grp and "origin" in grp["pressure"].attrs:
+            out["grid"] = {k: np.asarray(grp["pressure"].attrs[k], float) for k in ("origin", "spacing")}
         return out
+
+
+
+def open_run(path: Path | str, allow_running: bool = False) -> RunReader:
+    """Open a run directory (or its run.h5) for reading; see :class:`RunReader`."""
+    return RunReader(path, allow_running)
+
+
+
+def read_slips(h5: h5py.File) -> list[dict] | None:
+    """The /slips catalog of an open run file (one dict of attributes, plus subevent_time and
+    subevent_velocity lists, per slip, in order), or None if the run wrote none."""
+    if "slips" not in h5:
+        return None
+    out = []
+    for name in sorted(h5["slips"]):
+        g = h5["slips"][name]
+        entry = {k: attr_value(g.attrs, k) for k in g.attrs.keys()}
+        entry["subevent_time"] = g["subevent_time"][...].tolist() if "subevent_time" in g else []
+        entry["subevent_velocity"] = g["subevent_velocity"][...].tolist() if "subevent_velocity" in g else []
+        out.append(entry)
+    return out
+
+
+def _table_to_group(group: h5py.Group, rows: list[dict], columns) -> None:
+    group.attrs["columns"] = json.dumps(list(columns))
+    for col in columns:
+        values = [r.get(col) for r in rows]
+        if all(isinstance(v, (bool, np.bool_)) for v in values) and values:
+            data = np.asarray(values, dtype=bool)
+        elif all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+                 for v in values):
+            data = np.asarray(values, dtype=float)
+        else:
+            data = np.asarray(["" if v is None else str(v) for v in values], dtype=h5py.string_dtype())
+        group.create_dataset(col, data=data)
+
+
+def write_analysis_tables(h5_path: Path, notch: bool, summary: str, tables: dict) -> None:
+    """Replace ``/analysis`` in run.h5 (written by `gouge analyze`): attrs created, version, notch,
+    summary (JSON); one group per table, `tables` = {name: (rows as dicts, columns)}, one dataset
+    per column. Raises OSError if the file cannot be written (read-only, or open elsewhere)."""
+    with h5py.File(h5_path, "a") as h5:
+        if "analysis" in h5:
+            del h5["analysis"]
+        grp = h5.create_group("analysis")
+        grp.attrs["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+        grp.attrs["version"] = __version__
+        grp.attrs["notch"] = notch
+        grp.attrs["summary"] = summary
+        for name, (rows, columns) in tables.items():
+            _table_to_group(grp.create_group(name), rows, columns)
+        document_analysis(grp)

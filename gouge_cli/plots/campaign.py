@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from matplotlib.ticker import MaxNLocator
 
-from ..analysis.report import ForkPair, campaign
+from ..analysis.forkpairs import campaign, ForkPair
 from .style import DRAINED, UNDRAINED, new_figure, save
 
 _ORDER = ("I", "I-C", "II", "II-C", "tie", "tie-C", "none")

@@ -6,15 +6,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.report import (
-    NoSlipsError,
-    RunReader,
-    find_slip,
-    fork_branches,
-    read_catalog,
-    run_pairs,
-    slip_friction,
-)
+from ..analysis.catalog import find_slip, read_catalog, slip_friction
+from ..analysis.forkpairs import fork_branches, run_pairs
+from ..errors import NoSlipsError
+from ..io.runfile import RunReader
 from .campaign import campaign_figure
 from .series import friction_figure, overview_figure, pair_figure, slip_figure
 from .snapshot import snapshot_figure

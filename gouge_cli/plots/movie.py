@@ -22,7 +22,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 
-from ..analysis.report import AnalysisError, RunReader, find_slip, read_catalog
+from ..analysis.catalog import find_slip, read_catalog
+from ..errors import AnalysisError
+from ..io.runfile import RunReader
 from .snapshot import CHAIN, chain_segments, draw_discs, draw_pressure, pressure_grid
 from .style import DRAINED, LABEL, UNDRAINED
 

@@ -12,14 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.report import (
-    ForkPair,
-    RunReader,
-    SlipFriction,
-    fit_slip,
-    series_envelope,
-    slip_window,
-)
+from ..analysis.catalog import fit_slip, series_envelope, slip_window, SlipFriction
+from ..analysis.forkpairs import ForkPair
+from ..io.runfile import RunReader
 from .style import (
     DRAINED,
     FIT,

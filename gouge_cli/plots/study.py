@@ -7,7 +7,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.report import ForkPair, RunReader, find_slip, read_catalog, slip_friction
+from ..analysis.catalog import find_slip, read_catalog, slip_friction
+from ..analysis.forkpairs import ForkPair
+from ..io.runfile import RunReader
 from .campaign import _COLORS, campaign_figure
 from .make import undrained_friction_figure
 from .series import friction_figure, overview_figure, pair_figure

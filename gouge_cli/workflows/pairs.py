@@ -10,7 +10,9 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from ..analysis.report import AnalysisError, RunReader, classify_fork, fork_branches
+from ..analysis.forkpairs import classify_fork, fork_branches
+from ..errors import AnalysisError
+from ..io.runfile import RunReader
 from ..io.filedoc import json_safe
 from ..io.provenance import branch_bit_risks
 

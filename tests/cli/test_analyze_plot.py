@@ -11,7 +11,8 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from gouge_cli.analysis.report import CATALOG_COLUMNS, FIT_COLUMNS, PAIR_COLUMNS
+from gouge_cli.analysis.catalog import CATALOG_COLUMNS, FIT_COLUMNS
+from gouge_cli.analysis.forkpairs import PAIR_COLUMNS
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.plots import DPI, FIGSIZE

@@ -2,7 +2,7 @@
 layer, imports (top-level and lazy ones inside functions alike) go down the layers only, there is
 no import cycle between modules, and the kernels import nothing but kernels.
 
-    cli -> workflows -> studies -> plots, export -> analysis -> driver -> model -> io
+    cli -> workflows -> studies -> plots, export -> analysis -> driver -> io -> model
         -> config, units, errors, config_doc -> kernels (and the package root, which only picks numba's cache)
 """
 
@@ -12,7 +12,7 @@ import ast
 from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[2] / "gouge_cli"
-RANK = {"kernels": 0, "": 0, "errors": 1, "units": 1, "config": 1, "config_doc": 1, "io": 2, "model": 3,
+RANK = {"kernels": 0, "": 0, "errors": 1, "units": 1, "config": 1, "config_doc": 1, "model": 2, "io": 3,
         "driver": 4, "analysis": 5, "plots": 6, "export": 6, "studies": 7, "workflows": 8, "cli": 9}
 
 

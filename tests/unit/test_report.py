@@ -1,4 +1,4 @@
-"""gouge_cli.analysis.report on small synthetic run files with planted block-slider slips.
+"""gouge_cli.analysis.report (with catalog, forkpairs, io.runfile) on small synthetic run files with planted block-slider slips.
 
 The planted series is thesis Eq. 3 exactly (loading neglected during slip): slip i starts
 when tau/sigma reaches MU_S[i], v = (mu_s - mu_d) sigma / sqrt(k m) sin(omega t'),
@@ -16,6 +16,10 @@ import numpy as np
 import pytest
 import yaml
 
+from gouge_cli import errors as E
+from gouge_cli.analysis import catalog as C
+from gouge_cli.analysis import forkpairs as FP
+from gouge_cli.io import runfile as RF
 from gouge_cli.analysis import report as R
 
 M, K, SIGMA, V_S, MU_D = 2.0, 0.5, 1.0, 2e-4, 0.5       # omega = 0.5, half period 2 pi
@@ -84,8 +88,8 @@ def planted_run(tmp_path_factory):
 
 def test_catalog_finds_planted_slips(planted_run):
     run, events = planted_run
-    with R.open_run(run) as reader:
-        rows = R.catalog_table(reader)
+    with RF.open_run(run) as reader:
+        rows = C.catalog_table(reader)
     assert [r["number"] for r in rows] == [1, 2, 3]
     for row, (t_on, t_end, _, amp, mu_s) in zip(rows, events):
         assert row["static_strength"] == pytest.approx(mu_s, abs=2e-4)
@@ -98,7 +102,7 @@ def test_catalog_finds_planted_slips(planted_run):
         assert math.isnan(row["deborah"])
     assert math.isnan(rows[0]["recurrence"])
     assert rows[1]["recurrence"] == pytest.approx(events[1][0] - events[0][0], abs=2 * DT)
-    stats = R.summary_statistics(rows)
+    stats = C.summary_statistics(rows)
     assert stats["static_strength"]["mean"] == pytest.approx(np.mean(PLANTED), abs=2e-4)
     assert stats["static_strength"]["std"] == pytest.approx(np.std(PLANTED), abs=2e-4)
     assert stats["recurrence"]["n"] == 2
@@ -106,8 +110,8 @@ def test_catalog_finds_planted_slips(planted_run):
 
 def test_fits_return_planted_half_period(planted_run):
     run, events = planted_run
-    with R.open_run(run) as reader:
-        fits = R.fit_table(reader, notch=False)
+    with RF.open_run(run) as reader:
+        fits = C.fit_table(reader, notch=False)
     assert len(fits) == 3
     for fit, (_, _, _, amp, mu_s) in zip(fits, events):
         assert fit["success"]
@@ -123,9 +127,9 @@ def test_fits_return_planted_half_period(planted_run):
 
 def test_slip_friction_with_notch_keeps_mean(planted_run):
     run, _ = planted_run
-    with R.open_run(run) as reader:
-        entry = R.read_catalog(reader)[1]
-        fr = R.slip_friction(reader, entry, notch=True)
+    with RF.open_run(run) as reader:
+        entry = C.read_catalog(reader)[1]
+        fr = C.slip_friction(reader, entry, notch=True)
     assert fr.drained and fr.t.shape == fr.friction.shape == fr.v_wall.shape
     assert fr.mean_mu_d == pytest.approx(MU_D, abs=5e-3)
     assert fr.mu_s == pytest.approx(PLANTED[1], abs=2e-4)
@@ -149,7 +153,7 @@ def run_with_forks(tmp_path):
 
 
 def test_pair_types_from_planted_strengths(run_with_forks):
-    pairs, skipped = R.run_pairs(run_with_forks)
+    pairs, skipped = FP.run_pairs(run_with_forks)
     assert skipped == []
     by_branch = {p.row["branch"]: p.row for p in pairs}
     assert by_branch["perm_1e-05"]["type"] == "II"
@@ -159,7 +163,7 @@ def test_pair_types_from_planted_strengths(run_with_forks):
     assert by_branch["perm_1e-05"]["permeability"] == 1e-5
     # stronger packing, bigger drop: the Eq. 3 velocity scales with mu_s - mu_d
     assert by_branch["perm_1e-05"]["peak_velocity_ratio"] == pytest.approx(0.14 / 0.10, rel=1e-2)
-    summary = R.campaign(pairs)
+    summary = FP.campaign(pairs)
     assert summary["n_type_I"] == 1 and summary["n_type_II"] == 1 and summary["n_complex"] == 0
 
 
@@ -169,7 +173,7 @@ def test_analyze_and_write(run_with_forks):
     with open(written["pairs"]) as fh:
         rows = list(csv.DictReader(fh))
     assert [r["type"] for r in rows] == ["II", "I"]           # sorted by permeability
-    assert list(rows[0].keys()) == list(R.PAIR_COLUMNS)
+    assert list(rows[0].keys()) == list(FP.PAIR_COLUMNS)
     with open(written["catalog"]) as fh:
         assert len(list(csv.DictReader(fh))) == 3
     with h5py.File(run_with_forks / "run.h5", "r") as h5:
@@ -184,12 +188,12 @@ def test_analyze_and_write(run_with_forks):
 def test_running_fork_is_a_clear_error(run_with_forks):
     _fork(run_with_forks, 2, "drained", 0.60)
     _fork(run_with_forks, 2, "perm_1e-05", 0.62, status="running")
-    with pytest.raises(R.RunStillRunningError, match="status 'running'"):
-        R.classify_fork(run_with_forks / "forks" / "slip_002")
-    pairs, skipped = R.run_pairs(run_with_forks)
+    with pytest.raises(E.RunStillRunningError, match="status 'running'"):
+        FP.classify_fork(run_with_forks / "forks" / "slip_002")
+    pairs, skipped = FP.run_pairs(run_with_forks)
     assert len(pairs) == 2 and len(skipped) == 1 and "slip 2" in skipped[0]
-    with pytest.raises(R.RunStillRunningError):
-        R.run_pairs(run_with_forks, strict=True)
+    with pytest.raises(E.RunStillRunningError):
+        FP.run_pairs(run_with_forks, strict=True)
 
 
 def test_no_slip_run_and_not_a_run(tmp_path):
@@ -197,25 +201,25 @@ def test_no_slip_run_and_not_a_run(tmp_path):
     quiet = {"time": t, "wall_x": V_S * t, "wall_vx": np.full_like(t, V_S),
              "tau_over_sigma": 0.1 + 0 * t, "porosity": 0.2 + 0 * t}
     run = write_run(tmp_path / "quiet", quiet)
-    with pytest.raises(R.NoSlipsError, match="has no slips"):
+    with pytest.raises(E.NoSlipsError, match="has no slips"):
         R.analyze_run(run)
-    with pytest.raises(R.NotARunError, match="not a gouge run directory"):
+    with pytest.raises(E.NotARunError, match="not a gouge run directory"):
         R.analyze_run(tmp_path)
     (tmp_path / "junk").mkdir()
     (tmp_path / "junk" / "run.h5").write_text("not hdf5")
-    with pytest.raises(R.NotARunError, match="cannot be read as HDF5"):
+    with pytest.raises(E.NotARunError, match="cannot be read as HDF5"):
         R.analyze_run(tmp_path / "junk")
-    with pytest.raises(R.RunStillRunningError):
+    with pytest.raises(E.RunStillRunningError):
         R.analyze_run(write_run(tmp_path / "busy", quiet, status="running"))
-    with R.open_run(run) as reader:
-        with pytest.raises(R.SlipNotFoundError, match="no slip number 4"):
-            R.find_slip(R.read_catalog(reader), 4)
+    with RF.open_run(run) as reader:
+        with pytest.raises(E.SlipNotFoundError, match="no slip number 4"):
+            C.find_slip(C.read_catalog(reader), 4)
 
 
 def test_series_envelope_keeps_extremes(planted_run):
     run, _ = planted_run
-    with R.open_run(run) as reader:
-        env = R.series_envelope(reader, ["wall_vx", "tau_over_sigma"], max_points=2000, chunk=7001)
+    with RF.open_run(run) as reader:
+        env = C.series_envelope(reader, ["wall_vx", "tau_over_sigma"], max_points=2000, chunk=7001)
         full = reader.series(["wall_vx", "tau_over_sigma"])
         n = reader.info.n_samples
     assert n > 20000 and env["time"].size <= 2002
