@@ -16,15 +16,11 @@ from typing import Annotated, Any, Literal, Optional
 import yaml
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from .errors import InputError, bounded, clip
+from .errors import bounded, clip, ConfigError
 from .units import Scales, to_dimensionless
 
 MAX_DEPTH = 8           # nesting of a config file (sections are 2 deep)
 MAX_FILE_BYTES = 1_000_000
-
-
-class ConfigError(InputError):
-    """A config that cannot be run; the message is meant for the user."""
 
 
 def _quantity(dimension: str):

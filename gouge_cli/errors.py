@@ -128,3 +128,39 @@ class NoSlipsError(AnalysisError):
 
 class SlipNotFoundError(AnalysisError):
     """No slip with the requested number."""
+
+
+class ConfigError(InputError):
+    """A config that cannot be run; the message is meant for the user."""
+
+
+class RunDirError(InputError):
+    """The run directory cannot be used (exists with results, is not a run, or is in use)."""
+
+
+class CheckpointError(InputError):
+    """A checkpoint that cannot be used (missing, truncated, corrupt)."""
+
+
+class ExecutorError(ValueError):
+    """A cluster cannot be started as asked (bad option, missing package); exit code 2."""
+
+
+class SpecError(ConfigError):
+    """The campaign file cannot be used; the message names the key and what is allowed."""
+
+
+class CampaignConflict(ValueError):
+    """Existing results were made with other settings; the message names the points and keys."""
+
+
+class StudyInterrupted(RuntimeError):
+    """The loading run was interrupted (Ctrl-C): no branch is started; `gouge study` again resumes it."""
+
+
+class MovieError(AnalysisError):
+    """The fork cannot be made into a movie (missing branch, no snapshots)."""
+
+
+class ExportError(AnalysisError):
+    """The run cannot be exported as asked (no snapshots, no such fork)."""

@@ -1,7 +1,7 @@
 """The campaign table: one row per run and per drained/undrained pair, and the phase-diagram cells.
 
-Reads run files only (through :mod:`gouge_cli.analysis.report`); pairs are classified by
-:func:`~gouge_cli.analysis.report.classify_fork` (thesis Sections 4.2-4.3: Type I / II, -C).
+Reads run files only (through :mod:`gouge_cli.io.runfile`); pairs are classified by
+:func:`~gouge_cli.analysis.forkpairs.classify_fork` (thesis Sections 4.2-4.3: Type I / II, -C).
 Swept values are the resolved (dimensionless) config values; ``permeability`` of a pair row is
 the kappa_c [d^2] of its undrained branch.
 """

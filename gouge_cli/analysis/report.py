@@ -1,19 +1,11 @@
-"""Reading run files and computing what `gouge analyze` reports (thesis Sections IV-V).
+"""What `gouge analyze` reports for a run (thesis Sections IV-V): the slip catalog and fits
+(analysis.catalog), the drained/undrained fork pairs (analysis.forkpairs) and their summary, written
+as RUN/analysis/*.csv, summary.json and /analysis in run.h5 (through io.runfile).
 
-Reads only: ``RUN/run.h5`` (see :mod:`gouge_cli.io.runfile`) and the forks under
-``RUN/forks/slip_NNN/{drained,perm_K}/run.h5``. The physics is in the pure
-functions of :mod:`gouge_cli.analysis` (block-slider fit, Eq. 3; friction,
-Eqs. 5-7; pair types) and :mod:`gouge_cli.driver.detector`; this module only finds the
-samples they need. Series are sliced per slip window with h5py (sample indices
-found by bisection on the ``time`` dataset), so a long run is never loaded whole
-except for :func:`series_envelope`, which reads it in chunks.
-
-All quantities are dimensionless (length d, stress E, time t0; physics.md section 1):
-``tau/sigma`` and friction [-], velocities [v0] (also given over V_s), times [t0],
-slip distances [d].
-
-Errors are :class:`AnalysisError` (subclasses name the case); the CLI turns them
-into exit code 2.
+Reads only: ``RUN/run.h5`` (io.runfile.RunReader) and the forks under
+``RUN/forks/slip_NNN/{drained,perm_K}/run.h5``. All quantities are dimensionless (length d,
+stress E, time t0; physics.md section 1). Errors are gouge_cli.errors.AnalysisError (subclasses
+name the case); the CLI turns them into exit code 2.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The study table and summary (thesis Table 3 / Appendix B, Sections 4.1-4.3): reads files only.
 
 One row per drained/undrained pair (:data:`STUDY_COLUMNS`), built from the rows of
-:func:`~gouge_cli.analysis.report.classify_fork` (the one pair definition) and the drained
+:func:`~gouge_cli.analysis.forkpairs.classify_fork` (the one pair definition) and the drained
 slip's block-slider fit (Eq. 3). Transient slips (:func:`transient_slips`) are marked and left
 out of every statistic of :func:`study_summary`, which is printed next to :data:`THESIS`.
 """

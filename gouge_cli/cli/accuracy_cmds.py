@@ -8,7 +8,8 @@ from typing import List, Optional
 
 import typer
 
-from ..config import ConfigError, load_config
+from ..config import load_config
+from ..errors import ConfigError
 from ..errors import EXIT_PHYSICS
 from .common import err, fail, out
 
@@ -77,7 +78,7 @@ def accuracy(
     is chaotic: longer intervals measure the chaotic spread, not the discretisation error).
     Writes accuracy.csv and accuracy.png (work-precision: error vs run time)."""
     from ..studies.accuracy import run_accuracy
-    from ..io.checkpoint import CheckpointError
+    from ..errors import CheckpointError
     from ..errors import PhysicsError
 
     if config is None and slip_checkpoint is None:

@@ -1,4 +1,4 @@
-"""`gouge analyze` and `gouge plot`: thin wrappers over gouge_cli.analysis.report and gouge_cli.plots.
+"""`gouge analyze` and `gouge plot`: thin wrappers over gouge_cli.analysis (report, catalog) and gouge_cli.plots.
 
 Registered on the main typer app by :func:`register` (called at the end of cli/main.py).
 Bad input (not a run, still running, no slips, no such slip) exits with code 2.

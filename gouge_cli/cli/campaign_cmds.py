@@ -41,10 +41,12 @@ def register(app: typer.Typer):
         retries: int = typer.Option(3, "--retries", help="Dask retries of a piece that raised"),
     ):
         """Run a parameter sweep (runs, or studies = run + forks of every slip) on Dask; idempotent."""
-        from ..config import ConfigError
-        from ..workflows.campaign import CampaignConflict, run_campaign, status_lines, survey
+        from ..errors import ConfigError
+        from ..errors import CampaignConflict
+        from ..workflows.campaign import run_campaign, status_lines, survey
         from ..workflows.campaign_spec import load_spec
-        from ..workflows.executors import ClusterOptions, ExecutorError
+        from ..errors import ExecutorError
+        from ..workflows.executors import ClusterOptions
 
         try:
             if status:

@@ -94,7 +94,7 @@ def catalog_since_loading(run_dir: Path, slip_catalog) -> tuple[list[dict], floa
     began and NaN as None (valid JSON); returns (catalog, the clock at which loading began)."""
     from ..errors import AnalysisError
     from ..io.runfile import RunReader
-    from ..workflows.run import RunDirError
+    from ..errors import RunDirError
     from ..io.filedoc import json_safe
 
     try:

@@ -27,11 +27,12 @@ def register(app: typer.Typer) -> None:
         """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
         from ..errors import AnalysisError
         from ..analysis.study import STUDY_COLUMNS, summary_lines
-        from ..io.checkpoint import CheckpointError
-        from ..config import ConfigError
-        from ..workflows.run import RunDirError
+        from ..errors import CheckpointError
+        from ..errors import ConfigError
+        from ..errors import RunDirError
         from ..errors import PhysicsError
-        from ..workflows.study import StudyInterrupted, parse_slips, run_study
+        from ..errors import StudyInterrupted
+        from ..workflows.study import parse_slips, run_study
         from .analysis_cmds import _table
         from ..errors import EXIT_INTERRUPTED, EXIT_PHYSICS
         from .common import fail, out

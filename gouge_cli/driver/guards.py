@@ -276,7 +276,7 @@ class Guards:
 def guard_callbacks(sim: Simulation, interval: float | None = None, **limits) -> list[Every]:
     """[Every(steps, Guards(**limits))] at `interval` [t0] (default: output.series_interval)."""
     interval = sim.config.output.series_interval if interval is None else interval
-    return [Every(sim.steps_for(interval), Guards(**limits))]
+    return [Every.t0(sim, interval, Guards(**limits), "guards")]
 
 
 def guarded_run(sim: Simulation, duration: float, interval: float | None = None, compact: bool = True,
@@ -295,5 +295,5 @@ def guarded_run(sim: Simulation, duration: float, interval: float | None = None,
         rows.append(s.observe())
 
     interval = sim.config.output.series_interval if interval is None else interval
-    sim.run(duration, [Every(sim.steps_for(interval), record)])
+    sim.run(duration, [Every.t0(sim, interval, record, "guards+series")])
     return rows

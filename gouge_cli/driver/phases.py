@@ -63,11 +63,14 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
             write_checkpoint(ck_dir / "latest.h5", snapshot_of(
                 s, {"phase": "loading", "slip_recorder": rec_state, "guards": guards[0].action.state_dict()}, ring))
 
+    # callback order on a step where several are due: guards, slip_frames, series (+ slip detector,
+    # progress), snapshots, ring (pre-slip states), checkpoint (latest.h5 with the guards' and the
+    # slip recorder's states)
     callbacks = guards + slip_frame_callbacks(sim, writer, recorder) + [
-                 Every(sim.steps_for(config.output.series_interval), record),
-                 Every(sim.steps_for(config.output.snapshot_interval), writer.snapshot),
-                 Every(recorder.ring_every, recorder.keep),
-                 Every(sim.steps_for(config.output.checkpoint_interval), latest)]
+                 Every.t0(sim, config.output.series_interval, record, "series"),
+                 Every.t0(sim, config.output.snapshot_interval, writer.snapshot, "snapshots"),
+                 Every(recorder.ring_every, recorder.keep, "ring"),
+                 Every.t0(sim, config.output.checkpoint_interval, latest, "checkpoint")]
     status = "finished"
     try:
         with deferred_interrupt() as interrupted:
@@ -102,7 +105,7 @@ def slip_frame_callbacks(sim: Simulation, writer: RunFile, recorder: SlipRecorde
         if s.state.wall[L.W_VX] >= recorder.lo:
             writer.snapshot(s)
 
-    return [Every(sim.steps_for(period / frames), dense)]
+    return [Every.t0(sim, period / frames, dense, "slip_frames")]
 
 
 

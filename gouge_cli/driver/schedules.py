@@ -9,10 +9,19 @@ from typing import Callable
 
 @dataclass
 class Every:
-    """Call ``action(sim)`` every ``steps`` steps (step counts since step 0, so restarts line up)."""
+    """Call ``action(sim)`` every ``steps`` steps (step counts since step 0, so restarts line up).
+    ``name`` says what the callback is (guards, series, snapshots, ...); callbacks due on the same
+    step fire in the order of the list given to Simulation.run."""
 
     steps: int
     action: Callable
+    name: str = ""
+
+    @classmethod
+    def t0(cls, sim, interval: float, action: Callable, name: str = "") -> "Every":
+        """Every `interval` [t0] of the scene `sim`, rounded to whole steps (at least 1): the one
+        conversion of a schedule in time to steps."""
+        return cls(sim.steps_for(interval), action, name)
 
     def next_step(self, step: int) -> int:
         return (step // self.steps + 1) * self.steps

@@ -194,7 +194,18 @@ class Simulation:
         return max(1, int(round(duration / self.dt)))
 
     def run(self, duration: float, callbacks: list[Every] = (), should_stop: Callable[[], bool] = None):
-        """Advance by `duration` [t0], firing callbacks when due. Returns steps done."""
+        """Advance by `duration` [t0], firing callbacks when due. Returns steps done.
+
+            end = step + steps_for(duration)
+            while step < end:
+                advance(min(next due step of any callback, end) - step)   # numba, kernels.step order:
+                    # wall half kick + drift; grains half kick + drift (+ list rebuild);
+                    # contact forces; wall force + spring; closing half kicks
+                    # (+ a fluid update every fluid_interval steps: deposit, pressure, drag)
+                for cb in callbacks (in list order): if cb.due(step): cb.action(self)
+                if should_stop(): break
+
+        The loading phase's callbacks and their order: driver.phases.load_phase."""
         s = self.state
         first = s.step
         end = first + self.steps_for(duration)

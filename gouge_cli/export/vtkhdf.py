@@ -44,16 +44,12 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ..errors import AnalysisError
+from ..errors import ExportError
 from ..io.runfile import RunReader
 from ..io.filedoc import BODY_CODES, TIME_ORIGIN
 
 VERSION = (2, 2)
 TOPOLOGIES = ("Vertices", "Lines", "Polygons", "Strips")
-
-
-class ExportError(AnalysisError):
-    """The run cannot be exported as asked (no snapshots, no such fork)."""
 
 
 @dataclass

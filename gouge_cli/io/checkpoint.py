@@ -24,14 +24,10 @@ import yaml
 
 from .. import __version__
 from . import provenance
-from ..config import Config, ConfigError, build_config, dump_config
+from ..config import build_config, Config, dump_config
+from ..errors import CheckpointError, ConfigError
 from .filedoc import document_checkpoint
-from ..errors import InputError
 from .rundir import pid_alive
-
-
-class CheckpointError(InputError):
-    """A checkpoint that cannot be used (missing, truncated, corrupt)."""
 
 
 @dataclass

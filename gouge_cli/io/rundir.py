@@ -21,17 +21,13 @@ from pathlib import Path
 
 import h5py
 
-from ..errors import InputError
+from ..errors import RunDirError
 
 LOCK_NAME = ".gouge.lock"
 OWNED = ("run.h5", "config.yaml", "checkpoints", "forks", "figures", "analysis")
 # a campaign point directory (gouge campaign) holds its state point and ledger beside the run:
 # they make no directory foreign, count as no run, and are never removed by --force
 CAMPAIGN_ENTRIES = ("point.yaml", "ledger")
-
-
-class RunDirError(InputError):
-    """The run directory cannot be used (exists with results, is not a run, or is in use)."""
 
 
 class RunLock:

@@ -5,26 +5,19 @@ vectorise), no allocation: every array is allocated once by :class:`gouge_cli.mo
 and passed in. Everything is dimensionless (d = E = rho_s = 1): lengths [d], time [t0],
 pressure [E], permeability [d^2], viscosity [E t0], compressibility [1/E].
 
-Grid
-----
-Cell-centred, ``nx`` cells across the periodic width ``Lx`` and ``nz`` cells
-between the wall planes ``z_bot`` and ``z_top``; cell (i, j) has its centre at
-``((i + 1/2) dx, z_bot + (j + 1/2) dz)`` with ``dx = Lx / nx`` and
-``dz = (z_top - z_bot) / nz``. The grid stretches with the layer: a cell keeps
-its index and moves affinely with the two wall planes, so pressure and solid
-fraction are attached to cells that follow the affine part of the solid motion.
-P = 0 on both wall planes (half a cell from the boundary centres), periodic in x.
+Grid: :mod:`gouge_cli.kernels.deposit` (cell-centred, stretching with the layer, P = 0 on both
+wall planes, periodic in x).
 
 One fluid update = deposit (deposit.py) -> source and pressure solve (pressure.py, Eqs. 14-20)
 -> pressure gradient and grain drag (drag.py, Eqs. 12-13); this module orders them.
 
 Array layouts
 -------------
-params : float64[N_PARAMS]  indices P_* (kernels.layout) (see FluidGrid.from_config)
-state  : float64[N_STATE]   indices S_* (kernels.layout); S_Z_BOT/S_Z_TOP are the planes at
+params : float64[N_FLUID_PARAMS]  indices P_* (kernels.layout) (see FluidGrid.from_config)
+state  : float64[N_FLUID_STATE]   indices S_* (kernels.layout); S_Z_BOT/S_Z_TOP are the planes at
                             the last update and must be checkpointed with P and s
 P, s, s_old, ux, uz, permeability, div_u : float64[nx, nz]
-work   : float64[N_WORK, nx, nz]   scratch, rows G_* of kernels.layout
+work   : float64[N_GRID_WORK, nx, nz]   scratch, rows G_* of kernels.layout
 corners : float64[N_CORNERS, N]    per-grain deposit cells and areas (see deposit), reused for the drag
 partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit);
                             allocate it zeroed: between calls it is zero outside the columns flagged

@@ -5,23 +5,7 @@ the deposit's per-grain records, the observables, and the status codes the kerne
 Every index has one name with one meaning: the DEM step's vectors (params ``N_PARAMS``, wall
 ``W_*``, clock ``C_*``, counters ``K_*``) and the fluid grid's (``P_*`` / ``N_FLUID_PARAMS``,
 state ``S_*`` / ``N_FLUID_STATE``, work rows ``G_*`` / ``N_GRID_WORK``, corner rows ``CR_*``)
-are distinct names. Shapes of the fluid arrays (kernels.fluid_update):
-
-params : float64[N_PARAMS]  indices P_* below (see FluidGrid.from_config)
-state  : float64[N_STATE]   indices S_* below; S_Z_BOT/S_Z_TOP are the planes at
-                            the last update and must be checkpointed with P and s
-P, s, s_old, ux, uz, permeability, div_u : float64[nx, nz]
-work   : float64[N_WORK, nx, nz]   scratch, indices W_* below
-corners : float64[N_CORNERS, N]    per-grain deposit cells and areas (see deposit), reused for the drag
-partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit);
-                            allocate it zeroed: between calls it is zero outside the columns flagged
-                            in it (M_FLAG)
-drag_x, drag_z : float64[N]        force on each grain [E d^2]
-
-Status: STATUS_OK 0; STATUS_SOLVER 1 (CG not converged in max_iter: P is the
-last iterate; explicit sub-steps above max_substeps: P = P*, no diffusion; a
-non-positive dt_f or layer thickness: nothing done); STATUS_NONFINITE 2 (P not
-finite; drag is then set to zero). A status other than 0 should stop the run.
+are distinct names. Shapes of the fluid arrays and the status codes: kernels.fluid_update.
 """
 
 # ---- DEM step (kernels.step, kernels.coupled) --------------------------------------------------

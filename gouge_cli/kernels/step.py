@@ -12,7 +12,11 @@ Within one ``advance`` the grains' step-5 kick is done in the same pass as the n
 step-2 kick and drift (same operations in the same order: the bits do not depend on how a
 run is cut into advance calls); the state is at a whole step when advance returns. Code that
 needs whole-step velocities mid-call takes them from ``closed_velocity`` (the fluid deposit).
-Arrays named in ``GRAIN``/``LIST`` order are passed as tuples from :mod:`gouge_cli.model.state`.
+Arrays named in ``GRAIN``/``LIST`` order are passed as tuples from :mod:`gouge_cli.model.state`;
+indices of params, wall, clock and counters: :mod:`gouge_cli.kernels.layout`.
+
+Size (~510 lines): the pair pass (block_layout .. contact_forces) and the step (kicks, drift,
+rebuild, advance) stay in one file for now; the pair pass is the natural next split (forces.py).
 """
 
 from __future__ import annotations

@@ -16,7 +16,8 @@ import math
 
 import numpy as np
 
-from ..config import Config, ConfigError
+from ..config import Config
+from ..errors import ConfigError
 from ..kernels.reorder import STRIP
 from .state import BOTTOM, FREE, TOP, State
 

@@ -25,7 +25,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..config import Config, ConfigError
+from ..config import Config
+from ..errors import ConfigError
 from .packing import packing_layout
 from .timestep import choose_dt, contact_constants, stability_bound
 

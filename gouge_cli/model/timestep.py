@@ -17,7 +17,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..config import Config, ConfigError
+from ..config import Config
+from ..errors import ConfigError
 from .portable import cube, power
 
 CHAIN_FACTOR = 10.0

@@ -44,9 +44,9 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
     ``slip_NNN_pair_B.png`` (drained black, undrained blue, pore pressure),
     ``slip_NNN_friction_B.png`` (R/sigma, Eq. 6) and ``slip_NNN_snapshot_B.png`` (the branch's
     snapshot nearest its peak velocity, pressure shaded) when the branch wrote snapshots.
-    Pairs are classified by :func:`~gouge_cli.analysis.report.classify_fork` (``main``: the compared
+    Pairs are classified by :func:`~gouge_cli.analysis.forkpairs.classify_fork` (``main``: the compared
     events), so titles and shading say what pairs.csv and pair.json say.
-    Raises :class:`~gouge_cli.analysis.report.AnalysisError` subclasses for bad input.
+    Raises :class:`~gouge_cli.errors.AnalysisError` subclasses for bad input.
     """
     run_dir = Path(run_dir)
     written: list[Path] = []

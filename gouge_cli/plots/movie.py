@@ -23,7 +23,7 @@ import numpy as np
 from matplotlib.collections import LineCollection
 
 from ..analysis.catalog import find_slip, read_catalog
-from ..errors import AnalysisError
+from ..errors import MovieError
 from ..io.runfile import RunReader
 from .snapshot import CHAIN, chain_segments, draw_discs, draw_pressure, pressure_grid
 from .style import DRAINED, LABEL, UNDRAINED
@@ -34,10 +34,6 @@ FORCE_SCALE_PT = 0.6            # line width [pt] of a contact carrying sigma * 
 MAX_LINE_PT = 5.0
 MIN_FORCE_FRACTION = 0.25       # chains below a quarter of sigma d are not drawn
 FPS = 12
-
-
-class MovieError(AnalysisError):
-    """The fork cannot be made into a movie (missing branch, no snapshots)."""
 
 
 @dataclass

@@ -49,7 +49,8 @@ from pathlib import Path
 import numpy as np
 
 from ..io.checkpoint import read_checkpoint
-from ..config import Config, ConfigError, build_config
+from ..config import build_config, Config
+from ..errors import ConfigError
 from ..driver.guards import Guards
 from ..kernels import layout as L
 from ..driver.simulation import Simulation

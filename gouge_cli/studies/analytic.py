@@ -171,7 +171,7 @@ def terzaghi_error(nz: int, solver: str = "implicit", ratio: float = 0.5, thickn
 
 def block_slider_errors(dt: float, m=1.0, k=1e-2, sigma=1e-2, mu_s=0.6, mu_d=0.5, v_load=1e-5) -> dict:
     """Relative errors of the first slip's duration, slip and peak velocity against the exact
-    solution with loading during the slip (see tests/validation/test_block_slider.py)."""
+    solution with loading during the slip (see tests/kernels/test_block_slider.py)."""
     from scipy.optimize import brentq
 
     p = np.zeros(L.N_PARAMS)

@@ -14,6 +14,9 @@ study's permeabilities" (:func:`advance_run`, :func:`advance_fork`). A run piece
 was lost resumes from ``checkpoints/latest.h5`` (at most one ``output.checkpoint_interval`` of
 work is repeated); a fork piece starts again from its slip checkpoint (forks are short). What a
 point does is an :class:`Action`; ``study`` = run, then fork every slip kept with a checkpoint.
+
+Size (~500 lines): sweep expansion lives in campaign_spec.py and the executors in executors.py;
+what is left (ledger, survey, Dask tasks, tables) is one workflow.
 """
 
 from __future__ import annotations
@@ -30,13 +33,10 @@ from pathlib import Path
 import h5py
 import yaml
 
+from ..errors import CampaignConflict
 from ..config import Config, build_config
 from ..io.rundir import pid_alive
 from .campaign_spec import CampaignSpec, Point, expand, load_spec
-
-
-class CampaignConflict(ValueError):
-    """Existing results were made with other settings; the message names the points and keys."""
 
 
 # --------------------------------------------------------------------------- settings and ledger
@@ -500,5 +500,5 @@ def _value(config: Config, key: str) -> float:
     return node
 
 
-__all__ = ["CampaignConflict", "Piece", "Survey", "advance_run", "advance_fork", "survey", "status_lines",
+__all__ = ["Piece", "Survey", "advance_run", "advance_fork", "survey", "status_lines",
            "run_campaign", "write_results", "run_settings", "load_spec"]

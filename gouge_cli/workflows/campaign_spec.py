@@ -35,11 +35,8 @@ from typing import Any, Literal, Optional
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from ..config import Config, ConfigError, find_config, load_config
-
-
-class SpecError(ConfigError):
-    """The campaign file cannot be used; the message names the key and what is allowed."""
+from ..config import Config, find_config, load_config
+from ..errors import ConfigError, SpecError
 
 
 class _Section(BaseModel):

@@ -11,14 +11,11 @@ have a fixed order for any thread count.
 
 from __future__ import annotations
 
+from ..errors import ExecutorError
 import contextlib
 import logging
 import os
 from dataclasses import dataclass, field
-
-
-class ExecutorError(ValueError):
-    """A cluster cannot be started as asked (bad option, missing package); exit code 2."""
 
 
 def machine_cores() -> int:

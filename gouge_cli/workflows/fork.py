@@ -19,11 +19,13 @@ from pathlib import Path
 
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint
-from ..config import Config, ConfigError, build_config
+from ..config import build_config, Config
+from ..errors import ConfigError
 from ..driver.slips import lead_time
 from ..io.runfile import RunFile, slip_catalog
 from ..model.preflight import check_config
-from ..io.rundir import RunDirError, RunLock, check_run_dir, refuse_if_in_progress
+from ..errors import RunDirError
+from ..io.rundir import check_run_dir, refuse_if_in_progress, RunLock
 from ..driver.phases import load_phase
 from ..driver.simulation import Simulation
 

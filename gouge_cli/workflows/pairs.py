@@ -1,7 +1,7 @@
 """``RUN/forks/slip_NNN/pair.json``: the pair verdict of one forked slip, from its branch files.
 
 Written after ``gouge restart`` and by ``gouge study`` from the same rows that ``gouge analyze``
-writes to pairs.csv (:func:`gouge_cli.analysis.report.classify_fork`, one pair definition), so the
+writes to pairs.csv (:func:`gouge_cli.analysis.forkpairs.classify_fork`, one pair definition), so the
 two cannot disagree.
 """
 
@@ -37,7 +37,7 @@ def write_pair_json(fork_dir: Path, main: str = "first") -> dict:
     ``{"slip", "fork_dir", "branches": {name: status}, "definition": {...}, "pairs": [pairs.csv row
     per undrained branch], "library_differences_from_parent": [...]}`` (library versions that
     differ between the parent's checkpoint and the branches: the drained branch may then not
-    retrace the parent bit for bit). Raises :class:`~gouge_cli.analysis.report.AnalysisError` when a
+    retrace the parent bit for bit). Raises :class:`~gouge_cli.errors.AnalysisError` when a
     branch is missing or still running.
     """
     fork_dir = Path(fork_dir)

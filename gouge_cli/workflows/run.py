@@ -10,15 +10,15 @@ from pathlib import Path
 
 
 from ..io import provenance
-from ..io.checkpoint import CheckpointError, read_checkpoint, remove_stale_temps
+from ..io.checkpoint import read_checkpoint, remove_stale_temps
 from ..config import Config, dump_config, load_config
 from ..errors import hdf5_os_error
 from ..kernels import layout as L
 from ..io.runfile import RunFile
 from ..model.preflight import check_config
 from ..driver.phases import compaction_phase, load_phase
-from ..io.rundir import (RunDirError, RunLock, check_run_dir, latest_run, open_run_file,
-                     prepare_run_dir)
+from ..errors import RunDirError
+from ..io.rundir import check_run_dir, open_run_file, prepare_run_dir, RunLock
 from ..driver.simulation import Simulation
 from ..errors import PhysicsError
 
@@ -151,5 +151,4 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
                       resume_from=ck)
 
 
-__all__ = ["RunDirError", "RunResult", "run_scene", "resume_run", "latest_run",
-           "check_run_dir", "CheckpointError"]
+__all__ = ["RunResult", "default_run_dir", "run_scene", "resume_run"]

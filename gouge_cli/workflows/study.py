@@ -33,14 +33,17 @@ from pathlib import Path
 from ..analysis.report import analyze_run, write_analysis
 from ..analysis.study import STUDY_COLUMNS, study_rows, study_summary, summary_lines, transient_slips
 from ..io.checkpoint import read_checkpoint
-from ..config import ConfigError, load_config
+from ..config import load_config
+from ..errors import ConfigError, StudyInterrupted
 from ..io.runfile import slip_catalog
 from .fork import branch_name, check_perms, run_branch
-from .run import RunDirError, check_run_dir, default_run_dir, resume_run, run_scene
+from ..errors import RunDirError
+from ..io.rundir import check_run_dir
+from .run import default_run_dir, resume_run, run_scene
 from ..io.filedoc import json_safe
 from .pairs import branch_status, write_pair_json
 
-__all__ = ["EXTRA_STRENGTH", "StudyInterrupted", "StudyResult", "parse_slips", "study_window", "branch_task", "plan_branches",
+__all__ = ["EXTRA_STRENGTH", "StudyResult", "parse_slips", "study_window", "branch_task", "plan_branches",
            "run_study"]
 
 #: Each branch runs on after the drained slip's end for 2 slip durations plus the time the spring
@@ -94,10 +97,6 @@ def branch_task(run_dir: str, slip: int, perm: float | None, duration: float, st
         status, steps = f"physics failure: {exc}", 0
     return {"slip": slip, "branch": branch_name(perm), "status": status, "steps": steps,
             "wall_seconds": time.perf_counter() - t0}
-
-
-class StudyInterrupted(RuntimeError):
-    """The loading run was interrupted (Ctrl-C): no branch is started; `gouge study` again resumes it."""
 
 
 @dataclass

@@ -11,7 +11,7 @@ from __future__ import annotations
 import ast
 from pathlib import Path
 
-PACKAGE = Path(__file__).resolve().parents[2] / "gouge_cli"
+PACKAGE = Path(__file__).resolve().parents[1] / "gouge_cli"
 RANK = {"kernels": 0, "": 0, "errors": 1, "units": 1, "config": 1, "config_doc": 1, "model": 2, "io": 3,
         "driver": 4, "analysis": 5, "plots": 6, "export": 6, "studies": 7, "workflows": 8, "cli": 9}
 

@@ -15,7 +15,8 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from gouge_cli.io.checkpoint import CheckpointError, read_checkpoint, snapshot_of, write_checkpoint
+from gouge_cli.errors import CheckpointError
+from gouge_cli.io.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.io.runfile import slip_catalog

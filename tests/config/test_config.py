@@ -6,7 +6,8 @@ import math
 
 import pytest
 
-from gouge_cli.config import ConfigError, build_config, load_config
+from gouge_cli.config import build_config, load_config
+from gouge_cli.errors import ConfigError
 from gouge_cli.model.timestep import choose_dt, stability_bound
 
 
