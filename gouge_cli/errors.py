@@ -142,7 +142,7 @@ class CheckpointError(InputError):
     """A checkpoint that cannot be used (missing, truncated, corrupt)."""
 
 
-class ExecutorError(ValueError):
+class ExecutorError(InputError):
     """A cluster cannot be started as asked (bad option, missing package); exit code 2."""
 
 
@@ -150,7 +150,7 @@ class SpecError(ConfigError):
     """The campaign file cannot be used; the message names the key and what is allowed."""
 
 
-class CampaignConflict(ValueError):
+class CampaignConflict(InputError):
     """Existing results were made with other settings; the message names the points and keys."""
 
 

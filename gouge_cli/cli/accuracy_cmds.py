@@ -9,9 +9,8 @@ from typing import List, Optional
 import typer
 
 from ..config import load_config
-from ..errors import ConfigError
 from ..errors import EXIT_PHYSICS
-from .common import err, fail, out
+from .common import err, fail, guarded, out
 
 
 def _fmt(value: float) -> str:
@@ -78,7 +77,6 @@ def accuracy(
     is chaotic: longer intervals measure the chaotic spread, not the discretisation error).
     Writes accuracy.csv and accuracy.png (work-precision: error vs run time)."""
     from ..studies.accuracy import run_accuracy
-    from ..errors import CheckpointError
     from ..errors import PhysicsError
 
     if config is None and slip_checkpoint is None:
@@ -95,8 +93,6 @@ def accuracy(
                               samples=samples, analytic=analytic, fluid=fluid,
                               on_level=lambda r: err.print(f"{r.level.ladder} {r.level.setting}: {r.status[:80]} "
                                                            f"({r.wall_seconds:.2f} s)", highlight=False))
-    except (ConfigError, CheckpointError) as e:
-        fail(str(e))
     except PhysicsError as e:
         fail(f"physics failure while preparing the scene: {e}", EXIT_PHYSICS)
     _print_report(result)
@@ -104,4 +100,4 @@ def accuracy(
 
 
 def register(app: typer.Typer):
-    app.command("accuracy")(accuracy)
+    app.command("accuracy")(guarded(accuracy))

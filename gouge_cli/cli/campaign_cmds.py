@@ -14,10 +14,11 @@ import typer
 
 
 def register(app: typer.Typer):
-    from ..errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_PHYSICS
-    from .common import fail, out
+    from ..errors import EXIT_INTERRUPTED, EXIT_PHYSICS
+    from .common import guarded, out
 
     @app.command()
+    @guarded
     def campaign(
         spec: Path = typer.Argument(..., help="campaign file (YAML: name, base, set, sweep, action, study, phase)"),
         status: bool = typer.Option(False, "--status", help="show what is done, running, failed and left; run nothing"),
@@ -41,11 +42,8 @@ def register(app: typer.Typer):
         retries: int = typer.Option(3, "--retries", help="Dask retries of a piece that raised"),
     ):
         """Run a parameter sweep (runs, or studies = run + forks of every slip) on Dask; idempotent."""
-        from ..errors import ConfigError
-        from ..errors import CampaignConflict
         from ..workflows.campaign import run_campaign, status_lines, survey
         from ..workflows.campaign_spec import load_spec
-        from ..errors import ExecutorError
         from ..workflows.executors import ClusterOptions
 
         try:
@@ -58,8 +56,6 @@ def register(app: typer.Typer):
                                   retries).check()
             report = run_campaign(spec, cluster=opts, force=force, retry_failed=retry_failed,
                                   log=lambda m: out.print(m, highlight=False))
-        except (ConfigError, CampaignConflict, ExecutorError) as e:
-            fail(str(e), EXIT_BAD_INPUT)
         except KeyboardInterrupt:
             out.print("interrupted: run the same command again to resume (finished pieces are kept)")
             raise typer.Exit(EXIT_INTERRUPTED)

@@ -7,11 +7,14 @@ from typing import List, Optional
 
 import typer
 
+from .common import guarded
+
 
 def register(app: typer.Typer) -> None:
     """Add the `study` command to ``app``."""
 
     @app.command()
+    @guarded
     def study(
         target: Path = typer.Argument(..., help="a config (the dry loading run is run first) or a run directory"),
         perm: List[float] = typer.Option([], "--perm", help="kappa_c [d^2] of the undrained branches; repeatable"),
@@ -25,16 +28,11 @@ def register(app: typer.Typer) -> None:
         quiet: bool = typer.Option(False, "--quiet"),
     ):
         """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
-        from ..errors import AnalysisError
         from ..analysis.study import STUDY_COLUMNS, summary_lines
-        from ..errors import CheckpointError
-        from ..errors import ConfigError
-        from ..errors import RunDirError
-        from ..errors import PhysicsError
         from ..errors import StudyInterrupted
         from ..workflows.study import parse_slips, run_study
         from .analysis_cmds import _table
-        from ..errors import EXIT_INTERRUPTED, EXIT_PHYSICS
+        from ..errors import EXIT_INTERRUPTED
         from .common import fail, out
 
         try:
@@ -47,10 +45,6 @@ def register(app: typer.Typer) -> None:
         try:
             result = run_study(target, perm, wanted, main=main, jobs=jobs, out=out_dir, overrides=set_,
                                quiet=quiet, figures=figures, on_progress=say)
-        except (ConfigError, RunDirError, CheckpointError, AnalysisError) as e:
-            fail(str(e))
-        except PhysicsError as e:
-            fail(f"physics failure: {e}", EXIT_PHYSICS)
         except StudyInterrupted as e:
             fail(str(e), EXIT_INTERRUPTED)
         cols = [(c, c) for c in STUDY_COLUMNS if c not in ("note", "criteria")]
