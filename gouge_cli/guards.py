@@ -72,7 +72,8 @@ class Scan:
         row = sim.observe()
         kinetic = row["kinetic_energy"]
         if s.top.size:
-            kinetic += 0.5 * sim.wall_mass_per_length * s.width * (s.wall[K.W_VX] ** 2 + s.wall[K.W_VZ] ** 2)
+            kinetic += 0.5 * sim.wall_mass_per_length * s.width * (s.wall[K.W_VX] ** 2 + s.wall[K.W_VZ] ** 2) \
+                * getattr(sim, "inertia_scale", 1.0)      # stick scaling: the wall's scaled mass
         return cls(s.time, int(row["nonfinite"]), float(kinetic), float(row["max_overlap"]), row["worst_pair"],
                    float(row["contact_energy"]))
 

@@ -57,6 +57,8 @@ SERIES = {
     "pressure_max": ("E", "largest pore pressure perturbation"),
     "deborah": ("-", "Deborah number l u0 / D of the fluid"),
 }
+from .stick_scaling import SERIES_COLUMNS as _STICK     # noqa: E402  stick scaling: its columns
+SERIES.update(_STICK)
 
 
 class RunFile:
@@ -94,15 +96,19 @@ class RunFile:
     def flush(self):
         if self._rows:
             group = self.h5["series"]
-            names = [n for n in self._rows[0] if n in SERIES]
-            for name in names:
-                values = np.array([r[name] for r in self._rows], dtype=np.float64)
+            names = list(dict.fromkeys(n for r in self._rows for n in r if n in SERIES))
+            rows_before = group["time"].shape[0] if "time" in group else 0
+            for name in names:     # a column missing from some rows (stick scaling's) is NaN there
+                values = np.array([r.get(name, np.nan) for r in self._rows], dtype=np.float64)
                 if name not in group:
                     unit, description = SERIES[name]
                     ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64,
                                               chunks=(4096,))
                     ds.attrs["unit"] = unit
                     ds.attrs["description"] = description
+                    if name != "time" and rows_before:
+                        ds.resize((rows_before,))
+                        ds[:] = np.nan
                 ds = group[name]
                 old = ds.shape[0]
                 ds.resize((old + values.size,))
