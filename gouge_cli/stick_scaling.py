@@ -45,6 +45,8 @@ from .kernels import step as K
 from .portable import sphere_mass
 from .timestep import choose_dt
 
+LADDER_DEFAULT = 1.0     # the largest lambda the ladder found within the seed spread (README)
+
 SERIES_COLUMNS = {      # name -> (unit, description), merged into output.SERIES
     "stick_scaling": ("-", "inertia scaling lambda in force at this row (1: true inertia)"),
     "inertial_number": ("-", "I = (|v_wall| / H) d_mean sqrt(lambda rho / sigma) of the layer"),
@@ -247,3 +249,21 @@ class StickScaling:
                 f"{c['misses']} without a slip where the scaled run slipped, {c['in_place']} switched in place, "
                 f"{c['lowered']} lowered by the guard; {100.0 * c['steps_true'] / total:.1f} % of the steps at "
                 f"true inertia, {c['steps_discarded']} steps discarded")
+
+
+def cycle_steps(config: Config, lam: float, cycle: float, slip: float) -> tuple[float, float]:
+    """(steps at lambda = 1, steps at `lam`) of one loading cycle of `cycle` [t0] with a slip of
+    `slip` [t0], by the rules above: per cycle the true-inertia stretch is the rollback lead
+    (at least slips.lead, the ring spaced lead/4: 1.25 lead), the slip and the quiet wait
+    quiet_time; the rest of the cycle and the discarded scaled stretch (1.25 lead) run at
+    dt sqrt(lambda). An estimate for projections (gouge bench); the ladder measures it."""
+    from .events import lead_time
+
+    dt = choose_dt(config)
+    lead = lead_time(config)
+    quiet = max(lead, config.slips.merge_gap + 2.0 * config.output.series_interval)
+    true_t = min(cycle, 1.25 * lead + slip + quiet)
+    if lam <= 1.0:
+        return cycle / dt, cycle / dt
+    scaled_t = cycle - true_t + 1.25 * lead
+    return cycle / dt, true_t / dt + scaled_t / (dt * math.sqrt(lam))

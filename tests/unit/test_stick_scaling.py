@@ -118,3 +118,16 @@ def test_ladder_statistics_and_default():
     assert res["default"] == 4.0
     assert res["cycle"] == pytest.approx(100.0)
     assert rows[16.0]["speedup"] == pytest.approx(1000 / 250)
+
+
+def test_cycle_projection_counts_the_true_inertia_stretch():
+    from gouge_cli.events import lead_time
+    from gouge_cli.stick_scaling import cycle_steps
+
+    config = build_config({**SMALL, "slips": {"lead": 100.0}, "output": {"series_interval": 10.0}})
+    dt = choose_dt(config)
+    assert cycle_steps(config, 1.0, 1e4, 50.0) == (1e4 / dt, 1e4 / dt)
+    plain, scaled = cycle_steps(config, 16.0, 1e4, 50.0)
+    true_t = 1.25 * lead_time(config) + 50.0 + 100.0
+    assert scaled == pytest.approx(true_t / dt + (1e4 - true_t + 125.0) / (4.0 * dt), rel=1e-12)
+    assert plain / scaled < 4.0
