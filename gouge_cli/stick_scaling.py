@@ -2,37 +2,42 @@
 
 While a loading run sticks, the mass and moment of inertia of every grain and the mass of the
 top wall are multiplied by lambda (``numerics.stick_scaling``); the step is the true step times
-sqrt(lambda), so the stability margin (timestep.py) is unchanged. Forces, the contact law, its
-damping (proportional to sqrt(m k), so the damping ratio is unchanged) and the loading are the
-same. Only loading runs with ``numerics.stick_scaling > 1`` are scaled: compaction, forks
-(forks.branch_config sets lambda = 1) and every slip run at true inertia.
+sqrt(lambda), so the stability margin (timestep.py) is unchanged, and the dashpot rate
+(material.damping, a rate: F = -gamma m_ij v_n, thesis Eq. 8) is divided by sqrt(lambda), which
+keeps the damping ratio gamma m / (2 sqrt(k m)) and the dashpot's stability (gamma dt) as they
+are. Forces, the contact law and the loading are unchanged. Only loading runs with
+``numerics.stick_scaling > 1`` are scaled: compaction, forks (forks.branch_config sets
+lambda = 1) and every slip run at true inertia.
 
 Rules of :class:`StickScaling` (checked on every time-series row):
 
-* **Onset.** The first row with v_wall >= slips.start_factor V_s in a scaled stretch sends the
-  run back to the slip recorder's pre-slip state (the newest ring state at least slips.lead
-  before the onset, events.SlipRecorder._choose; the oldest kept one if none is that old).
-  Rows, snapshots and catalog entries after it are dropped (RunFile.truncate_after), the
-  recorder and the energy guard are restored to that moment, lambda becomes 1 and the run
-  computes again from there. Without a kept state it switches to lambda = 1 where it is
-  (counted as ``in_place``).
-* **Resume.** Scaling resumes once the true-inertia stretch has seen a trigger
-  (v_wall >= start_factor V_s) and the wall has since stayed quiet (v_wall < end_factor V_s)
-  for quiet_time = max(slips.lead, slips.merge_gap + 2 output.series_interval), so the
-  detector has closed the slip before the step changes.
-* **Miss.** If the recomputation reaches the scaled onset time + slips.lead without a trigger,
-  it is counted in ``misses`` and simply continues at lambda = 1 until it triggers.
-* **Guard.** If, while the wall is quiet (v_wall < end_factor V_s), the inertial number I = (|v_wall| / H) d_mean sqrt(lambda rho / sigma) (or, wet,
-  the stick Deborah number sqrt(lambda) De) exceeds its bound (numerics.stick_inertial_max,
-  stick_deborah_max) in a scaled stretch, lambda is lowered to max(1, lambda (bound/value/2)^2)
-  until the next slip, and a line on stderr says so.
+* **Onset.** A slip's velocities are sqrt(lambda) times smaller with scaled inertia (block
+  slider: v_peak ~ dtau / sqrt(k m)), so a scaled stretch ends at the first row with
+  v_wall >= max(end_factor, start_factor / sqrt(lambda)) V_s, or with tau/sigma more than
+  slips.lead_stress / 4 below its peak since scaling (re)started. The run goes back to the
+  slip recorder's pre-slip state (the newest ring state at least slips.lead before the onset
+  estimate, events.SlipRecorder._choose; the oldest kept one if none is that old). Rows,
+  snapshots and catalog entries after it are dropped (RunFile.truncate_after), the recorder
+  and the energy guard are restored to that moment, lambda becomes 1 and the run computes
+  again from there. Without a kept state it switches to lambda = 1 where it is (``in_place``).
+* **Resume.** Scaling resumes once the true-inertia stretch has moved (v_wall >= end_factor
+  V_s, or tau/sigma lead_stress / 4 below its peak since the rollback) and the wall has since
+  stayed quiet (v_wall < end_factor V_s) for quiet_time = max(slips.lead, slips.merge_gap +
+  2 output.series_interval), so that the detector has closed the slip before the step changes.
+* **Miss.** If the recomputation reaches the scaled onset time + slips.lead without moving so,
+  it is counted in ``misses`` and simply continues at lambda = 1 until it does.
+* **Guard.** If, in a scaled stretch while the wall is quiet (v_wall < end_factor V_s), the
+  inertial number I = (|v_wall| / H) d_mean sqrt(lambda rho / sigma) (or, wet, the stick
+  Deborah number sqrt(lambda) De) exceeds its bound (numerics.stick_inertial_max,
+  stick_deborah_max), lambda is lowered to lambda (bound / value / 2)^2 (1 below 2) until
+  the next slip, and a line on stderr says so.
 * **Wet runs.** Scaling slows the grains' response but not pressure diffusion: the scaled stick
   phase is the true one loaded sqrt(lambda) times faster, De_stick = sqrt(lambda) l V_s / D.
   A wet loading run whose De_stick exceeds numerics.stick_deborah_max is refused (ConfigError).
 
-With lambda = 1 the mass arrays, step and wall mass are recomputed with the very expressions
-State and Simulation use, so the true-inertia stretches are bit for bit what an unscaled run
-(and a fork) computes from the same state.
+With lambda = 1 the mass arrays, step, wall mass and dashpot rate are recomputed with the very
+expressions State and Simulation use, so the true-inertia stretches are bit for bit what an
+unscaled run (and a fork) computes from the same state.
 """
 
 from __future__ import annotations
@@ -55,8 +60,8 @@ SERIES_COLUMNS = {      # name -> (unit, description), merged into output.SERIES
 
 
 def set_inertia(sim, lam: float, dt_true: float):
-    """Scale grain mass, inv_mass, inv_inertia [N], the wall mass and the step by lambda (dt by
-    sqrt(lambda)); lam = 1 gives exactly the arrays of State.__post_init__ and the params of
+    """Scale grain mass, inv_mass, inv_inertia [N] and the wall mass by lambda, the step by
+    sqrt(lambda) and the dashpot rate by 1/sqrt(lambda); lam = 1 gives exactly the arrays of State.__post_init__ and the params of
     simulation.build_params."""
     s = sim.state
     s.mass[...] = sphere_mass(s.radius, s.density * lam)
@@ -65,6 +70,7 @@ def set_inertia(sim, lam: float, dt_true: float):
     sim.dt = dt_true * math.sqrt(lam)
     sim.params[K.DT] = sim.dt
     sim.params[K.WALL_MASS] = sim.wall_mass_per_length * s.width * lam
+    sim.params[K.DAMPING] = sim.config.material.damping / math.sqrt(lam)
     sim.inertia_scale = lam
 
 
@@ -96,6 +102,8 @@ class StickScaling:
         self.triggered = bool(st.get("triggered", False))
         self.quiet_since = st.get("quiet_since")
         self.missed_now = bool(st.get("missed_now", False))
+        self.peak_tau = float(st.get("peak_tau", -math.inf))     # tau/sigma peak of this scaled stretch
+        self.drop = 0.25 * config.slips.lead_stress
         self.counts = {k: int(st.get(k, 0)) for k in
                        ("rollbacks", "misses", "in_place", "lowered", "steps_scaled", "steps_true",
                         "steps_discarded")}
@@ -107,7 +115,8 @@ class StickScaling:
     # ---- state ---------------------------------------------------------------------------
     def state_dict(self) -> dict:
         return {"lam": self.lam, "onset_scaled": self.onset_scaled, "triggered": self.triggered,
-                "quiet_since": self.quiet_since, "missed_now": self.missed_now, **self.counts}
+                "quiet_since": self.quiet_since, "missed_now": self.missed_now,
+                "peak_tau": self.peak_tau, **self.counts}
 
     @property
     def scaled(self) -> bool:
@@ -142,7 +151,8 @@ class StickScaling:
         """Called after the recorder saw `row`; True if the run went back in time."""
         t, v = row["time"], row["wall_vx"]
         if self.scaled:
-            if v >= self.hi:
+            self.peak_tau = max(self.peak_tau, row["tau_over_sigma"])
+            if v >= max(self.lo, self.hi / math.sqrt(self.lam)) or row["tau_over_sigma"] < self.peak_tau - self.drop:
                 self._rollback(sim, recorder, writer, guard, t)
                 return True
             if v < self.lo:     # the guard watches the quiet stick phase; onsets are rolled back
@@ -151,7 +161,8 @@ class StickScaling:
         if self.target <= 1.0:
             return False
         # true-inertia stretch after a rollback (or a lowered-to-1 guard)
-        if v >= self.hi:
+        self.peak_tau = max(self.peak_tau, row["tau_over_sigma"])
+        if v >= self.lo or row["tau_over_sigma"] < self.peak_tau - self.drop:
             self.triggered = True
             self.quiet_since = None
         elif self.onset_scaled is not None and not self.triggered and not self.missed_now \
@@ -188,7 +199,8 @@ class StickScaling:
             self._set(sim, lam)
 
     def _rollback(self, sim, recorder, writer, guard, t_onset: float):
-        ck = recorder.pending if recorder.pending is not None else (recorder.ring[0] if recorder.ring else None)
+        ck = recorder.pending if recorder.pending is not None else \
+            recorder._choose(min(recorder.last_quiet, recorder.peak_time, t_onset))
         self.onset_scaled, self.triggered, self.quiet_since, self.missed_now = t_onset, False, None, False
         if ck is None:
             self.counts["in_place"] += 1
@@ -198,6 +210,7 @@ class StickScaling:
         self.counts["rollbacks"] += 1
         self.counts["steps_discarded"] += sim.state.step - ck.step
         sim.state.restore(ck.state)
+        self.peak_tau = -math.inf
         if sim.fluid is not None:
             sim.fluid.restore(ck.fluid)
         recorder.rewind_to(ck)
@@ -207,6 +220,8 @@ class StickScaling:
         self._set(sim, 1.0)
 
     def _set(self, sim, lam: float):
+        if lam > 1.0 and self.lam <= 1.0:
+            self.peak_tau = -math.inf
         self.lam = float(lam)
         set_inertia(sim, self.lam, self.dt_true)
         self.changed = True

@@ -41,6 +41,7 @@ def test_inertia_and_step_scale_together_and_lambda_one_is_exact():
     np.testing.assert_allclose(s.mass, 16.0 * f.mass, rtol=1e-15)
     np.testing.assert_allclose(s.inv_inertia, f.inv_inertia / 16.0, rtol=1e-15)
     assert sim.params[K.WALL_MASS] == pytest.approx(16.0 * fresh.params[K.WALL_MASS], rel=1e-15)
+    assert sim.params[K.DAMPING] * sim.dt == pytest.approx(fresh.params[K.DAMPING] * fresh.dt, rel=1e-15)
     # the stability margin dt / sqrt(m) of every grain is lambda's invariant
     np.testing.assert_allclose(sim.dt * np.sqrt(s.inv_mass), fresh.dt * np.sqrt(f.inv_mass), rtol=1e-14)
     set_inertia(sim, 1.0, dt0)
