@@ -16,14 +16,18 @@ Rules of :class:`StickScaling` (checked on every time-series row):
   v_wall >= max(end_factor, start_factor / sqrt(lambda)) V_s, or with tau/sigma more than
   slips.lead_stress / 4 below its peak since scaling (re)started. The run goes back to the
   slip recorder's pre-slip state (the newest ring state at least slips.lead before the onset
-  estimate, events.SlipRecorder._choose; the oldest kept one if none is that old). Rows,
+  estimate, events.SlipRecorder._choose; the oldest kept one if none is that old; never one
+  from before scaling last resumed, whose state is put in the ring then, since the stretch
+  before it was at true inertia already: so a run cannot loop). Rows,
   snapshots and catalog entries after it are dropped (RunFile.truncate_after), the recorder
   and the energy guard are restored to that moment, lambda becomes 1 and the run computes
   again from there. Without a kept state it switches to lambda = 1 where it is (``in_place``).
-* **Resume.** Scaling resumes once the true-inertia stretch has moved (v_wall >= end_factor
-  V_s, or tau/sigma lead_stress / 4 below its peak since the rollback) and the wall has since
-  stayed quiet (v_wall < end_factor V_s) for quiet_time = max(slips.lead, slips.merge_gap +
-  2 output.series_interval), so that the detector has closed the slip before the step changes.
+* **Resume.** Scaling resumes once the true-inertia stretch has moved (v_wall >= start_factor
+  V_s, or tau/sigma lead_stress / 4 below its peak since the rollback) and then been quiet for
+  quiet_time = max(slips.lead, slips.merge_gap + 2 output.series_interval): no row with
+  v_wall >= start_factor V_s, |mean wall velocity| over the window (displacement / time) and
+  |v_wall| of the last row below end_factor V_s (the instantaneous wall velocity rattles above end_factor V_s
+  in ~15 % of stick rows), so that the detector has closed the slip before the step changes.
 * **Miss.** If the recomputation reaches the scaled onset time + slips.lead without moving so,
   it is counted in ``misses`` and simply continues at lambda = 1 until it does.
 * **Guard.** If, in a scaled stretch while the wall is quiet (v_wall < end_factor V_s), the
@@ -31,6 +35,10 @@ Rules of :class:`StickScaling` (checked on every time-series row):
   Deborah number sqrt(lambda) De) exceeds its bound (numerics.stick_inertial_max,
   stick_deborah_max), lambda is lowered to lambda (bound / value / 2)^2 (1 below 2) until
   the next slip, and a line on stderr says so.
+* **Switches.** When lambda changes without a rollback (resume, guard, a switch in place) the
+  velocities of grains, spins and the top wall are multiplied by sqrt(lambda_old /
+  lambda_new): the switch creates no kinetic energy. A rollback restores the stored state as
+  it is (a fork from it then computes exactly the same).
 * **Wet runs.** Scaling slows the grains' response but not pressure diffusion: the scaled stick
   phase is the true one loaded sqrt(lambda) times faster, De_stick = sqrt(lambda) l V_s / D.
   A wet loading run whose De_stick exceeds numerics.stick_deborah_max is refused (ConfigError).
@@ -48,6 +56,7 @@ import sys
 from .config import Config, ConfigError
 from .kernels import step as K
 from .portable import sphere_mass
+from .checkpoint import snapshot_of
 from .timestep import choose_dt
 
 LADDER_DEFAULT = 1.0     # the largest lambda the ladder found within the seed spread (README)
@@ -100,9 +109,11 @@ class StickScaling:
         self.lam = float(st.get("lam", self.target))
         self.onset_scaled = st.get("onset_scaled")      # time of the scaled onset being recomputed
         self.triggered = bool(st.get("triggered", False))
-        self.quiet_since = st.get("quiet_since")
+        self.quiet_since = st.get("quiet_since")        # start (t, x_wall) of the quiet window
+        self.quiet_x = st.get("quiet_x")
         self.missed_now = bool(st.get("missed_now", False))
-        self.peak_tau = float(st.get("peak_tau", -math.inf))     # tau/sigma peak of this scaled stretch
+        self.peak_tau = float(st.get("peak_tau", -math.inf))
+        self.resumed_at = float(st.get("resumed_at", -math.inf))   # when scaling last resumed [t0]     # tau/sigma peak of this scaled stretch
         self.drop = 0.25 * config.slips.lead_stress
         self.counts = {k: int(st.get(k, 0)) for k in
                        ("rollbacks", "misses", "in_place", "lowered", "steps_scaled", "steps_true",
@@ -115,8 +126,9 @@ class StickScaling:
     # ---- state ---------------------------------------------------------------------------
     def state_dict(self) -> dict:
         return {"lam": self.lam, "onset_scaled": self.onset_scaled, "triggered": self.triggered,
-                "quiet_since": self.quiet_since, "missed_now": self.missed_now,
-                "peak_tau": self.peak_tau, **self.counts}
+                "quiet_since": self.quiet_since, "quiet_x": self.quiet_x, "missed_now": self.missed_now,
+                "peak_tau": self.peak_tau,
+                "resumed_at": self.resumed_at, **self.counts}
 
     @property
     def scaled(self) -> bool:
@@ -162,24 +174,30 @@ class StickScaling:
             return False
         # true-inertia stretch after a rollback (or a lowered-to-1 guard)
         self.peak_tau = max(self.peak_tau, row["tau_over_sigma"])
-        if v >= self.lo or row["tau_over_sigma"] < self.peak_tau - self.drop:
+        if v >= self.hi or row["tau_over_sigma"] < self.peak_tau - self.drop:
             self.triggered = True
+        if v >= self.hi:                        # a slip in progress: the quiet window starts after it
             self.quiet_since = None
-        elif self.onset_scaled is not None and not self.triggered and not self.missed_now \
+        if not self.triggered and self.onset_scaled is not None and not self.missed_now \
                 and t > self.onset_scaled + self.lead:
             self.missed_now = True
             self.counts["misses"] += 1
             self._say(f"stick scaling: the true-inertia recomputation did not slip by t = {t:.6g} t0 "
                       f"(scaled onset {self.onset_scaled:.6g} t0); it goes on at true inertia")
         if self.triggered or self.onset_scaled is None:
-            if v < self.lo:
-                if self.quiet_since is None:
-                    self.quiet_since = t
-                elif t - self.quiet_since >= self.quiet_time:
+            x = row["wall_x"]
+            if self.quiet_since is None:
+                if abs(v) < self.lo:
+                    self.quiet_since, self.quiet_x = t, x
+            elif t - self.quiet_since >= self.quiet_time:
+                if abs(v) < self.lo and abs(x - self.quiet_x) / (t - self.quiet_since) < self.lo:
                     self._set(sim, self.target)
+                    self.resumed_at = t         # kept in the ring: no later rollback goes back past it
+                    recorder.ring.append(snapshot_of(sim, {"slip_recorder": recorder.state_dict(),
+                                                           "guards": guard.state_dict() if guard else {}}))
                     self.onset_scaled, self.triggered, self.quiet_since, self.missed_now = None, False, None, False
-            else:
-                self.quiet_since = None
+                else:
+                    self.quiet_since, self.quiet_x = t, x
         return False
 
     def _guard(self, sim, row: dict):
@@ -201,6 +219,9 @@ class StickScaling:
     def _rollback(self, sim, recorder, writer, guard, t_onset: float):
         ck = recorder.pending if recorder.pending is not None else \
             recorder._choose(min(recorder.last_quiet, recorder.peak_time, t_onset))
+        if ck is not None and ck.time < self.resumed_at:      # never redo a true-inertia stretch
+            later = [c for c in recorder.ring if c.time >= self.resumed_at]
+            ck = later[0] if later else None
         self.onset_scaled, self.triggered, self.quiet_since, self.missed_now = t_onset, False, None, False
         if ck is None:
             self.counts["in_place"] += 1
@@ -217,11 +238,20 @@ class StickScaling:
         if guard is not None and "guards" in ck.extra:
             guard.load_state_dict(ck.extra["guards"])
         writer.truncate_after(ck.time, ck.step, recorder.count)
-        self._set(sim, 1.0)
+        self._set(sim, 1.0, rescale=False)      # the stored state as it is: a fork from it computes the same
 
-    def _set(self, sim, lam: float):
+    def _set(self, sim, lam: float, rescale: bool = True):
+        """Switch to lambda; `rescale`: velocities times sqrt(old / new), so that the switch
+        creates no kinetic energy (grains, spins and the top wall)."""
         if lam > 1.0 and self.lam <= 1.0:
             self.peak_tau = -math.inf
+        if rescale and lam != self.lam:
+            f = math.sqrt(self.lam / lam)
+            s = sim.state
+            for arr in (s.vx, s.vz, s.spin):
+                arr *= f
+            s.wall[K.W_VX] *= f
+            s.wall[K.W_VZ] *= f
         self.lam = float(lam)
         set_inertia(sim, self.lam, self.dt_true)
         self.changed = True
