@@ -38,7 +38,8 @@ Rules of :class:`StickScaling` (checked on every time-series row):
 * **Switches.** When lambda changes without a rollback (resume, guard, a switch in place) the
   velocities of grains, spins and the top wall are multiplied by sqrt(lambda_old /
   lambda_new): the switch creates no kinetic energy. A rollback restores the stored state as
-  it is (a fork from it then computes exactly the same).
+  it is (a fork from it then computes exactly the same), and the start of loading scales the
+  settled packing with its (tiny) velocities as they are.
 * **Wet runs.** Scaling slows the grains' response but not pressure diffusion: the scaled stick
   phase is the true one loaded sqrt(lambda) times faster, De_stick = sqrt(lambda) l V_s / D.
   A wet loading run whose De_stick exceeds numerics.stick_deborah_max is refused (ConfigError).
@@ -70,8 +71,8 @@ SERIES_COLUMNS = {      # name -> (unit, description), merged into output.SERIES
 
 def set_inertia(sim, lam: float, dt_true: float):
     """Scale grain mass, inv_mass, inv_inertia [N] and the wall mass by lambda, the step by
-    sqrt(lambda) and the dashpot rate by 1/sqrt(lambda); lam = 1 gives exactly the arrays of State.__post_init__ and the params of
-    simulation.build_params."""
+    sqrt(lambda) and the dashpot rate by 1/sqrt(lambda); lam = 1 gives exactly the arrays of
+    State.__post_init__ and the params of simulation.build_params."""
     s = sim.state
     s.mass[...] = sphere_mass(s.radius, s.density * lam)
     s.inv_mass[...] = 1.0 / s.mass
@@ -112,8 +113,8 @@ class StickScaling:
         self.quiet_since = st.get("quiet_since")        # start (t, x_wall) of the quiet window
         self.quiet_x = st.get("quiet_x")
         self.missed_now = bool(st.get("missed_now", False))
-        self.peak_tau = float(st.get("peak_tau", -math.inf))
-        self.resumed_at = float(st.get("resumed_at", -math.inf))   # when scaling last resumed [t0]     # tau/sigma peak of this scaled stretch
+        self.peak_tau = float(st.get("peak_tau", -math.inf))        # tau/sigma peak of this stretch
+        self.resumed_at = float(st.get("resumed_at", -math.inf))    # when scaling last resumed [t0]
         self.drop = 0.25 * config.slips.lead_stress
         self.counts = {k: int(st.get(k, 0)) for k in
                        ("rollbacks", "misses", "in_place", "lowered", "steps_scaled", "steps_true",
