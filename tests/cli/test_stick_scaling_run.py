@@ -146,3 +146,56 @@ def test_stop_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_pa
     ca, cb = slip_catalog(out), slip_catalog(cut)
     assert [e["onset_time"] for e in ca] == [e["onset_time"] for e in cb]
     assert [e["checkpoint_time"] for e in ca] == [e["checkpoint_time"] for e in cb]
+
+
+@pytest.mark.validation
+def test_kill_9_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_path):
+    """A real kill -9 of `gouge run` (a subprocess) as soon as latest.h5 (written every 100 t0)
+    shows a true-inertia recomputation in progress, then `gouge resume`: bit for bit the
+    uninterrupted run."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    path, out, scene = scaled_run
+    dense = dict(scene, output=dict(scene["output"], checkpoint_interval=100))
+    dense_path = tmp_path / "dense.yaml"
+    dense_path.write_text(yaml.safe_dump(dense))
+    straight = tmp_path / "straight"
+    assert gouge("run", dense_path, "--out", straight, "--quiet").exit_code == 0
+    cut = tmp_path / "cut"
+    env = dict(os.environ, PYTHONUNBUFFERED="1", NUMBA_NUM_THREADS="1")
+    proc = subprocess.Popen([sys.executable, "-m", "gouge_cli.cli", "run", str(dense_path), "--out", str(cut),
+                             "--quiet"], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    latest = cut / "checkpoints" / "latest.h5"
+    caught = False
+    try:
+        deadline = time.time() + 300
+        while time.time() < deadline and proc.poll() is None:
+            if latest.exists():
+                try:
+                    state = read_checkpoint(latest).extra.get("stick_scaling", {})
+                except Exception:           # being replaced just now
+                    state = {}
+                if state.get("lam") == 1.0 and state.get("onset_scaled") is not None:
+                    proc.send_signal(signal.SIGSTOP)
+                    caught = True
+                    break
+            time.sleep(0.005)
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert caught, "the run finished before a recomputation could be caught"
+    result = gouge("resume", cut, "--quiet")
+    assert result.exit_code == 0, result.output
+    a = read_checkpoint(straight / "checkpoints" / "latest.h5")
+    b = read_checkpoint(latest)
+    for name in a.state:
+        assert np.array_equal(a.state[name], b.state[name]), name
+    assert a.extra["stick_scaling"] == b.extra["stick_scaling"]
+    sa, sb = series(straight / "run.h5"), series(cut / "run.h5")
+    for name in ("time", "wall_vx", "tau_over_sigma", "stick_scaling"):
+        assert np.array_equal(sa[name], sb[name], equal_nan=True), name
+    assert [e["onset_time"] for e in slip_catalog(straight)] == [e["onset_time"] for e in slip_catalog(cut)]
