@@ -148,6 +148,20 @@ class NumericsConfig(_Section):
         description="re-number the grains by position every this many neighbour-list rebuilds, so that "
                     "neighbours stay close in memory as the layer shears; 0 = never; default 20 from "
                     "2000 grains, else 0")
+    # stick scaling (gouge_cli.stick_scaling)
+    stick_scaling: float = Field(
+        1.0, ge=1.0, le=1.0e4,
+        description="inertia (density) scaling lambda of grains and walls while a loading run sticks: the "
+                    "step grows by sqrt(lambda); every slip is recomputed at true inertia, forks are never "
+                    "scaled; 1 = off [-]")
+    stick_inertial_max: float = Field(
+        1.0e-3, gt=0, le=0.1,
+        description="bound on the inertial number I = (|v_wall|/H) d sqrt(lambda rho/sigma) in scaled "
+                    "stretches; above it lambda is lowered until the next slip [-]")
+    stick_deborah_max: float = Field(
+        0.01, gt=0, le=10.0,
+        description="wet loading runs: bound on the stick-phase Deborah number sqrt(lambda) l V_s / D; "
+                    "a larger one is refused, and lambda is lowered when the measured one exceeds it [-]")
 
 
 class RunConfig(_Section):

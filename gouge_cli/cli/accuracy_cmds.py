@@ -70,6 +70,12 @@ def accuracy(
     analytic: bool = typer.Option(True, "--analytic/--no-analytic", help="also the analytic cases"),
     fluid: bool = typer.Option(True, "--fluid/--no-fluid", help="also the fluid ladders (a dry scene gets "
                                                                 "kappa_c = 1e-5 for them)"),
+    stick_scaling: Optional[str] = typer.Option(
+        None, "--stick-scaling", help="instead: the stick-scaling ladder over these lambdas, e.g. 1,4,16,64,256 "
+                                      "(slip statistics and cost against lambda; gouge_cli.studies.scaling_ladder)"),
+    seeds: int = typer.Option(3, "--seeds", min=2, help="stick-scaling ladder: seeds (config seed, +1, ...)"),
+    transient: float = typer.Option(0.2, "--transient", min=0.0, max=0.9,
+                                    help="stick-scaling ladder: fraction of the loading ignored as transient"),
 ):
     """Errors and run times of a scene at ladders of dt_safety, fluid cell size, fluid step and solver, and of analytic cases; observed orders.
 
@@ -81,6 +87,8 @@ def accuracy(
 
     if config is None and slip_checkpoint is None:
         fail("give a CONFIG, a --slip-checkpoint, or both")
+    if stick_scaling is not None:           # stick scaling: its own ladder
+        return _stick_ladder(config, set_, stick_scaling, seeds, transient, out_dir)
     try:
         cfg = load_config(config, set_) if config is not None else None
         if cfg is None and set_:
@@ -101,3 +109,36 @@ def accuracy(
 
 def register(app: typer.Typer):
     app.command("accuracy")(guarded(accuracy))
+
+
+def _stick_ladder(config, set_, lambdas, seeds, transient, out_dir):
+    """`gouge accuracy CONFIG --stick-scaling 1,4,16 --seeds 3`: run, print the table, write files."""
+    from ..studies.scaling_ladder import QUANTITIES, run_ladder
+
+    if config is None:
+        fail("--stick-scaling needs a CONFIG (a scene that stick-slips repeatedly)")
+    try:
+        values = [float(v) for v in lambdas.split(",") if v.strip()]
+    except ValueError:
+        fail(f"--stick-scaling: {lambdas!r} is not a comma-separated list of numbers")
+    if not values or min(values) < 1.0:
+        fail(f"--stick-scaling: every lambda must be >= 1 (got {lambdas})")
+    cfg = load_config(config, set_)           # ConfigError / PhysicsError: exit codes through guarded
+    target = out_dir or Path("runs") / "accuracy" / f"{cfg.name}_stick_scaling"
+    result = run_ladder(cfg, values, seeds, target, transient, progress=lambda r: err.print(
+        f"lambda {r['lam']:g} seed {r['seed']}: {len(r['slips'])} slips, {r['steps']} steps, {r['wall']:.1f} s",
+        highlight=False))
+    from rich.table import Table
+
+    table = Table(title=f"stick-scaling ladder ({seeds} seeds; differences from lambda = 1: mean ± 95 % CI "
+                        "[lambda = 1 seed-to-seed spread])")
+    for col in ("lambda", "slips/seed", "grain-steps/cycle", "speed-up", "wall s/cycle", "I max", *QUANTITIES, "ok"):
+        table.add_column(col, justify="right")
+    for r in result["rows"]:
+        table.add_row(f"{r['lambda']:g}", f"{r['slips_per_seed']:.1f}", f"{r['grain_steps_per_cycle']:.3g}",
+                      f"{r['speedup']:.2f}", f"{r['wall_s_per_cycle']:.3g}", _fmt(r["i_max"]),
+                      *[f"{_fmt(r[q + '_diff'])} ± {_fmt(r[q + '_ci95'])} [{_fmt(r[q + '_spread'])}]"
+                        for q in QUANTITIES], "yes" if r["within_spread"] else "no")
+    out.print(table)
+    out.print(f"default (largest lambda with every difference within the spread): {result['default']:g}; "
+              f"files: {target / 'scaling_ladder.csv'}, {target / 'scaling_ladder.png'}", highlight=False)

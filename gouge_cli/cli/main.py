@@ -275,6 +275,11 @@ def bench(
                       f"{v['rate']:.3g} grain-steps/s: one loading cycle ({r24['cycle_t0']:.2g} t0) "
                       f"{v['cycle_hours']:.1f} h, one slip ({r24['slip_t0']:.3g} t0) {v['slip_minutes']:.1f} min",
                       highlight=False)
+        for lam, v in r24.get("stick_scaling", {}).items():      # stick scaling: projected cycle
+            hours = ", ".join(f"{h:.1f} h on {t} thread(s)" for t, h in v["cycle_hours"].items())
+            out.print(f"  with numerics.stick_scaling {float(lam):g}{' (the measured default)' if v['default'] else ''}: "
+                      f"{v['step_ratio']:.2f}x fewer steps per cycle (stick_scaling.cycle_steps): {hours}",
+                      highlight=False)
     out.print(f"peak RSS {results['peak_rss_mb']:.0f} MB; results in {json_out}")
 
 

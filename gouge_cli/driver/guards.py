@@ -78,7 +78,8 @@ class Scan:
         row = sim.observe()
         kinetic = row["kinetic_energy"]
         if s.top.size:
-            kinetic += 0.5 * sim.wall_mass_per_length * s.width * (s.wall[L.W_VX] ** 2 + s.wall[L.W_VZ] ** 2)
+            kinetic += 0.5 * sim.wall_mass_per_length * s.width * (s.wall[L.W_VX] ** 2 + s.wall[L.W_VZ] ** 2) \
+                * sim.inertia_scale       # stick scaling: the wall's scaled mass
         return cls(s.time, int(row["nonfinite"]), float(kinetic), float(row["max_overlap"]), row["worst_pair"],
                    float(row["contact_energy"]))
 

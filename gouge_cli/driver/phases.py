@@ -6,7 +6,9 @@ accuracy study alike."""
 
 from __future__ import annotations
 
+import json
 import signal
+import sys
 import threading
 from contextlib import contextmanager
 from pathlib import Path
@@ -19,7 +21,7 @@ from ..kernels import layout as L
 from ..model.timestep import slip_duration
 from .guards import guard_callbacks
 from .progress import ProgressReport, SettleReport
-from ..errors import PhysicsError
+from ..errors import ConfigError, PhysicsError
 from .schedules import Every
 from .simulation import Simulation
 from .slips import SlipRecorder
@@ -39,6 +41,14 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
                             resume_from.attached if resume_from is not None else None)
     guards = guard_callbacks(sim)
     guards[0].action.load_state_dict(saved.get("guards", {}))
+    scaling = None
+    if config.numerics.stick_scaling > 1.0:     # stick scaling: the controller (sets the inertia)
+        from .stick_scaling import StickScaling
+        try:
+            scaling = StickScaling(config, sim, saved.get("stick_scaling"), quiet=quiet)
+        except ConfigError as err:
+            writer.close(f"refused: {err}", provenance.sim_hash(sim))
+            raise
     progress = None if quiet else ProgressReport(label, end_time - sim.state.time, sim.state.n, live=live)
     t_begin = sim.state.time
     stop = {"now": False}
@@ -48,8 +58,12 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     def record(s: Simulation):
         ensure_space(out_dir, need)
         row = s.observe()
+        if scaling is not None:                 # stick scaling: lambda, I (and De) columns
+            row.update(scaling.columns(s, row))
         writer.append(row)
         slip = recorder.observe(row)
+        if scaling is not None and scaling.after_row(s, row, recorder, writer, guards[0].action):
+            return                              # stick scaling: went back to a pre-slip state
         if slip is not None and stop_after_slip:
             stop["now"] = True
         if progress:
@@ -60,22 +74,32 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
         if ck_dir is not None:
             writer.flush()
             rec_state, ring = recorder.full_state()
-            write_checkpoint(ck_dir / "latest.h5", snapshot_of(
-                s, {"phase": "loading", "slip_recorder": rec_state, "guards": guards[0].action.state_dict()}, ring))
+            extra = {"phase": "loading", "slip_recorder": rec_state, "guards": guards[0].action.state_dict()}
+            if scaling is not None:             # stick scaling: its state
+                extra["stick_scaling"] = scaling.state_dict()
+            write_checkpoint(ck_dir / "latest.h5", snapshot_of(s, extra, ring))
+
+    def keep(s: Simulation):                    # stick scaling: ring states carry the energy guard's history
+        recorder.keep(s, {"guards": guards[0].action.state_dict()})
 
     # callback order on a step where several are due: guards, slip_frames, series (+ slip detector,
     # progress), snapshots, ring (pre-slip states), checkpoint (latest.h5 with the guards' and the
     # slip recorder's states)
-    callbacks = guards + slip_frame_callbacks(sim, writer, recorder) + [
+    def build() -> list[Every]:
+        """The callbacks; their periods are step counts, so stick scaling rebuilds them when dt changes."""
+        recorder.ring_every = sim.steps_for(recorder.lead / 4.0)
+        return guards + slip_frame_callbacks(sim, writer, recorder) + [
                  Every.t0(sim, config.output.series_interval, record, "series"),
                  Every.t0(sim, config.output.snapshot_interval, writer.snapshot, "snapshots"),
-                 Every(recorder.ring_every, recorder.keep, "ring"),
+                 Every(recorder.ring_every, recorder.keep if scaling is None else keep, "ring"),
                  Every.t0(sim, config.output.checkpoint_interval, latest, "checkpoint")]
     status = "finished"
     try:
         with deferred_interrupt() as interrupted:
-            if sim.state.time < end_time:
-                sim.run(end_time - sim.state.time, callbacks, should_stop=lambda: stop["now"] or interrupted())
+            if sim.state.time < end_time and scaling is not None:
+                scaling.run(sim, end_time, build, should_stop=lambda: stop["now"] or interrupted())
+            elif sim.state.time < end_time:
+                sim.run(end_time - sim.state.time, build(), should_stop=lambda: stop["now"] or interrupted())
             if interrupted():
                 status = "interrupted"
             latest(sim)
@@ -88,6 +112,11 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     finally:
         if progress:
             progress.close()
+    if scaling is not None:
+        recorder.stick_scaling = scaling        # stick scaling: counts for reports and the ladder
+        writer.set_attr("stick_scaling_counts", json.dumps(scaling.state_dict()))
+        if not quiet:
+            print(scaling.summary(), file=sys.stderr, flush=True)
     return status, recorder
 
 

@@ -59,6 +59,7 @@ class Simulation:
         restored packing: a fork from a dry checkpoint)."""
         self.config = config
         self.dt = choose_dt(config)
+        self.inertia_scale = 1.0     # lambda of driver.stick_scaling in force (1: true inertia)
         self.state = state if state is not None else build_packing(config)
         s = self.state
         top_mass = float(s.mass[s.top].sum()) / s.width

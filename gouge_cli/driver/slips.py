@@ -90,12 +90,27 @@ class SlipRecorder:
             attached["pending"] = self.pending
         return state, attached
 
-    def keep(self, sim):
+    def keep(self, sim, extra: dict | None = None):
         """Ring callback (every lead/4): keep the state if the wall is quiet (v < end threshold),
-        so that the ring always reaches back from the last quiet moment before an onset."""
+        so that the ring always reaches back from the last quiet moment before an onset.
+        `extra`: more callback states to keep with it (stick scaling: the energy guard's)."""
         tau = sim.tau_over_sigma()
         if sim.state.wall[W_VX] < self.lo and tau >= self.peak_tau - self.peak_band:
-            self.ring.append(snapshot_of(sim, {"slip_recorder": self.state_dict()}))
+            self.ring.append(snapshot_of(sim, {"slip_recorder": self.state_dict(), **(extra or {})}))
+
+    def rewind_to(self, ck: Checkpoint):
+        """Stick scaling: back to the moment ring state `ck` was kept (detector, peak, count as
+        then; later ring states and the pending state dropped)."""
+        state = ck.extra["slip_recorder"]
+        self.detector = SlipDetector.from_state_dict(state["detector"])
+        self.count = int(state["count"])
+        self.last_quiet, self.above = float(state["last_quiet"]), bool(state["above"])
+        self.peak_tau, self.peak_time = float(state["peak_tau"]), float(state["peak_time"])
+        self.pending = None
+        self._deborah.clear()
+        kept = [c for c in self.ring if c.step <= ck.step]
+        self.ring.clear()
+        self.ring.extend(kept)
 
     def _choose(self, onset_estimate: float) -> Checkpoint | None:
         """Newest kept state at least `lead` before the onset estimate, else the oldest kept

@@ -8,7 +8,9 @@ Layout of ``run.h5``::
     /            attrs: config (YAML), scales (JSON), version, seed, dt, status, created,
                  provenance (JSON: version, commit, command, libraries, CPU, threads; see
                  gouge_cli.io.provenance), provenance_resumed (JSON, of the latest resume) and
-                 final_state_hash (16 hex digits of the state when the run stopped)
+                 final_state_hash (16 hex digits of the state when the run stopped),
+                 stick_scaling_counts (JSON, runs with numerics.stick_scaling > 1: rollbacks, misses,
+                 steps scaled / at true inertia / discarded; gouge_cli.driver.stick_scaling)
     /series/<q>  (T,) float64, resizable; attrs unit, description
     /snapshots/<step>/{x,z,radius,vx,vz,spin,body, contact_i, contact_j, contact_fx, contact_fz}
                  attrs time, load_time, step; optional pressure/porosity [nx, nz] fields when the
@@ -76,6 +78,10 @@ SERIES = {
     "pressure_min": ("E", "smallest pore pressure perturbation"),
     "pressure_max": ("E", "largest pore pressure perturbation"),
     "deborah": ("-", "Deborah number l u0 / D of the fluid"),
+    # stick scaling (driver.stick_scaling), only in runs with numerics.stick_scaling > 1
+    "stick_scaling": ("-", "inertia scaling lambda in force at this row (1: true inertia)"),
+    "inertial_number": ("-", "I = (|v_wall| / H) d_mean sqrt(lambda rho / sigma) of the layer"),
+    "stick_deborah": ("-", "stick-phase Deborah number sqrt(lambda) De (wet runs)"),
 }
 
 
@@ -114,15 +120,19 @@ class RunFile:
     def flush(self):
         if self._rows:
             group = self.h5["series"]
-            names = [n for n in self._rows[0] if n in SERIES]
-            for name in names:
-                values = np.array([r[name] for r in self._rows], dtype=np.float64)
+            names = list(dict.fromkeys(n for r in self._rows for n in r if n in SERIES))
+            rows_before = group["time"].shape[0] if "time" in group else 0
+            for name in names:     # a column missing from some rows (stick scaling's) is NaN there
+                values = np.array([r.get(name, np.nan) for r in self._rows], dtype=np.float64)
                 if name not in group:
                     unit, description = SERIES[name]
                     ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64,
                                               chunks=(4096,))
                     ds.attrs["unit"] = unit
                     ds.attrs["description"] = description
+                    if name != "time" and rows_before:
+                        ds.resize((rows_before,))
+                        ds[:] = np.nan
                 ds = group[name]
                 old = ds.shape[0]
                 ds.resize((old + values.size,))

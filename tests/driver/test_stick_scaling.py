@@ -1,0 +1,136 @@
+"""Stick scaling's pieces on small scenes: inertia and step consistent with lambda and exactly undone
+at lambda = 1, the inertial-number guard, the wet-run refusal, and the ladder's statistics."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from gouge_cli.cli.main import app
+from gouge_cli.errors import EXIT_BAD_INPUT
+from gouge_cli.config import build_config
+from gouge_cli.errors import ConfigError
+from gouge_cli.kernels import layout as K
+from gouge_cli.studies.scaling_ladder import summarize
+from gouge_cli.driver.simulation import Simulation
+from gouge_cli.driver.stick_scaling import StickScaling, set_inertia
+from gouge_cli.model.timestep import choose_dt
+
+SMALL = {"packing": {"n_grains": 60, "width": 8}, "seed": 3,
+         "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
+         "compaction": {"min_time": 100.0, "max_time": 300.0},
+         "numerics": {"stick_scaling": 16}}
+
+
+def _sim(**over) -> Simulation:
+    data = {**SMALL, **over}
+    sim = Simulation(build_config(data))
+    sim.start_loading()
+    return sim
+
+
+def test_inertia_and_step_scale_together_and_lambda_one_is_exact():
+    sim = _sim()
+    fresh = Simulation(build_config({**SMALL, "numerics": {"stick_scaling": 1}}))
+    fresh.start_loading()
+    s, f = sim.state, fresh.state
+    dt0 = choose_dt(sim.config)
+    set_inertia(sim, 16.0, dt0)
+    assert sim.dt == 4.0 * dt0 and sim.params[K.DT] == sim.dt
+    np.testing.assert_allclose(s.mass, 16.0 * f.mass, rtol=1e-15)
+    np.testing.assert_allclose(s.inv_inertia, f.inv_inertia / 16.0, rtol=1e-15)
+    assert sim.params[K.WALL_MASS] == pytest.approx(16.0 * fresh.params[K.WALL_MASS], rel=1e-15)
+    assert sim.params[K.DAMPING] * sim.dt == pytest.approx(fresh.params[K.DAMPING] * fresh.dt, rel=1e-15)
+    # the stability margin dt / sqrt(m) of every grain is lambda's invariant
+    np.testing.assert_allclose(sim.dt * np.sqrt(s.inv_mass), fresh.dt * np.sqrt(f.inv_mass), rtol=1e-14)
+    set_inertia(sim, 1.0, dt0)
+    for name in ("mass", "inv_mass", "inv_inertia"):
+        assert np.array_equal(getattr(s, name), getattr(f, name)), name
+    assert np.array_equal(sim.params, fresh.params) and sim.dt == fresh.dt
+
+
+def _row(sim, v):
+    return {"time": 100.0, "wall_vx": v, "thickness": 6.0, "tau_over_sigma": 0.1}
+
+
+def test_inertial_number_and_guard_lower_lambda(capsys):
+    sim = _sim(numerics={"stick_scaling": 16, "stick_inertial_max": 1e-4})
+    ctl = StickScaling(sim.config, sim)
+    assert ctl.lam == 16.0 and sim.dt == pytest.approx(4.0 * choose_dt(sim.config), rel=1e-15)
+    v = 1.2 * 4e-5                                 # quiet: below end_factor V_s = 2 V_s
+    expected = v / 6.0 * 1.0 * math.sqrt(16.0 / 3e-4)
+    assert ctl.columns(sim, _row(sim, v))["inertial_number"] == pytest.approx(expected, rel=1e-12)
+    assert expected > 1e-4
+    ctl.after_row(sim, _row(sim, v), None, None, None)
+    lowered = 16.0 * (0.5 * 1e-4 / expected) ** 2
+    assert ctl.lam == pytest.approx(lowered if lowered >= 2 else 1.0)
+    assert ctl.counts["lowered"] == 1 and "lowered" in capsys.readouterr().err
+    assert sim.params[K.DT] == pytest.approx(choose_dt(sim.config) * math.sqrt(ctl.lam), rel=1e-15)
+    # a quiet row below the bound changes nothing
+    lam = ctl.lam
+    ctl.after_row(sim, _row(sim, 1e-9), None, None, None)
+    assert ctl.lam == lam
+
+
+def test_wet_loading_run_above_the_deborah_bound_is_refused():
+    wet = {"fluid": {"permeability": 1e-9}}       # slow diffusion: De_stick large
+    sim = _sim(**wet)
+    sim.start_fluid()
+    with pytest.raises(ConfigError, match="numerics.stick_scaling"):
+        StickScaling(sim.config, sim)
+    fast = _sim(fluid={"permeability": 1e-3}, numerics={"stick_scaling": 4})
+    fast.start_fluid()
+    assert StickScaling(fast.config, fast).lam == 4.0
+    assert "stick_deborah" in StickScaling(fast.config, fast).columns(fast, {**_row(fast, 1e-5), "deborah": 1e-3})
+
+
+def test_cli_refuses_a_wet_scaled_run_with_exit_2(tmp_path):
+    import yaml
+
+    scene = {**SMALL, "name": "wet", "fluid": {"permeability": 1e-9}, "run": {"duration": 100.0}}
+    path = tmp_path / "wet.yaml"
+    path.write_text(yaml.safe_dump(scene))
+    result = CliRunner().invoke(app, ["run", str(path), "--out", str(tmp_path / "wet"), "--quiet"])
+    assert result.exit_code == EXIT_BAD_INPUT, result.output
+    assert "numerics.stick_scaling" in result.output
+
+
+def _run(lam, seed, drops, t_load=0.0, duration=1000.0):
+    slips = [{"onset_time": t_load + 300.0 + 100.0 * i, "static_strength": 0.3, "stress_drop": d,
+              "peak_velocity": 1e-3, "duration": 50.0} for i, d in enumerate(drops)]
+    return {"lam": lam, "seed": seed, "steps": int(1000 / math.sqrt(lam)), "wall": 1.0, "n": 10,
+            "t_load": t_load, "duration": duration, "i_max": 1e-5, "counts": {}, "slips": slips}
+
+
+def test_ladder_statistics_and_default():
+    runs = [_run(1.0, 1, [0.10, 0.10, 0.10]), _run(1.0, 2, [0.12, 0.12, 0.12]),
+            _run(4.0, 1, [0.105, 0.11, 0.115]), _run(4.0, 2, [0.11, 0.11, 0.11]),
+            _run(16.0, 1, [0.2, 0.2, 0.2]), _run(16.0, 2, [0.2, 0.2, 0.2])]
+    res = summarize(runs, transient=0.2)
+    rows = {r["lambda"]: r for r in res["rows"]}
+    spread = np.std([0.10, 0.12], ddof=1)
+    assert rows[4.0]["stress_drop_spread"] == pytest.approx(spread)
+    assert rows[4.0]["stress_drop_diff"] == pytest.approx(0.11 - 0.11)
+    assert rows[16.0]["stress_drop_diff"] == pytest.approx(0.09)
+    a, b = np.array([0.2] * 6), np.array([0.1] * 3 + [0.12] * 3)
+    assert rows[16.0]["stress_drop_ci95"] == pytest.approx(1.96 * math.sqrt(a.var(ddof=1) / 6 + b.var(ddof=1) / 6))
+    assert rows[4.0]["within_spread"] and not rows[16.0]["within_spread"]
+    assert res["default"] == 4.0
+    assert res["cycle"] == pytest.approx(100.0)
+    assert rows[16.0]["speedup"] == pytest.approx(1000 / 250)
+
+
+def test_cycle_projection_counts_the_true_inertia_stretch():
+    from gouge_cli.driver.slips import lead_time
+    from gouge_cli.driver.stick_scaling import cycle_steps
+
+    config = build_config({**SMALL, "slips": {"lead": 100.0}, "output": {"series_interval": 10.0}})
+    dt = choose_dt(config)
+    assert cycle_steps(config, 1.0, 1e4, 50.0) == (1e4 / dt, 1e4 / dt)
+    plain, scaled = cycle_steps(config, 16.0, 1e4, 50.0)
+    true_t = 1.25 * lead_time(config) + 50.0 + 100.0
+    assert scaled == pytest.approx(true_t / dt + (1e4 - true_t + 125.0) / (4.0 * dt), rel=1e-12)
+    assert plain / scaled < 4.0
