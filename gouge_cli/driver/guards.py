@@ -281,13 +281,12 @@ def guard_callbacks(sim: Simulation, interval: float | None = None, **limits) ->
 
 def guarded_run(sim: Simulation, duration: float, interval: float | None = None, compact: bool = True,
                 **limits) -> list[dict]:
-    """Compact (if still compacting and `compact`), start the fluid, then load for `duration`
+    """Compact (if still compacting and `compact`; the fluid starts with loading), then load for `duration`
     [t0] with all guards every `interval` [t0] (default output.series_interval); returns the
     time-series rows (Simulation.observe) taken at the same cadence. Raises PhysicsError."""
     guards = Guards(**limits)
     if compact and sim.phase == L.COMPACTION:
         sim.compact(on_chunk=lambda s, elapsed: guards(s))
-    sim.start_fluid()
     rows = [sim.observe()]
 
     def record(s: Simulation):

@@ -167,7 +167,6 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
     writer = RunFile(work_dir / "run.h5", config, sim.dt)
     try:
         sim.compact()
-        sim.start_fluid()
         writer.append(sim.observe())
         _, recorder = load_phase(sim, writer, work_dir, sim.state.time + config.run.duration, quiet=quiet,
                                  stop_after_slip=True)
