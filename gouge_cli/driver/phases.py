@@ -47,7 +47,7 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
 
     def record(s: Simulation):
         ensure_space(out_dir, need)
-        row = s.observe()
+        row = s.measure()               # (the guards' row when they ran on this step)
         writer.append(row)
         slip = recorder.observe(row)
         if slip is not None and stop_after_slip:
