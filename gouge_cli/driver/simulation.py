@@ -150,9 +150,8 @@ class Simulation:
         from ..kernels.coupled import advance_fluid
 
         s = self.state
-        args = self.fluid.kernel_args()
         return advance_fluid(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params, s.counters,
-                             nsteps, args[-2], args[-1], args[:-2], self.fluid_interval,
+                             nsteps, self.fluid.drag_x, self.fluid.drag_z, self.fluid.record(), self.fluid_interval,
                              self.wall_planes()[0], self._fluid_status)
 
     @property

@@ -17,8 +17,8 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
                   fluid, interval, z_bottom, fluid_status):
     """As kernels.step.advance, plus a pore-pressure update (kernels.fluid_update.fluid_update) after every
     `interval`-th step (step count multiple of interval) over dt_f = interval * dt; the drag
-    it leaves in drag_x/drag_z acts on the grains until the next update. fluid: the tuple
-    FluidGrid.kernel_args() without drag. Returns (FLUID_FAILED, steps) with fluid_status[0]
+    it leaves in drag_x/drag_z acts on the grains until the next update. fluid: the grid's
+    arrays by name (kernels.layout.FluidArrays, FluidGrid.record()). Returns (FLUID_FAILED, steps) with fluid_status[0]
     set if the fluid update fails (the grains may then be drifted into the next step).
 
     The step before an update is not closed: the deposit takes the grains' whole-step
@@ -28,7 +28,9 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     other."""
     x, z, vx, vz, radius = grains.x, grains.z, grains.vx, grains.vz, grains.radius
     force_x, force_z, inv_mass, body = grains.force_x, grains.force_z, grains.inv_mass, grains.body
-    fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work, corners, partial = fluid
+    fparams, fstate, P, s, s_old = fluid.params, fluid.state, fluid.pressure, fluid.s, fluid.s_old
+    ux, uz, perm, div_u, work = fluid.ux, fluid.uz, fluid.permeability, fluid.div_u, fluid.work
+    corners, partial = fluid.corners, fluid.partial
     n = x.shape[0]
     width = params[WIDTH]
     dt_f = interval * params[DT]

@@ -111,6 +111,11 @@ G_SX = 16            # ds/dx consistent with the deposit
 G_SZ = 17            # ds/dz consistent with the deposit
 N_GRID_WORK = 18
 
+# the grid's arrays as kernels.coupled takes them, addressed by name (model.fluid.FluidGrid.record;
+# shapes: kernels.fluid_update's module doc)
+FluidArrays = namedtuple("FluidArrays", ("params", "state", "pressure", "s", "s_old", "ux", "uz", "permeability",
+                                         "div_u", "work", "corners", "partial"))
+
 STATUS_OK = 0
 STATUS_SOLVER = 1
 STATUS_NONFINITE = 2
