@@ -15,7 +15,7 @@ needs whole-step velocities mid-call takes them from ``closed_velocity`` (the fl
 The scene's arrays come as records addressed by field name (kernels.layout.Grains, Lists, Pairs,
 built by model.state.State); indices of params, wall, clock and counters: kernels.layout.
 
-Size (~510 lines): the pair pass (block_layout .. contact_forces) and the step (kicks, drift,
+Size (~525 lines): the pair pass (block_layout .. contact_forces) and the step (kicks, drift,
 rebuild, advance) stay in one file for now; the pair pass is the natural next split (forces.py).
 """
 
