@@ -32,13 +32,6 @@ def _main(version: bool = typer.Option(False, "--version", callback=_version, is
     """gouge: grain-scale stick-slip simulations of (water-saturated) fault gouge."""
 
 
-def _set_threads(threads: int):
-    import numba
-
-    if threads:
-        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-
-
 @app.command()
 @guarded
 def run(
@@ -52,7 +45,6 @@ def run(
     from ..workflows.run import default_run_dir, run_scene
 
     cfg = load_config(config, set_)
-    _set_threads(cfg.numerics.threads)
     target = out_dir or default_run_dir(cfg)
     result = run_scene(cfg, target, force=force, quiet=quiet)
     out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s, "
@@ -165,7 +157,7 @@ def show_config(
 ):
     """Validate a config and print it fully resolved (dimensionless), or print the defaults."""
     from ..model.preflight import check_config
-    from ..driver.simulation import Simulation
+    from ..model.params import choose_threads
     from ..model.timestep import stability_bound
 
     if schema is not None or (defaults and config is None and not set_):
@@ -175,7 +167,7 @@ def show_config(
         return
     cfg = build_config({}, set_) if (defaults or config is None) else load_config(config, set_)
     bound = stability_bound(cfg)
-    pre = check_config(cfg, Simulation._choose_threads(cfg.numerics.threads, cfg.packing.n_grains))
+    pre = check_config(cfg, choose_threads(cfg.numerics.threads, cfg.packing.n_grains))
     out.print(dump_config(cfg), highlight=False, end="")
     out.print(f"# time step {pre.dt:.6g} t0 (stability bound {bound.bound:.6g} t0, {bound.mode} mode)",
               highlight=False)

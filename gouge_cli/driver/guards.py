@@ -73,9 +73,10 @@ class Scan:
 
     @classmethod
     def of(cls, sim: Simulation) -> "Scan":
-        """From Simulation.observe (kernels.measure), plus the top wall's kinetic energy."""
+        """From Simulation.measure (kernels.measure; shared with the series row of the same step),
+        plus the top wall's kinetic energy."""
         s = sim.state
-        row = sim.observe()
+        row = sim.measure()
         kinetic = row["kinetic_energy"]
         if s.top.size:
             kinetic += 0.5 * sim.wall_mass_per_length * s.width * (s.wall[L.W_VX] ** 2 + s.wall[L.W_VZ] ** 2) \
@@ -282,19 +283,15 @@ def guard_callbacks(sim: Simulation, interval: float | None = None, **limits) ->
 
 def guarded_run(sim: Simulation, duration: float, interval: float | None = None, compact: bool = True,
                 **limits) -> list[dict]:
-    """Compact (if still compacting and `compact`), start the fluid, then load for `duration`
+    """Compact (if still compacting and `compact`; the fluid starts with loading), then load for `duration`
     [t0] with all guards every `interval` [t0] (default output.series_interval); returns the
-    time-series rows (Simulation.observe) taken at the same cadence. Raises PhysicsError."""
+    time-series rows (Simulation.measure, shared with the guards) taken at the same cadence:
+    Simulation.run with the callbacks "guards", "series". Raises PhysicsError."""
     guards = Guards(**limits)
     if compact and sim.phase == L.COMPACTION:
         sim.compact(on_chunk=lambda s, elapsed: guards(s))
-    sim.start_fluid()
-    rows = [sim.observe()]
-
-    def record(s: Simulation):
-        guards(s)
-        rows.append(s.observe())
-
+    rows = [sim.measure()]
     interval = sim.config.output.series_interval if interval is None else interval
-    sim.run(duration, [Every.t0(sim, interval, record, "guards+series")])
+    sim.run(duration, [Every.t0(sim, interval, guards, "guards"),
+                       Every.t0(sim, interval, lambda s: rows.append(s.measure()), "series")])
     return rows

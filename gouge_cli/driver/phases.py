@@ -57,7 +57,7 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
 
     def record(s: Simulation):
         ensure_space(out_dir, need)
-        row = s.observe()
+        row = s.measure()               # (the guards' row when they ran on this step)
         if scaling is not None:                 # stick scaling: lambda, I (and De) columns
             row.update(scaling.columns(s, row))
         writer.append(row)

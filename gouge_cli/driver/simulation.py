@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from typing import Callable
 
-import numba
 import numpy as np
 
 from ..config import Config
@@ -23,29 +22,10 @@ from .guards import NonFiniteGuard, OverlapGuard, Scan
 from .schedules import Every
 from .settling import SettleCheck, settle_check
 from ..model.state import State
-from ..model.timestep import choose_dt, contact_constants
+from ..model.params import build_params, choose_threads, numba_threads
+from ..model.timestep import choose_dt
 
 _EMPTY = np.zeros(0)
-AUTO_PARALLEL_MIN_GRAINS = 2000
-AUTO_SORT_EVERY = 20        # rebuilds between re-numberings (~900 steps at the bench scene; LAMMPS: 1000)
-
-
-def build_params(config: Config, dt: float, width: float, wall_mass: float) -> np.ndarray:
-    """Kernel parameter vector (layout: kernels.step DT..DRIVE). wall_mass: total m_b L_x; 0 = no top wall."""
-    c_normal, c_tangential = contact_constants(config)
-    p = np.zeros(L.N_PARAMS)
-    p[L.DT] = dt
-    p[L.WIDTH] = width
-    p[L.SKIN] = config.numerics.skin
-    p[L.C_NORMAL] = c_normal
-    p[L.C_TANGENTIAL] = c_tangential
-    p[L.DAMPING] = config.material.damping
-    p[L.FRICTION] = config.material.friction
-    p[L.SIGMA] = config.loading.normal_stress
-    p[L.SPRING] = config.loading.spring_constant
-    p[L.V_LOAD] = config.loading.velocity
-    p[L.WALL_MASS] = wall_mass
-    return p
 
 
 class Simulation:
@@ -64,22 +44,23 @@ class Simulation:
         s = self.state
         top_mass = float(s.mass[s.top].sum()) / s.width
         self.wall_mass_per_length = (config.loading.wall_mass or top_mass) if s.top.size else 0.0
-        p = build_params(config, self.dt, s.width, self.wall_mass_per_length * s.width)
+        p = build_params(config, self.dt, s.width, self.wall_mass_per_length * s.width, s.n)
         self.params = p
-        self.threads = self._choose_threads(config.numerics.threads, s.n)
-        p[L.SORT_EVERY] = self._choose_sort_every(config.numerics.sort_every, s.n)
+        self.threads = choose_threads(config.numerics.threads, s.n)     # every kernel of this scene runs on these
         self.compaction_settled: bool | None = None
         self.compaction_start: tuple[float, int] | None = None     # (time, step) where compaction began
         self.settling: SettleCheck | None = None                    # the last check of compaction's criterion
         self.fluid = None
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(L.N_OBSERVABLES)
+        self._measured: dict | None = None      # measure()'s row while run fires a step's callbacks
         self._fluid_status = np.zeros(1, np.int64)
         if arrays is not None:
             s.restore(arrays)
         else:
             self._rebuild()
-            K.compute_forces(s.grains(), s.lists(), s.pairs(), s.wall, p, *self.drag)
+            with numba_threads(self.threads):
+                K.compute_forces(s.grains(), s.lists(), s.pairs(), s.wall, p, *self.drag)
         self._apply_phase()
         if self.phase == L.LOADING:
             self.start_fluid(fluid_arrays)
@@ -91,9 +72,11 @@ class Simulation:
         return float(s.z[s.bottom].mean()), float(s.wall[L.W_Z])
 
     def start_fluid(self, fluid_arrays: dict | None = None):
-        """Build the pressure grid if the config has a fluid section (never for a dry scene).
-        With no saved arrays P starts at 0 on the current packing; the grain forces then
-        include its (zero) drag from the next step on."""
+        """Build the pressure grid if the config has a fluid section (never for a dry scene), once:
+        the fluid lives through loading, so this is called where loading starts (start_loading,
+        or __init__ for a state restored in loading; later calls do nothing). With no saved
+        arrays P starts at 0 on the current packing; the grain forces then include its (zero)
+        drag from the next step on."""
         if self.config.fluid is None or self.fluid is not None:
             return
         from ..model.fluid import FluidGrid
@@ -104,7 +87,8 @@ class Simulation:
         if fluid_arrays:
             self.fluid.restore(fluid_arrays)
         else:
-            status = self.fluid.init(s.x, s.z, s.vx, s.vz, s.radius, z_bot, z_top)
+            with numba_threads(self.threads):
+                status = self.fluid.init(s.x, s.z, s.vx, s.vz, s.radius, z_bot, z_top)
             if status != 0:
                 raise PhysicsError("the pressure grid could not be initialised (layer thickness <= 0)",
                                    "check the packing and fluid.cell_size", s.time)
@@ -123,7 +107,8 @@ class Simulation:
     def start_loading(self):
         """End compaction and start the driver clock. The spring is attached in equilibrium
         with the residual grain shear force on the wall (initial stretch s0 = -F_x / (k L_x)),
-        so the wall does not jump when it is released along x."""
+        so the wall does not jump when it is released along x. The pore fluid (if any) starts
+        here, on the compacted packing."""
         s = self.state
         s.counters[L.K_PHASE] = L.LOADING
         s.clock[L.C_ANCHOR] = -s.wall[L.W_FX] / (self.params[L.SPRING] * s.width)
@@ -131,37 +116,22 @@ class Simulation:
         s.wall[L.W_VX] = 0.0
         s.clock[L.C_DRIVE_TIME] = 0.0
         self._apply_phase()
+        self.start_fluid()
 
     # ---- stepping ----------------------------------------------------------------------
-    @staticmethod
-    def _choose_threads(requested: int, n_grains: int) -> int:
-        available = numba.config.NUMBA_NUM_THREADS
-        if requested:
-            return min(requested, available)
-        return 1 if n_grains < AUTO_PARALLEL_MIN_GRAINS else available
-
-    @staticmethod
-    def _choose_sort_every(requested: int | None, n_grains: int) -> int:
-        if requested is not None:
-            return requested
-        return AUTO_SORT_EVERY if n_grains >= AUTO_PARALLEL_MIN_GRAINS else 0
-
     def _rebuild(self):
         s = self.state
-        self.params[L.THREADS] = numba.get_num_threads()
-        while not K.rebuild(s.grains(), s.lists(), self.params, s.counters, *self.drag):
-            s.grow_pairs(int(s.counters[L.K_NEEDED_CAPACITY]))
+        self.params[L.THREADS] = self.threads
+        with numba_threads(self.threads):
+            while not K.rebuild(s.grains(), s.lists(), self.params, s.counters, *self.drag):
+                s.grow_pairs(int(s.counters[L.K_NEEDED_CAPACITY]))
 
     def advance(self, nsteps: int):
-        """Advance exactly nsteps steps (numba); grows the pair arrays if a rebuild overflows."""
-        left = int(nsteps)
-        previous = numba.get_num_threads()
-        numba.set_num_threads(self.threads)
+        """Advance exactly nsteps steps (numba, on self.threads); grows the pair arrays if a
+        rebuild overflows."""
         self.params[L.THREADS] = self.threads
-        try:
-            self._advance(left)
-        finally:
-            numba.set_num_threads(previous)
+        with numba_threads(self.threads):
+            self._advance(int(nsteps))
 
     def _advance(self, left: int):
         s = self.state
@@ -181,9 +151,8 @@ class Simulation:
         from ..kernels.coupled import advance_fluid
 
         s = self.state
-        args = self.fluid.kernel_args()
         return advance_fluid(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params, s.counters,
-                             nsteps, args[-2], args[-1], args[:-2], self.fluid_interval,
+                             nsteps, self.fluid.drag_x, self.fluid.drag_z, self.fluid.record(), self.fluid_interval,
                              self.wall_planes()[0], self._fluid_status)
 
     @property
@@ -194,28 +163,35 @@ class Simulation:
     def steps_for(self, duration: float) -> int:
         return max(1, int(round(duration / self.dt)))
 
-    def run(self, duration: float, callbacks: list[Every] = (), should_stop: Callable[[], bool] = None):
-        """Advance by `duration` [t0], firing callbacks when due. Returns steps done.
+    def run(self, duration: float | None, callbacks: list[Every] = (), should_stop: Callable[[], bool] = None):
+        """Advance by `duration` [t0] (None: until should_stop, e.g. compaction's settling
+        criterion; then callbacks must not be empty), firing callbacks when due. Returns steps done.
 
-            end = step + steps_for(duration)
+            end = step + steps_for(duration)        # (no end for duration None)
             while step < end:
                 advance(min(next due step of any callback, end) - step)   # numba, kernels.step order:
                     # wall half kick + drift; grains half kick + drift (+ list rebuild);
                     # contact forces; wall force + spring; closing half kicks
                     # (+ a fluid update every fluid_interval steps: deposit, pressure, drag)
                 for cb in callbacks (in list order): if cb.due(step): cb.action(self)
+                    # (callbacks that measure on the same step share one row: measure())
                 if should_stop(): break
 
-        The loading phase's callbacks and their order: driver.phases.load_phase."""
+        The compaction's callbacks: compact; the loading phase's and their order:
+        driver.phases.load_phase."""
         s = self.state
         first = s.step
-        end = first + self.steps_for(duration)
-        while s.step < end:
-            target = min([cb.next_step(s.step) for cb in callbacks] + [end])
+        end = first + self.steps_for(duration) if duration is not None else None
+        while end is None or s.step < end:
+            target = min([cb.next_step(s.step) for cb in callbacks] + ([end] if end is not None else []))
             self.advance(target - s.step)
-            for cb in callbacks:
-                if cb.due(s.step):
-                    cb.action(self)
+            self._measured = {}
+            try:
+                for cb in callbacks:
+                    if cb.due(s.step):
+                        cb.action(self)
+            finally:
+                self._measured = None
             if should_stop is not None and should_stop():
                 break
         return s.step - first
@@ -263,6 +239,17 @@ class Simulation:
             row.update(self.fluid.observe())
         return row
 
+    def measure(self) -> dict:
+        """observe(), shared by the callbacks of one step: while run fires a step's callbacks
+        (which leave the state alone), the first that measures (guards, the series writer,
+        compaction's check) runs the measurement kernel and the later ones get a copy of its
+        row. Outside that (or after a callback moved the state to another step) it is observe()."""
+        if self._measured is None:
+            return self.observe()
+        if self._measured.get("step") != self.state.step:
+            self._measured = {"step": self.state.step, "row": self.observe()}
+        return dict(self._measured["row"])
+
     def check(self):
         """Stop with a PhysicsError on NaN/inf or a runaway overlap (the non-finite and overlap
         guards of gouge_cli.driver.guards, run once; used while compacting and by the benchmark)."""
@@ -272,34 +259,41 @@ class Simulation:
 
     # ---- compaction --------------------------------------------------------------------
     def compact(self, on_chunk: Callable = None, start: tuple[float, int] | None = None) -> dict:
-        """Settle under the normal stress alone until the top wall and grains are still.
-        Checked every 100 t0 of steps counted from `start` = (time, step) where compaction
-        began (default: now), so a compaction resumed from any step ends where it would have.
-        Each check is kept in ``self.settling`` (settling.SettleCheck) before `on_chunk` runs."""
+        """Settle under the normal stress alone until the top wall and grains are still, then
+        start loading (and the fluid). Simulation.run with a stop condition and the callbacks,
+        every 100 t0 of steps counted from `start` = (time, step) where compaction began
+        (default: now), so a compaction resumed from any step ends where it would have:
+
+            "settling": check() (non-finite and overlap guards), observe, settle_check -> self.settling;
+                        stop when settled (min_time passed, wall and grains still) or at max_time
+            "on_chunk": on_chunk(sim, elapsed), if given
+
+        A compaction resumed on a check step runs that check first. Returns the last check's row."""
         cfg = self.config.compaction
         v_tol = cfg.wall_velocity_tol * self.config.loading.normal_stress
         chunk = self.steps_for(100.0)
         t0, step0 = start if start is not None else (self.state.time, self.state.step)
         self.compaction_start = (t0, step0)
-        row = self.observe()
-        first = True
-        while True:
-            done = self.state.step - step0
-            if not (first and done > 0 and done % chunk == 0):     # resumed on a check: check it first
-                self.advance(chunk - done % chunk)
-            first = False
-            self.check()
-            row = self.observe()
-            elapsed = self.state.time - t0
-            self.settling = settle_check(self.state, row["kinetic_energy"], row["wall_vz"], elapsed, v_tol,
-                                         cfg.min_time)
-            if on_chunk is not None:
-                on_chunk(self, elapsed)
-            if self.settling.settled:
-                self.compaction_settled = True
-                break
-            if elapsed >= cfg.max_time:
-                self.compaction_settled = False
-                break
+        last = {"row": None, "elapsed": 0.0}
+
+        def settling(sim: Simulation):
+            sim.check()
+            row = last["row"] = sim.measure()
+            elapsed = last["elapsed"] = sim.state.time - t0
+            sim.settling = settle_check(sim.state, row["kinetic_energy"], row["wall_vz"], elapsed, v_tol, cfg.min_time)
+            if sim.settling.settled:
+                sim.compaction_settled = True
+            elif elapsed >= cfg.max_time:
+                sim.compaction_settled = False
+
+        callbacks = [Every(chunk, settling, "settling", offset=step0)]
+        if on_chunk is not None:
+            callbacks.append(Every(chunk, lambda sim: on_chunk(sim, last["elapsed"]), "on_chunk", offset=step0))
+        self.compaction_settled = None
+        if self.state.step > step0 and callbacks[0].due(self.state.step):     # resumed on a check
+            for cb in callbacks:
+                cb.action(self)
+        if self.compaction_settled is None:
+            self.run(None, callbacks, should_stop=lambda: self.compaction_settled is not None)
         self.start_loading()
-        return row
+        return last["row"]

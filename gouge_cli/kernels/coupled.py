@@ -6,7 +6,7 @@ from __future__ import annotations
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (BG_DAMPING, DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, LIST_OVERFLOW, L_CELL_OF, L_X_BUILD, L_Z_BUILD,
+from .layout import (BG_DAMPING, DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, LIST_OVERFLOW,
                      OK, THREADS, WIDTH, W_VX, W_VZ, W_Z)
 from .fluid_update import fluid_begin, fluid_drag, fluid_solve
 from .step import _step, close_step, move_range, open_step
@@ -17,8 +17,8 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
                   fluid, interval, z_bottom, fluid_status):
     """As kernels.step.advance, plus a pore-pressure update (kernels.fluid_update.fluid_update) after every
     `interval`-th step (step count multiple of interval) over dt_f = interval * dt; the drag
-    it leaves in drag_x/drag_z acts on the grains until the next update. fluid: the tuple
-    FluidGrid.kernel_args() without drag. Returns (FLUID_FAILED, steps) with fluid_status[0]
+    it leaves in drag_x/drag_z acts on the grains until the next update. fluid: the grid's
+    arrays by name (kernels.layout.FluidArrays, FluidGrid.record()). Returns (FLUID_FAILED, steps) with fluid_status[0]
     set if the fluid update fails (the grains may then be drifted into the next step).
 
     The step before an update is not closed: the deposit takes the grains' whole-step
@@ -26,8 +26,11 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     steps 1-2 (wall, kicks and drift: they need neither the pressure nor the drag) run while
     the grid is solved (_solve_and_drift). Both keep the bits of doing one thing after the
     other."""
-    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
-    fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work, corners, partial = fluid
+    x, z, vx, vz, radius = grains.x, grains.z, grains.vx, grains.vz, grains.radius
+    force_x, force_z, inv_mass, body = grains.force_x, grains.force_z, grains.inv_mass, grains.body
+    fparams, fstate, P, s, s_old = fluid.params, fluid.state, fluid.pressure, fluid.s, fluid.s_old
+    ux, uz, perm, div_u, work = fluid.ux, fluid.uz, fluid.permeability, fluid.div_u, fluid.work
+    corners, partial = fluid.corners, fluid.partial
     n = x.shape[0]
     width = params[WIDTH]
     dt_f = interval * params[DT]
@@ -53,13 +56,13 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
                                      div_u, work)
             else:
                 open_step(grains, wall, clock, params)
-                late = _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                                        lists[L_X_BUILD], lists[L_Z_BUILD], owed, params, width, z_bottom, z_top,
-                                        dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work,
-                                        lists[L_CELL_OF])
+                late = _solve_and_drift(x, z, vx, vz, grains.spin, force_x, force_z, grains.torque, inv_mass,
+                                        grains.inv_inertia, body, lists.x_build, lists.z_build, owed, params, width,
+                                        z_bottom, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u,
+                                        work, lists.cell_of)
                 if late > 0:
                     counters[K_NEED_REBUILD] = 1
-                status = lists[L_CELL_OF][0]
+                status = lists.cell_of[0]
                 drifted = True
             fluid_drag(n, work, corners, drag_x, drag_z, status)
         if status != 0:
@@ -78,7 +81,7 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
     it) run step 2 of the next step, the grains' kicks and drift (move_range), in fixed parts: no
     data is shared, so the bits are those of one after the other. Returns how many grains are
     now past skin/2; out: int64 scratch (>= parts + 1), out[0] = fluid_solve's status.
-    [Arrays, not the grains/lists tuples: unpacked from tuples inside this parallel function,
+    [Arrays, not the grains/lists records: unpacked from tuples inside this parallel function,
     the two tasks ran ~1.7x slower than one after the other.]"""
     n = x.shape[0]
     parts = max(min(int(params[THREADS]) - 1, n - 1), 1)      # (n >= 2)

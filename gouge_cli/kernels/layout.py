@@ -8,7 +8,28 @@ state ``S_*`` / ``N_FLUID_STATE``, work rows ``G_*`` / ``N_GRID_WORK``, corner r
 are distinct names. Shapes of the fluid arrays and the status codes: kernels.fluid_update.
 """
 
+from collections import namedtuple
+
 # ---- DEM step (kernels.step, kernels.coupled) --------------------------------------------------
+
+# The arrays of a scene travel into the kernels as three records addressed by field name
+# (namedtuples of arrays: numba compiles one specialisation per record type, and a field access
+# is free). Field names are model.state.State's attribute names; adding a per-grain field means
+# adding it here and allocating it in State (kernels.step.renumber re-orders the per-grain ones).
+# per grain (N,): float64 except body (int8, FREE/BOTTOM/TOP), id (int64, original number);
+# top: int64 (N_top,) current numbers of the top-wall grains
+Grains = namedtuple("Grains", ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inertia", "body",
+                               "force_x", "force_z", "torque", "top", "id"))
+# the half neighbour list (kernels.neighbors) and its scratch: start (N + 1,) int64 row offsets,
+# index int32 / shear float64 (capacity,) per pair slot, cross_* int32 (capacity,) crossing pairs
+# of the block layout, x_build/z_build (N,) positions at the last build, new_* the rebuild's
+# second buffers, layout int64 (N_LAYOUT,), cell_of/order (N,) and cell_count (2N + 64,) int64
+# (cell_of between rebuilds: the per-grain flags of the skin check)
+Lists = namedtuple("Lists", ("start", "index", "shear", "cross_i", "cross_k", "cross_in", "x_build", "z_build",
+                             "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count"))
+# the force pass's per-pair results of crossing pairs (capacity,) and per-block chunk buffers
+# pair_buf (blocks, N_BUF, PAIR_BUF)
+Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_buf"))
 
 # params: float64 array
 DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \
@@ -38,9 +59,6 @@ MAX_BLOCKS = 256    # most row blocks of the force pass
 # and incoming crossing pairs, and the block count it was built for (-1: stale, rebuild it)
 L_ROWS, L_OUT, L_IN, L_BUILT = 0, MAX_BLOCKS + 1, 2 * MAX_BLOCKS + 2, 3 * MAX_BLOCKS + 3
 N_LAYOUT = 3 * MAX_BLOCKS + 4
-# positions in the lists tuple (state.LIST_FIELDS); cell_of is rebuild scratch, and between
-# rebuilds holds the per-grain flags of the skin check
-L_X_BUILD, L_Z_BUILD, L_CELL_OF = 6, 7, 12
 # pair_buf: float64 (blocks, N_BUF, PAIR_BUF), per-block chunk of pair inputs and results
 B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ, B_RI, B_RJ, B_MI, B_MJ, B_SHEAR, B_FX, B_FZ, B_TI, B_TJ = range(15)
 N_BUF = 15
@@ -92,6 +110,11 @@ G_FZ = 15            # drag per unit grain area, -(dP/dz)/s
 G_SX = 16            # ds/dx consistent with the deposit
 G_SZ = 17            # ds/dz consistent with the deposit
 N_GRID_WORK = 18
+
+# the grid's arrays as kernels.coupled takes them, addressed by name (model.fluid.FluidGrid.record;
+# shapes: kernels.fluid_update's module doc)
+FluidArrays = namedtuple("FluidArrays", ("params", "state", "pressure", "s", "s_old", "ux", "uz", "permeability",
+                                         "div_u", "work", "corners", "partial"))
 
 STATUS_OK = 0
 STATUS_SOLVER = 1

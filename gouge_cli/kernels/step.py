@@ -12,10 +12,10 @@ Within one ``advance`` the grains' step-5 kick is done in the same pass as the n
 step-2 kick and drift (same operations in the same order: the bits do not depend on how a
 run is cut into advance calls); the state is at a whole step when advance returns. Code that
 needs whole-step velocities mid-call takes them from ``closed_velocity`` (the fluid deposit).
-Arrays named in ``GRAIN``/``LIST`` order are passed as tuples from :mod:`gouge_cli.model.state`;
-indices of params, wall, clock and counters: :mod:`gouge_cli.kernels.layout`.
+The scene's arrays come as records addressed by field name (kernels.layout.Grains, Lists, Pairs,
+built by model.state.State); indices of params, wall, clock and counters: kernels.layout.
 
-Size (~510 lines): the pair pass (block_layout .. contact_forces) and the step (kicks, drift,
+Size (~525 lines): the pair pass (block_layout .. contact_forces) and the step (kicks, drift,
 rebuild, advance) stay in one file for now; the pair pass is the natural next split (forces.py).
 """
 
@@ -28,7 +28,7 @@ from . import NUMBA_CACHE
 from .layout import (BG_DAMPING, B_DVX, B_DVZ, B_DX, B_DZ, B_FX, B_FZ, B_MI, B_MJ, B_RI, B_RJ, B_SHEAR, B_TI, B_TJ, B_WI,
                      B_WJ, C_ANCHOR, C_DRIVE_TIME, C_NORMAL, C_TANGENTIAL, C_TIME, DAMPING, DRIVE, DT,
                      FREE, FRICTION, K_NEEDED_CAPACITY, K_NEED_REBUILD, K_PAIRS, K_REBUILDS, K_STEP,
-                     LIST_OVERFLOW, L_BUILT, L_CELL_OF, L_IN, L_OUT, L_ROWS, L_X_BUILD, L_Z_BUILD,
+                     LIST_OVERFLOW, L_BUILT, L_IN, L_OUT, L_ROWS,
                      MAX_BLOCKS, MID_STEP, OK, PAIR_BUF, SIGMA, SKIN, SORT_EVERY, SPRING, THREADS, TOP,
                      V_LOAD, WALL_MASS, WIDTH, W_FX, W_FZ, W_VX, W_VZ, W_X, W_Z)
 from .contact import hertz_mindlin
@@ -173,11 +173,23 @@ def _scatter(i, k0, k1, base, hi, index, shear, pair_fx, pair_fz, pair_ti, force
     torque[i] = tsi
 
 
+@njit(cache=NUMBA_CACHE)
+def contact_forces(grains, lists, pairs, drag_x, drag_z, params):
+    """grains.force_x, force_z, torque (N,) = contact forces of all listed pairs (+ drag_x, drag_z
+    (N,) when they have N entries; (0,) for none); lists.shear updated; see _contact_pass.
+    grains, lists, pairs: kernels.layout.Grains, Lists, Pairs."""
+    _contact_pass(grains.x, grains.z, grains.vx, grains.vz, grains.spin, grains.radius, grains.mass, lists.start,
+                  lists.index, lists.shear, lists.cross_i, lists.cross_k, lists.cross_in, pairs.pair_fx,
+                  pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, pairs.pair_buf, grains.force_x, grains.force_z,
+                  grains.torque, drag_x, drag_z, lists.layout, lists.new_start, params)
+
+
 @njit(parallel=True, error_model="numpy", cache=NUMBA_CACHE)
-def contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_i, cross_k, cross_in,
-                   pair_fx, pair_fz, pair_ti, pair_tj, pair_buf, force_x, force_z, torque, drag_x, drag_z,
-                   layout, scratch, params):
-    """force, torque (N,) = contact forces of all listed pairs (+ drag).
+def _contact_pass(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_i, cross_k, cross_in,
+                  pair_fx, pair_fz, pair_ti, pair_tj, pair_buf, force_x, force_z, torque, drag_x, drag_z,
+                  layout, scratch, params):
+    """force, torque (N,) = contact forces of all listed pairs (+ drag). [Arrays, not the records:
+    the parallel loops keep the code they were measured with.]
 
     Summation order, the same for any thread count: grain g first receives the pairs where it
     is second (j), in increasing i, then subtracts its own row in list order, then adds drag.
@@ -383,12 +395,11 @@ def kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inert
 def open_step(grains, wall, clock, params):
     """Step 1: the top wall's half kick and drift, its grains take its velocity; the clock
     advances by dt."""
-    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
     dt = params[DT]
     wall_kick(wall, clock, params)
     wall[W_X] += dt * wall[W_VX]
     wall[W_Z] += dt * wall[W_VZ]
-    _set_wall_grain_velocity(vx, vz, spin, top, wall)
+    _set_wall_grain_velocity(grains.vx, grains.vz, grains.spin, grains.top, wall)
     clock[C_TIME] += dt
     if params[DRIVE] > 0.0:
         clock[C_DRIVE_TIME] += dt
@@ -409,24 +420,22 @@ def _kick(vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, p
 @njit(cache=NUMBA_CACHE)
 def compute_forces(grains, lists, pair, wall, params, drag_x, drag_z):
     """Contact (+ drag) forces on every grain and on the top wall at the current state."""
-    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
-    (start, index, shear, cross_i, cross_k, cross_in, x_build, z_build, new_start, new_index, new_shear, layout,
-     cell_of, order, cell_count) = lists
-    pair_fx, pair_fz, pair_ti, pair_tj, pair_buf = pair
-    contact_forces(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_i, cross_k, cross_in,
-                   pair_fx, pair_fz, pair_ti, pair_tj, pair_buf, force_x, force_z, torque, drag_x, drag_z, layout,
-                   new_start, params)
-    wall_force(force_x, force_z, top, wall)
+    contact_forces(grains, lists, pair, drag_x, drag_z, params)
+    wall_force(grains.force_x, grains.force_z, grains.top, wall)
 
 
 @njit(cache=NUMBA_CACHE)
 def renumber(grains, lists, drag_x, drag_z, width):
     """Re-number the grains by position (kernels.reorder): every per-grain array (and the fluid
     drag, when there is one), the top-wall index list and the half list with its shear history.
-    The original numbers travel in ``ident``."""
-    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
-    (start, index, shear, cross_i, cross_k, cross_in, x_build, z_build, new_start, new_index, new_shear, layout,
-     cell_of, order, cell_count) = lists
+    The original numbers travel in ``id``."""
+    x, z, vx, vz, spin = grains.x, grains.z, grains.vx, grains.vz, grains.spin
+    radius, mass, inv_mass, inv_inertia = grains.radius, grains.mass, grains.inv_mass, grains.inv_inertia
+    force_x, force_z, torque = grains.force_x, grains.force_z, grains.torque
+    body, top, ident = grains.body, grains.top, grains.id
+    start, index, shear = lists.start, lists.index, lists.shear
+    new_start, new_index, new_shear = lists.new_start, lists.new_index, lists.new_shear
+    layout, cell_of, order, cell_count = lists.layout, lists.cell_of, lists.order, lists.cell_count
     n = x.shape[0]
     spatial_order(x, z, width, order, cell_of, cell_count)
     renumber_list(cell_of, start, index, shear, new_start, new_index, new_shear)
@@ -449,14 +458,13 @@ def renumber(grains, lists, drag_x, drag_z, width):
 def rebuild(grains, lists, params, counters, drag_x, drag_z):
     """Rebuild the neighbour list, re-numbering the grains first every params[SORT_EVERY]-th
     rebuild; False (and K_NEEDED_CAPACITY set) if the list does not fit."""
-    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
-    (start, index, shear, cross_i, cross_k, cross_in, x_build, z_build, new_start, new_index, new_shear, layout,
-     cell_of, order, cell_count) = lists
+    layout = lists.layout
     every = int(params[SORT_EVERY])
     if every > 0 and counters[K_REBUILDS] % every == 0:
         renumber(grains, lists, drag_x, drag_z, params[WIDTH])
-    npairs = build_neighbors(x, z, radius, body, params[WIDTH], params[SKIN], start, index, shear,
-                             new_start, new_index, new_shear, x_build, z_build, cell_of, order, cell_count,
+    npairs = build_neighbors(grains.x, grains.z, grains.radius, grains.body, params[WIDTH], params[SKIN],
+                             lists.start, lists.index, lists.shear, lists.new_start, lists.new_index, lists.new_shear,
+                             lists.x_build, lists.z_build, lists.cell_of, lists.order, lists.cell_count,
                              layout, params[THREADS] <= 1.0)
     if npairs < 0:
         counters[K_NEEDED_CAPACITY] = -npairs
@@ -476,11 +484,11 @@ def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, ow
     steps 1-2 are already done (open_step and _move_one of every grain, rebuild flag set).
     False if the rebuild overflows the list: the step is then left drifted
     (counters[K_NEED_REBUILD] = MID_STEP) and the next call resumes it at the rebuild."""
-    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
     if counters[K_NEED_REBUILD] != MID_STEP and not drifted:
         open_step(grains, wall, clock, params)
-        late = kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                           lists[L_X_BUILD], lists[L_Z_BUILD], owed, params, lists[L_CELL_OF])
+        late = kick_drift(grains.x, grains.z, grains.vx, grains.vz, grains.spin, grains.force_x, grains.force_z,
+                          grains.torque, grains.inv_mass, grains.inv_inertia, grains.body, lists.x_build,
+                          lists.z_build, owed, params, lists.cell_of)
         if late > 0:
             counters[K_NEED_REBUILD] = 1
     if counters[K_NEED_REBUILD] != 0:
@@ -499,9 +507,9 @@ def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, ow
 def close_step(grains, wall, params):
     """Step 5 on its own: the top wall's grains take its velocity and the free grains get the
     second half kick they owe (the state is then at a whole step)."""
-    x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ident = grains
-    _set_wall_grain_velocity(vx, vz, spin, top, wall)
-    _kick(vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, params)
+    _set_wall_grain_velocity(grains.vx, grains.vz, grains.spin, grains.top, wall)
+    _kick(grains.vx, grains.vz, grains.spin, grains.force_x, grains.force_z, grains.torque, grains.inv_mass,
+          grains.inv_inertia, grains.body, params)
 
 
 @njit(cache=NUMBA_CACHE)

@@ -98,11 +98,16 @@ class FluidGrid:
                    solver=fluid_config.solver,
                    explicit_safety=fluid_config.explicit_safety)
 
+    def record(self) -> L.FluidArrays:
+        """The grid's arrays by name, as kernels.coupled.advance_fluid takes them (without drag)."""
+        return L.FluidArrays(self.params, self.state, self.pressure, self.solid_fraction, self.previous_solid_fraction,
+                             self.solid_velocity_x, self.solid_velocity_z, self.permeability, self.div_u, self.work,
+                             self.corners, self.partial)
+
     def kernel_args(self) -> tuple:
-        """(params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z)."""
-        return (self.params, self.state, self.pressure, self.solid_fraction, self.previous_solid_fraction,
-                self.solid_velocity_x, self.solid_velocity_z, self.permeability, self.div_u, self.work,
-                self.corners, self.partial, self.drag_x, self.drag_z)
+        """(params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z):
+        the record's fields in order, then the drag, as fluid_init / fluid_update take them."""
+        return (*self.record(), self.drag_x, self.drag_z)
 
     def arrays(self) -> dict:
         """Copies of the evolving arrays (EVOLVING) for a checkpoint."""

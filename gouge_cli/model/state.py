@@ -20,14 +20,8 @@ from .portable import sphere_mass
 
 FREE, BOTTOM, TOP = L.FREE, L.BOTTOM, L.TOP
 
-GRAIN_FIELDS = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inertia", "body",
-                "force_x", "force_z", "torque", "top", "id")
 # fixed properties of a grain, re-ordered with it (kernels.step.renumber)
 STATIC = ("radius", "mass", "inv_mass", "inv_inertia", "body")
-LIST_FIELDS = ("start", "index", "shear", "cross_i", "cross_k", "cross_in", "x_build", "z_build",
-               "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count")
-assert tuple(LIST_FIELDS[i] for i in (L.L_X_BUILD, L.L_Z_BUILD, L.L_CELL_OF)) == ("x_build", "z_build", "cell_of")
-PAIR_FIELDS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_buf")
 # (block layout, crossing pairs and cell arrays are derived or scratch, rebuilt on demand)
 EVOLVING = ("id", "x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
             "start", "index", "shear", "x_build", "z_build", "wall", "clock", "counters")
@@ -128,14 +122,17 @@ class State:
         """Enlarge pair arrays to hold `needed` pairs (with 25 % headroom), keeping the list."""
         self._allocate_pairs(int(needed * 1.25) + 64, keep=int(self.start[-1]))
 
-    def grains(self) -> tuple:
-        return tuple(getattr(self, name) for name in GRAIN_FIELDS)
+    def grains(self) -> L.Grains:
+        """The per-grain arrays as the kernels take them (kernels.layout.Grains)."""
+        return L.Grains(*(getattr(self, name) for name in L.Grains._fields))
 
-    def lists(self) -> tuple:
-        return tuple(getattr(self, name) for name in LIST_FIELDS)
+    def lists(self) -> L.Lists:
+        """The neighbour list and its scratch as the kernels take them (kernels.layout.Lists)."""
+        return L.Lists(*(getattr(self, name) for name in L.Lists._fields))
 
-    def pairs(self) -> tuple:
-        return tuple(getattr(self, name) for name in PAIR_FIELDS)
+    def pairs(self) -> L.Pairs:
+        """The force pass's pair buffers as the kernels take them (kernels.layout.Pairs)."""
+        return L.Pairs(*(getattr(self, name) for name in L.Pairs._fields))
 
     @property
     def time(self) -> float:

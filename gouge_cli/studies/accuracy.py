@@ -52,6 +52,7 @@ from ..io.checkpoint import read_checkpoint
 from ..config import build_config, Config
 from ..errors import ConfigError
 from ..driver.guards import Guards
+from ..driver.schedules import Every
 from ..kernels import layout as L
 from ..driver.simulation import Simulation
 from ..errors import PhysicsError
@@ -167,7 +168,6 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
     writer = RunFile(work_dir / "run.h5", config, sim.dt)
     try:
         sim.compact()
-        sim.start_fluid()
         writer.append(sim.observe())
         _, recorder = load_phase(sim, writer, work_dir, sim.state.time + config.run.duration, quiet=quiet,
                                  stop_after_slip=True)
@@ -219,32 +219,38 @@ def _pressure_rms(sim: Simulation) -> float:
 
 def run_level(start: Start, level: Level, period: float, count: int) -> LevelResult:
     """Run `level` from `start`, sampling every `period` [t0] (a whole number of its steps)
-    `count` times."""
+    `count` times: Simulation.run with the callbacks "guards", "sample" every `period` from the
+    start's step. The elapsed time is the run's without its callbacks."""
     config = level_config(start.config, level)
     fluid = start.fluid if (level.keep_fluid and start.fluid and config.fluid is not None) else None
     sim = Simulation(config, arrays=start.state, fluid_arrays=fluid)
     guards = Guards()
     per = max(1, int(round(period / sim.dt)))
     series = {k: [] for k in ("time", "wall_x", "wall_vx", "tau_over_sigma", "pressure_rms")}
-    elapsed, steps0, status = 0.0, sim.state.step, "ok"
+    steps0, status = sim.state.step, "ok"
+    in_callbacks = [0.0]
 
-    def sample():
-        s = sim.state
-        for key, value in (("time", s.time), ("wall_x", s.wall[L.W_X]), ("wall_vx", s.wall[L.W_VX]),
-                           ("tau_over_sigma", sim.tau_over_sigma()),
-                           ("pressure_rms", _pressure_rms(sim))):
+    def sample(s: Simulation):
+        for key, value in (("time", s.state.time), ("wall_x", s.state.wall[L.W_X]),
+                           ("wall_vx", s.state.wall[L.W_VX]), ("tau_over_sigma", s.tau_over_sigma()),
+                           ("pressure_rms", _pressure_rms(s))):
             series[key].append(float(value))
 
-    sample()
-    try:
-        for _ in range(count):
+    def timed_out(action):
+        def run(s: Simulation):
             t0 = time.perf_counter()
-            sim.advance(per)
-            elapsed += time.perf_counter() - t0
-            guards(sim)
-            sample()
+            action(s)
+            in_callbacks[0] += time.perf_counter() - t0
+        return run
+
+    sample(sim)
+    t0 = time.perf_counter()
+    try:
+        sim.run(count * per * sim.dt, [Every(per, timed_out(guards), "guards", offset=steps0),
+                                       Every(per, timed_out(sample), "sample", offset=steps0)])
     except PhysicsError as err:
         status = f"failed: {err}"
+    elapsed = time.perf_counter() - t0 - in_callbacks[0]
     return LevelResult(level, status, elapsed, sim.state.step - steps0, sim.dt,
                        {k: np.array(v) for k, v in series.items()})
 

@@ -221,10 +221,8 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
     sim.advance(2000)
     per_rebuild_steps = (s.step - k0) / max(1, int(s.counters[L.K_REBUILDS]) - r0)
     g, lists, pairs = s.grains(), s.lists(), s.pairs()
-    (x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, fx, fz, tq, top, ident) = g
     sort_every = int(p[L.SORT_EVERY])
     p[L.SORT_EVERY] = 0        # rebuild alone; the re-numbering is timed on its own below
-    xb, zb, flags = lists[L.L_X_BUILD], lists[L.L_Z_BUILD], lists[L.L_CELL_OF]
     shear0 = s.shear.copy()
     v0 = (s.vx.copy(), s.vz.copy(), s.spin.copy(), s.x.copy(), s.z.copy())
 
@@ -237,8 +235,9 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
 
     out = {
         "contact_forces": timed(lambda: K.compute_forces(g, lists, pairs, s.wall, p, *sim.drag), reset=reset),
-        "kick_drift": timed(lambda: K.kick_drift(x, z, vx, vz, spin, fx, fz, tq, inv_mass, inv_inertia, body, xb, zb,
-                                                  True, p, flags), reset=reset),
+        "kick_drift": timed(lambda: K.kick_drift(g.x, g.z, g.vx, g.vz, g.spin, g.force_x, g.force_z, g.torque,
+                                                  g.inv_mass, g.inv_inertia, g.body, lists.x_build, lists.z_build,
+                                                  True, p, lists.cell_of), reset=reset),
         "rebuild_each": timed(lambda: K.rebuild(g, lists, p, s.counters, *sim.drag), n=max(3, repeats // 10),
                               reset=reset),
         "steps_per_rebuild": per_rebuild_steps,
@@ -256,23 +255,25 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
     return out
 
 
-def sub_system(s, m: int) -> tuple:
-    """Grains 0..m-1 of state s and the listed pairs among them (same order, shear copied):
-    arguments of kernels.step.contact_forces for one thread, without drag, in its order (7 start,
-    8 index, 9 shear, 18-20 force_x, force_z, torque), of the same types as compute_forces passes
-    (an int64 crossing list here once compiled the kernel a second time)."""
+def sub_system(s, m: int) -> tuple[L.Grains, L.Lists, L.Pairs]:
+    """Grains 0..m-1 of state s and the listed pairs among them (same order, shear copied), as the
+    records kernels.step.contact_forces takes for one thread (without drag): fields the contact
+    pass does not read are empty, every field has the state's dtype (an int64 crossing list here
+    once compiled the kernel a second time)."""
     rows = np.repeat(np.arange(s.n), np.diff(s.start))
     npairs = int(s.start[-1])
     keep = (rows < m) & (s.index[:npairs] < m)
     start = np.zeros(m + 1, s.start.dtype)
     np.cumsum(np.bincount(rows[keep], minlength=m), out=start[1:])
-    index, shear = s.index[:npairs][keep].copy(), s.shear[:npairs][keep].copy()
-    grain = tuple(a[:m].copy() for a in (s.x, s.z, s.vx, s.vz, s.spin, s.radius, s.mass))
-    cross = np.zeros(1, s.cross_i.dtype)        # the state's dtypes, so the step's compiled kernel serves
-    layout = np.full(L.N_LAYOUT, -1, s.layout.dtype)
-    return (*grain, start, index, shear, cross, cross, cross, *(np.zeros(1) for _ in range(4)),
-            np.zeros((1, L.N_BUF, L.PAIR_BUF)), *(np.zeros(m) for _ in range(3)), np.zeros(0), np.zeros(0),
-            layout, np.zeros(m + 1, s.new_start.dtype))
+    per_grain = ("x", "z", "vx", "vz", "spin", "radius", "mass")
+    grains = L.Grains(**{name: getattr(s, name)[:m].copy() if name in per_grain else
+                         np.zeros(m if name in ("force_x", "force_z", "torque") else 0, getattr(s, name).dtype)
+                         for name in L.Grains._fields})
+    lists = L.Lists(**{name: np.zeros(1, getattr(s, name).dtype) for name in L.Lists._fields})._replace(
+        start=start, index=s.index[:npairs][keep].copy(), shear=s.shear[:npairs][keep].copy(),
+        layout=np.full(L.N_LAYOUT, -1, s.layout.dtype), new_start=np.zeros(m + 1, s.new_start.dtype))
+    pairs = L.Pairs(*(np.zeros(1) for _ in range(4)), np.zeros((1, L.N_BUF, L.PAIR_BUF)))
+    return grains, lists, pairs
 
 
 def footprint_profile(sim: Simulation, start: dict, sizes, repeats: int = 5) -> list[dict]:
@@ -286,11 +287,13 @@ def footprint_profile(sim: Simulation, start: dict, sizes, repeats: int = 5) -> 
     numba.set_num_threads(1)
     out = []
     for m in sorted(v for v in sizes if v <= s.n):
-        args = sub_system(s, m)
-        npairs = int(args[7][-1])
-        K.contact_forces(*args, p)
-        best = best_seconds(lambda: K.contact_forces(*args, p), max(3, 200000 // m), repeats)
-        touched = sum(args[k].nbytes for k in (*range(10), 18, 19, 20))   # grains, list, forces
+        grains, lists, pairs = sub_system(s, m)
+        npairs = int(lists.start[-1])
+        none = np.zeros(0)
+        K.contact_forces(grains, lists, pairs, none, none, p)
+        best = best_seconds(lambda: K.contact_forces(grains, lists, pairs, none, none, p), max(3, 200000 // m),
+                            repeats)
+        touched = sum(a.nbytes for a in (*grains, lists.start, lists.index, lists.shear))   # grains, list, forces
         out.append({"of_n_grains": s.n, "first_grains": m, "pairs_per_grain": npairs / m,
                     "working_set_mb": touched / 2**20, "ns_per_grain": best * 1e9 / m})
     return out

@@ -15,6 +15,7 @@ from ..config import Config, dump_config, load_config
 from ..errors import hdf5_os_error
 from ..kernels import layout as L
 from ..io.runfile import RunFile
+from ..model.params import choose_threads
 from ..model.preflight import check_config
 from ..driver.phases import compaction_phase, load_phase
 from ..errors import RunDirError
@@ -52,8 +53,7 @@ def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=
             if resume_from is not None and "compaction_start" in resume_from.extra:
                 t0, step0 = resume_from.extra["compaction_start"]
                 start = (float(t0), int(step0))
-            compaction_phase(sim, out_dir, live, quiet, start)
-            sim.start_fluid()
+            compaction_phase(sim, out_dir, live, quiet, start)        # (ends with the fluid started)
             writer.set_attr("compaction_settled", bool(sim.compaction_settled))
             if not sim.compaction_settled:
                 print(f"warning: compaction did not settle within compaction.max_time = "
@@ -111,7 +111,7 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
     checkpoints/}. The config is checked whole (preflight) and the directory locked before
     anything is written. Ctrl-C stops cleanly (status 'interrupted', outputs flushed)."""
     out_dir = Path(out_dir)
-    pre = check_config(config, Simulation._choose_threads(config.numerics.threads, config.packing.n_grains))
+    pre = check_config(config, choose_threads(config.numerics.threads, config.packing.n_grains))
     if pre.note:
         print(pre.note, file=sys.stderr, flush=True)
     with prepare_run_dir(out_dir, force):

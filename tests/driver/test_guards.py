@@ -10,7 +10,8 @@ import pytest
 
 from gouge_cli.config import build_config
 from gouge_cli.driver.guards import (FluidSubstepGuard, Guards, KineticEnergyGuard, NonFiniteGuard, OverlapGuard, Scan,
-                              guard_callbacks)
+                              guard_callbacks, guarded_run)
+from gouge_cli.driver.schedules import Every
 from gouge_cli.kernels import layout as L
 from gouge_cli.driver.simulation import Simulation
 from gouge_cli.errors import PhysicsError
@@ -53,6 +54,23 @@ def test_guards_do_not_change_the_state(loaded):
     guarded.run(100.0, guard_callbacks(guarded, interval=5.0))
     for name, arr in plain.state.arrays().items():
         assert arr.tobytes() == guarded.state.arrays()[name].tobytes(), name
+
+
+def test_guards_and_series_share_one_measurement_per_row(loaded):
+    """guarded_run's "guards" and "series" callbacks, due on the same steps, run the measurement
+    kernel once per row; the rows are those of a plain run observed at the same steps."""
+    sim = fresh(loaded)
+    calls = []
+    observe = sim.observe
+    sim.observe = lambda: calls.append(sim.state.step) or observe()
+    rows = guarded_run(sim, 50.0, interval=5.0, compact=False)
+    per = sim.steps_for(5.0)
+    assert len(rows) >= 1 + sim.steps_for(50.0) // per > 5
+    assert len(calls) == len(rows) and len(set(calls)) == len(calls)
+    plain = fresh(loaded)
+    expected = [plain.observe()]
+    plain.run(50.0, [Every(per, lambda s: expected.append(s.observe()), "series")])
+    assert rows == expected
 
 
 def test_nan_in_a_velocity(loaded):

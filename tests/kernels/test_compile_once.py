@@ -46,8 +46,7 @@ def contact_forces_args(sim: Simulation) -> tuple:
     s = sim.state
     params = sim.params.copy()
     params[L.THREADS] = 1
-    return (*s.grains()[:7], s.start, s.index, s.shear, s.cross_i, s.cross_k, s.cross_in, *s.pairs(),
-            s.force_x, s.force_z, s.torque, *sim.drag, s.layout, s.new_start, params)
+    return (s.grains(), s.lists(), s.pairs(), *sim.drag, params)
 
 
 def step_and_observe(sim: Simulation, steps: int = 30) -> Simulation:

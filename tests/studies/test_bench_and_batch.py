@@ -40,16 +40,16 @@ def test_footprint_sub_systems_are_the_first_rows_of_the_packing():
     sim, start = prepare(600, 0.89, 0.2)
     s, p = sim.state, sim.params.copy()
     p[L.THREADS] = 1
-    whole = sub_system(s, s.n)          # every pair: the contact pass gives the run's own forces, bit for bit
-    K.contact_forces(*whole, p)
+    grains, lists, pairs = sub_system(s, s.n)   # every pair: the contact pass gives the run's own forces, bit for bit
+    K.contact_forces(grains, lists, pairs, np.zeros(0), np.zeros(0), p)
     K.compute_forces(s.grains(), s.lists(), s.pairs(), s.wall, p, np.zeros(0), np.zeros(0))
-    assert np.array_equal(whole[18], s.force_x) and np.array_equal(whole[20], s.torque)
-    assert np.array_equal(whole[9], s.shear[:s.start[-1]])
+    assert np.array_equal(grains.force_x, s.force_x) and np.array_equal(grains.torque, s.torque)
+    assert np.array_equal(lists.shear, s.shear[:s.start[-1]])
     s.restore(start)
     m = 250
-    part = sub_system(s, m)             # exactly the listed pairs with both grains below m, in list order
+    _, part, _ = sub_system(s, m)       # exactly the listed pairs with both grains below m, in list order
     pairs = [(i, int(s.index[k])) for i in range(m) for k in range(s.start[i], s.start[i + 1]) if s.index[k] < m]
-    got = [(i, int(part[8][k])) for i in range(m) for k in range(part[7][i], part[7][i + 1])]
+    got = [(i, int(part.index[k])) for i in range(m) for k in range(part.start[i], part.start[i + 1])]
     assert got == pairs and len(pairs) > m
     rows = footprint_profile(sim, start, (m, 600, 5000), repeats=1)
     assert [r["first_grains"] for r in rows] == [m, 600]
