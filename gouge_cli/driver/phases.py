@@ -76,6 +76,7 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
             rec_state, ring = recorder.full_state()
             extra = {"phase": "loading", "slip_recorder": rec_state, "guards": guards[0].action.state_dict()}
             if scaling is not None:             # stick scaling: its state
+                scaling.tally(s)
                 extra["stick_scaling"] = scaling.state_dict()
             write_checkpoint(ck_dir / "latest.h5", snapshot_of(s, extra, ring))
 
@@ -96,10 +97,9 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     status = "finished"
     try:
         with deferred_interrupt() as interrupted:
-            if sim.state.time < end_time and scaling is not None:
-                scaling.run(sim, end_time, build, should_stop=lambda: stop["now"] or interrupted())
-            elif sim.state.time < end_time:
-                sim.run(end_time - sim.state.time, build(), should_stop=lambda: stop["now"] or interrupted())
+            if sim.state.time < end_time:       # stick scaling changes the step: callbacks rebuilt
+                sim.run(end_time - sim.state.time, build if scaling is not None else build(),
+                        should_stop=lambda: stop["now"] or interrupted())
             if interrupted():
                 status = "interrupted"
             latest(sim)
@@ -113,6 +113,7 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
         if progress:
             progress.close()
     if scaling is not None:
+        scaling.tally(sim)
         recorder.stick_scaling = scaling        # stick scaling: counts for reports and the ladder
         writer.set_attr("stick_scaling_counts", json.dumps(scaling.state_dict()))
         if not quiet:

@@ -163,35 +163,56 @@ class Simulation:
     def steps_for(self, duration: float) -> int:
         return max(1, int(round(duration / self.dt)))
 
-    def run(self, duration: float | None, callbacks: list[Every] = (), should_stop: Callable[[], bool] = None):
+    def run(self, duration: float | None, callbacks: list[Every] | Callable[[], list[Every]] = (),
+            should_stop: Callable[[], bool] = None):
         """Advance by `duration` [t0] (None: until should_stop, e.g. compaction's settling
         criterion; then callbacks must not be empty), firing callbacks when due. Returns steps done.
+        `callbacks` may be a function returning the list: the step size may then change inside a
+        callback (stick scaling, driver.stick_scaling), the end is counted in time and the list is
+        rebuilt after such a change (schedules are step counts).
 
             end = step + steps_for(duration)        # (no end for duration None)
-            while step < end:
+            while step < end:                       # (changing step: end = step + round((t_end - t) / dt))
                 advance(min(next due step of any callback, end) - step)   # numba, kernels.step order:
                     # wall half kick + drift; grains half kick + drift (+ list rebuild);
                     # contact forces; wall force + spring; closing half kicks
                     # (+ a fluid update every fluid_interval steps: deposit, pressure, drag)
                 for cb in callbacks (in list order): if cb.due(step): cb.action(self)
-                    # (callbacks that measure on the same step share one row: measure())
+                    # (callbacks that measure on the same step share one row: measure();
+                    #  after one that changed dt the others wait and the list is rebuilt)
                 if should_stop(): break
 
         The compaction's callbacks: compact; the loading phase's and their order:
         driver.phases.load_phase."""
         s = self.state
         first = s.step
+        build = callbacks if callable(callbacks) else None
+        if build is not None:
+            callbacks = build()
         end = first + self.steps_for(duration) if duration is not None else None
-        while end is None or s.step < end:
+        end_time = s.time + duration if duration is not None and build is not None else None
+        while True:
+            if end_time is not None:            # the step may change: the end is a time
+                left = end_time - s.time
+                if left <= 0.5 * self.dt:
+                    break
+                end = s.step + max(1, int(round(left / self.dt)))
+            elif end is not None and s.step >= end:
+                break
             target = min([cb.next_step(s.step) for cb in callbacks] + ([end] if end is not None else []))
+            dt = self.dt
             self.advance(target - s.step)
             self._measured = {}
             try:
                 for cb in callbacks:
                     if cb.due(s.step):
                         cb.action(self)
+                        if self.dt != dt:
+                            break
             finally:
                 self._measured = None
+            if build is not None and self.dt != dt:
+                callbacks = build()
             if should_stop is not None and should_stop():
                 break
         return s.step - first

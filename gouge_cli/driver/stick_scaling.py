@@ -114,7 +114,7 @@ class StickScaling:
         self.counts = {k: int(st.get(k, 0)) for k in
                        ("rollbacks", "misses", "in_place", "lowered", "steps_scaled", "steps_true",
                         "steps_discarded")}
-        self.changed = False
+        self.counted_to = sim.state.step     # steps up to here are in counts (tally)
         if sim.fluid is not None and self.target > 1.0:
             self._check_wet(sim)
         set_inertia(sim, self.lam, self.dt_true)
@@ -157,6 +157,7 @@ class StickScaling:
     # ---- control --------------------------------------------------------------------------
     def after_row(self, sim, row: dict, recorder, writer, guard) -> bool:
         """Called after the recorder saw `row`; True if the run went back in time."""
+        self.tally(sim)
         t, v = row["time"], row["wall_vx"]
         if self.scaled:
             self.peak_tau = max(self.peak_tau, row["tau_over_sigma"])
@@ -250,38 +251,18 @@ class StickScaling:
             s.wall[L.W_VZ] *= f
         self.lam = float(lam)
         set_inertia(sim, self.lam, self.dt_true)
-        self.changed = True
+        self.counted_to = sim.state.step
 
     def _say(self, line: str):
         if not self.quiet:
             print(line, file=sys.stderr, flush=True)
 
-    # ---- loop -----------------------------------------------------------------------------
-    def run(self, sim, end_time: float, build, should_stop=None):
-        """Simulation.run with a step that changes: advance to `end_time` [t0], firing the
-        callbacks of `build()` (rebuilt whenever lambda changes, since their periods are step
-        counts); a rollback inside a callback skips the rest of that step's callbacks."""
-        callbacks = build()
-        s = sim.state
-        while True:
-            left = end_time - s.time
-            if left <= 0.5 * sim.dt:
-                break
-            end = s.step + max(1, int(round(left / sim.dt)))
-            target = min([cb.next_step(s.step) for cb in callbacks] + [end])
-            before = s.step
-            sim.advance(target - s.step)
-            self.counts["steps_scaled" if self.scaled else "steps_true"] += s.step - before
-            self.changed = False
-            for cb in callbacks:
-                if cb.due(s.step):
-                    cb.action(sim)
-                    if self.changed:
-                        break
-            if self.changed:
-                callbacks = build()
-            if should_stop is not None and should_stop():
-                break
+    # ---- counts ---------------------------------------------------------------------------
+    def tally(self, sim):
+        """Count the steps since the last tally as scaled or true (lambda changes only in
+        after_row, which tallies first; the loop is Simulation.run with rebuilt callbacks)."""
+        self.counts["steps_scaled" if self.scaled else "steps_true"] += max(sim.state.step - self.counted_to, 0)
+        self.counted_to = sim.state.step
 
     def summary(self) -> str:
         c = self.counts
