@@ -229,7 +229,7 @@ class Simulation:
         return float(self.params[L.SPRING] * self.spring_stretch() / self.params[L.SIGMA])
 
     def observe(self) -> dict:
-        """Time-series row (dimensionless); see output.SERIES for names and units."""
+        """Time-series row (dimensionless); see io.runfile.SERIES for names and units."""
         s, p = self.state, self.params
         o = self._observables
         M.observe(s.x, s.z, s.vx, s.vz, s.spin, s.radius, s.mass, s.body, s.force_x, s.force_z,

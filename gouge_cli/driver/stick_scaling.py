@@ -67,7 +67,7 @@ LADDER_DEFAULT = 1.0     # the largest lambda the ladder found within the seed s
 def set_inertia(sim, lam: float, dt_true: float):
     """Scale grain mass, inv_mass, inv_inertia [N] and the wall mass by lambda, the step by
     sqrt(lambda) and the dashpot rate by 1/sqrt(lambda); lam = 1 gives exactly the arrays of
-    State.__post_init__ and the params of simulation.build_params."""
+    State.__post_init__ and the params of model.params.build_params."""
     s = sim.state
     s.mass[...] = sphere_mass(s.radius, s.density * lam)
     s.inv_mass[...] = 1.0 / s.mass

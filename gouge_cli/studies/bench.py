@@ -42,8 +42,9 @@ from ..driver.simulation import Simulation
 from ..model.timestep import choose_dt, slip_duration
 
 CACHE = Path("runs/bench/cache")
-DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "kernels/reorder.py", "model/packing.py",
-               "driver/simulation.py", "model/state.py", "config.py", "model/timestep.py", "model/portable.py")     # (and bench_config below)
+DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "kernels/reorder.py", "kernels/layout.py",
+               "model/packing.py", "model/params.py", "driver/simulation.py", "model/state.py", "config.py",
+               "model/timestep.py", "model/portable.py")     # (and bench_config below)
 RUN24_CYCLE = 1.6e7     # [t0] one loading cycle of thesis Run 24 (physics.md section 6)
 
 
