@@ -114,7 +114,6 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
             progress.close()
     if scaling is not None:
         scaling.tally(sim)
-        recorder.stick_scaling = scaling        # stick scaling: counts for reports and the ladder
         writer.set_attr("stick_scaling_counts", json.dumps(scaling.state_dict()))
         if not quiet:
             print(scaling.summary(), file=sys.stderr, flush=True)

@@ -90,12 +90,13 @@ class SlipRecorder:
             attached["pending"] = self.pending
         return state, attached
 
-    def keep(self, sim, extra: dict | None = None):
+    def keep(self, sim, extra: dict | None = None, always: bool = False):
         """Ring callback (every lead/4): keep the state if the wall is quiet (v < end threshold),
         so that the ring always reaches back from the last quiet moment before an onset.
-        `extra`: more callback states to keep with it (stick scaling: the energy guard's)."""
+        `extra`: more callback states to keep with it (stick scaling: the energy guard's);
+        `always`: keep it whatever the wall does (stick scaling: the moment scaling resumes)."""
         tau = sim.tau_over_sigma()
-        if sim.state.wall[W_VX] < self.lo and tau >= self.peak_tau - self.peak_band:
+        if always or (sim.state.wall[W_VX] < self.lo and tau >= self.peak_tau - self.peak_band):
             self.ring.append(snapshot_of(sim, {"slip_recorder": self.state_dict(), **(extra or {})}))
 
     def rewind_to(self, ck: Checkpoint):
@@ -112,7 +113,7 @@ class SlipRecorder:
         self.ring.clear()
         self.ring.extend(kept)
 
-    def _choose(self, onset_estimate: float) -> Checkpoint | None:
+    def choose_pre_slip(self, onset_estimate: float) -> Checkpoint | None:
         """Newest kept state at least `lead` before the onset estimate, else the oldest kept
         (a shorter lead); None if nothing was kept since the previous slip."""
         for ck in reversed(self.ring):
@@ -128,7 +129,7 @@ class SlipRecorder:
         if row["tau_over_sigma"] > self.peak_tau and self.pending is None:
             self.peak_tau, self.peak_time = row["tau_over_sigma"], t
         if v >= self.hi and not self.above and self.pending is None:
-            self.pending = self._choose(min(self.last_quiet, self.peak_time))
+            self.pending = self.choose_pre_slip(min(self.last_quiet, self.peak_time))
         self.above = v >= self.hi
         slip = self.detector.update(t, row["wall_x"], v, row["tau_over_sigma"], row["porosity"])
         if "deborah" in row and (self.detector.raw is not None or slip is not None):

@@ -16,7 +16,7 @@ Rules of :class:`StickScaling` (checked on every time-series row):
   v_wall >= max(end_factor, start_factor / sqrt(lambda)) V_s, or with tau/sigma more than
   slips.lead_stress / 4 below its peak since scaling (re)started. The run goes back to the
   slip recorder's pre-slip state (the newest ring state at least slips.lead before the onset
-  estimate, driver.slips.SlipRecorder._choose; the oldest kept one if none is that old; never one
+  estimate, driver.slips.SlipRecorder.choose_pre_slip; the oldest kept one if none is that old; never one
   from before scaling last resumed, whose state is put in the ring then, since the stretch
   before it was at true inertia already: so a run cannot loop). Rows,
   snapshots and catalog entries after it are dropped (RunFile.truncate_after), the recorder
@@ -58,7 +58,6 @@ from ..config import Config
 from ..errors import ConfigError
 from ..kernels import layout as L
 from ..model.portable import sphere_mass
-from ..io.checkpoint import snapshot_of
 from ..model.timestep import choose_dt
 
 LADDER_DEFAULT = 1.0     # the largest lambda the ladder found within the seed spread (README)
@@ -190,8 +189,7 @@ class StickScaling:
                 if abs(v) < self.lo and abs(x - self.quiet_x) / (t - self.quiet_since) < self.lo:
                     self._set(sim, self.target)
                     self.resumed_at = t         # kept in the ring: no later rollback goes back past it
-                    recorder.ring.append(snapshot_of(sim, {"slip_recorder": recorder.state_dict(),
-                                                           "guards": guard.state_dict() if guard else {}}))
+                    recorder.keep(sim, {"guards": guard.state_dict() if guard else {}}, always=True)
                     self.onset_scaled, self.triggered, self.quiet_since, self.missed_now = None, False, None, False
                 else:
                     self.quiet_since, self.quiet_x = t, x
@@ -215,7 +213,7 @@ class StickScaling:
 
     def _rollback(self, sim, recorder, writer, guard, t_onset: float):
         ck = recorder.pending if recorder.pending is not None else \
-            recorder._choose(min(recorder.last_quiet, recorder.peak_time, t_onset))
+            recorder.choose_pre_slip(min(recorder.last_quiet, recorder.peak_time, t_onset))
         if ck is not None and ck.time < self.resumed_at:      # never redo a true-inertia stretch
             later = [c for c in recorder.ring if c.time >= self.resumed_at]
             ck = later[0] if later else None

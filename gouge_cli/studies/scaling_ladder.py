@@ -32,20 +32,14 @@ from ..config import Config, build_config
 QUANTITIES = ("static_strength", "stress_drop", "recurrence", "peak_velocity", "duration")
 
 
-def _with(config: Config, **sections) -> Config:
-    data = config.to_dict()
-    for section, values in sections.items():
-        data[section] = dict(data.get(section) or {}, **values) if isinstance(values, dict) else values
-    return build_config(data)
-
-
 def _run_rung(config: Config, packing, lam: float, out_dir: Path) -> dict:
     """One loading run from the compacted `packing` (a Checkpoint) at lambda; its slips and costs."""
-    from ..io.runfile import RunFile
+    from ..io.runfile import RunFile, RunReader, attr_value
     from ..driver.phases import load_phase
     from ..driver.simulation import Simulation
 
-    cfg = _with(config, numerics={"stick_scaling": float(lam), "stick_inertial_max": 0.1, "threads": 1})
+    cfg = build_config(config.to_dict(), {"numerics.stick_scaling": float(lam), "numerics.stick_inertial_max": 0.1,
+                                          "numerics.threads": 1})
     sim = Simulation(cfg, arrays=packing.state)
     out_dir.mkdir(parents=True, exist_ok=True)
     t_load, end = sim.state.time, sim.state.time + cfg.run.duration
@@ -58,18 +52,15 @@ def _run_rung(config: Config, packing, lam: float, out_dir: Path) -> dict:
     wall = time.perf_counter() - wall0
     steps = sim.state.step - step0
     writer.close(status)
-    import h5py
-
-    i_max = float("nan")
-    with h5py.File(out_dir / "run.h5", "r") as h5:
-        if "stick_scaling" in h5["series"]:
-            lam_col, i_col = h5["series/stick_scaling"][...], h5["series/inertial_number"][...]
-            scaled = lam_col > 1.0
-            i_max = float(np.nanmax(i_col[scaled])) if scaled.any() else float("nan")
-    counts = getattr(recorder, "stick_scaling", None)
+    i_max, counts = float("nan"), {}
+    with RunReader(out_dir) as run:                     # the columns and counts of stick scaling, if on
+        series = run.series(("stick_scaling", "inertial_number"))
+        if series["stick_scaling"] is not None:
+            scaled = series["stick_scaling"] > 1.0
+            i_max = float(np.nanmax(series["inertial_number"][scaled])) if scaled.any() else float("nan")
+        counts = json.loads(attr_value(run.h5.attrs, "stick_scaling_counts", "{}"))
     return {"lam": float(lam), "status": status, "steps": int(steps), "wall": wall, "n": sim.state.n,
-            "t_load": t_load, "duration": cfg.run.duration, "i_max": i_max,
-            "counts": counts.state_dict() if counts is not None else {},
+            "t_load": t_load, "duration": cfg.run.duration, "i_max": i_max, "counts": counts,
             "slips": [{k: float(s[k]) for k in ("onset_time", "static_strength", "stress_drop", "peak_velocity",
                                                  "duration")} for s in recorder.slips]}
 
@@ -150,7 +141,7 @@ def run_ladder(config: Config, lambdas: list[float], seeds: int, out_dir: Path, 
     runs = []
     for k in range(seeds):
         seed = config.seed + k
-        cfg = _with(config, seed=seed, numerics={"threads": 1, "stick_scaling": 1.0})
+        cfg = build_config(config.to_dict(), {"seed": seed, "numerics.threads": 1, "numerics.stick_scaling": 1.0})
         sim = Simulation(cfg)
         sim.compact()
         packing = snapshot_of(sim)
