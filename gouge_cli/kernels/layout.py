@@ -21,14 +21,15 @@ from collections import namedtuple
 Grains = namedtuple("Grains", ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inertia", "body",
                                "force_x", "force_z", "torque", "top", "id"))
 # the half neighbour list (kernels.neighbors) and its scratch: start (N + 1,) int64 row offsets,
-# index int32 / shear float64 (capacity,) per pair slot, cross_* int32 (capacity,) crossing pairs
-# of the block layout, x_build/z_build (N,) positions at the last build, new_* the rebuild's
-# second buffers, layout int64 (N_LAYOUT,), cell_of/order (N,) and cell_count (2N + 64,) int64
-# (cell_of between rebuilds: the per-grain flags of the skin check)
-Lists = namedtuple("Lists", ("start", "index", "shear", "cross_i", "cross_k", "cross_in", "x_build", "z_build",
+# index int32 / shear float64 (capacity,) per pair slot, the list by second grain rev_start
+# (N + 1,) int64 / rev_slot (capacity,) int32 (kernels.step.reverse_list), x_build/z_build (N,)
+# positions at the last build, new_* the rebuild's second buffers, layout int64 (N_LAYOUT,),
+# cell_of/order (N,) and cell_count (2N + 64,) int64 (cell_of between rebuilds: the per-grain
+# flags of the skin check)
+Lists = namedtuple("Lists", ("start", "index", "shear", "rev_start", "rev_slot", "x_build", "z_build",
                              "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count"))
-# the force pass's per-pair results of crossing pairs (capacity,) and per-block chunk buffers
-# pair_buf (blocks, N_BUF, PAIR_BUF)
+# the force pass's per-pair results pair_fx, pair_fz (force on j), pair_ti, pair_tj (torques)
+# float64 (capacity,) and its per-part chunk buffers pair_buf (parts, N_BUF, PAIR_BUF)
 Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_buf"))
 
 # params: float64 array
@@ -54,14 +55,15 @@ COMPACTION, LOADING = 0, 1
 OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
 
 
-MAX_BLOCKS = 256    # most row blocks of the force pass
-# layout: int64 (N_LAYOUT,): row bounds of the blocks, offsets of each block's outgoing
-# and incoming crossing pairs, and the block count it was built for (-1: stale, rebuild it)
-L_ROWS, L_OUT, L_IN, L_BUILT = 0, MAX_BLOCKS + 1, 2 * MAX_BLOCKS + 2, 3 * MAX_BLOCKS + 3
-N_LAYOUT = 3 * MAX_BLOCKS + 4
-# pair_buf: float64 (blocks, N_BUF, PAIR_BUF), per-block chunk of pair inputs and results
-B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ, B_RI, B_RJ, B_MI, B_MJ, B_SHEAR, B_FX, B_FZ, B_TI, B_TJ = range(15)
-N_BUF = 15
+# layout: int64 (N_LAYOUT,): layout[L_BUILT] is 1 while rev_start/rev_slot match the list, -1
+# once it changed (contact_forces then rebuilds them); layout[L_SCRATCH:] the list build's
+# per-block counters (kernels.neighbors.build_neighbors, 2 LIST_BLOCKS + 1)
+LIST_BLOCKS = 16    # row blocks of a parallel list build
+L_BUILT, L_SCRATCH = 0, 1
+N_LAYOUT = L_SCRATCH + 2 * LIST_BLOCKS + 1
+# pair_buf: float64 (parts, N_BUF, PAIR_BUF), per-part chunk of pair inputs
+B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ, B_RI, B_RJ, B_MI, B_MJ, B_SHEAR = range(11)
+N_BUF = 11
 PAIR_BUF = 256
 
 # ---- fluid grid (kernels.deposit, pressure, drag, fluid_update; model.fluid.FluidGrid) ----------

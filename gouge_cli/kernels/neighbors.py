@@ -10,8 +10,7 @@ from __future__ import annotations
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-
-LIST_BLOCKS = 16    # row blocks of a parallel rebuild
+from .layout import LIST_BLOCKS
 
 
 @njit(inline="always", cache=NUMBA_CACHE)

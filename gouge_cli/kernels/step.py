@@ -15,7 +15,7 @@ needs whole-step velocities mid-call takes them from ``closed_velocity`` (the fl
 The scene's arrays come as records addressed by field name (kernels.layout.Grains, Lists, Pairs,
 built by model.state.State); indices of params, wall, clock and counters: kernels.layout.
 
-Size (~525 lines): the pair pass (block_layout .. contact_forces) and the step (kicks, drift,
+Size (~500 lines): the pair pass (reverse_list .. _sum_pass) and the step (kicks, drift,
 rebuild, advance) stay in one file for now; the pair pass is the natural next split (forces.py).
 """
 
@@ -25,79 +25,27 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (BG_DAMPING, B_DVX, B_DVZ, B_DX, B_DZ, B_FX, B_FZ, B_MI, B_MJ, B_RI, B_RJ, B_SHEAR, B_TI, B_TJ, B_WI,
-                     B_WJ, C_ANCHOR, C_DRIVE_TIME, C_NORMAL, C_TANGENTIAL, C_TIME, DAMPING, DRIVE, DT,
-                     FREE, FRICTION, K_NEEDED_CAPACITY, K_NEED_REBUILD, K_PAIRS, K_REBUILDS, K_STEP,
-                     LIST_OVERFLOW, L_BUILT, L_IN, L_OUT, L_ROWS,
-                     MAX_BLOCKS, MID_STEP, OK, PAIR_BUF, SIGMA, SKIN, SORT_EVERY, SPRING, THREADS, TOP,
-                     V_LOAD, WALL_MASS, WIDTH, W_FX, W_FZ, W_VX, W_VZ, W_X, W_Z)
+from .layout import (BG_DAMPING, B_DVX, B_DVZ, B_DX, B_DZ, B_MI, B_MJ, B_RI, B_RJ, B_SHEAR, B_WI, B_WJ, C_ANCHOR,
+                     C_DRIVE_TIME, C_NORMAL, C_TANGENTIAL, C_TIME, DAMPING, DRIVE, DT, FREE, FRICTION,
+                     K_NEEDED_CAPACITY, K_NEED_REBUILD, K_PAIRS, K_REBUILDS, K_STEP, LIST_OVERFLOW, L_BUILT, L_SCRATCH,
+                     MID_STEP, OK, PAIR_BUF, SIGMA, SKIN, SORT_EVERY, SPRING, THREADS, TOP, V_LOAD, WALL_MASS,
+                     WIDTH, W_FX, W_FZ, W_VX, W_VZ, W_X, W_Z)
 from .contact import hertz_mindlin
-from .neighbors import build_neighbors, minimum_image
+from .neighbors import bucket_order, build_neighbors, minimum_image
 from .reorder import permute, renumber_list, spatial_order
 
 
 @njit(cache=NUMBA_CACHE)
-def block_layout(start, index, n, nb, layout, cross_i, cross_k, cross_in, scratch):
-    """Split grain rows into nb contiguous blocks of about equal pair counts and list the pairs
-    (i, j) whose j lies in a later block: cross_i/cross_k (row, slot) block by block in slot
-    order, and cross_in the same slots ordered by (j, slot). scratch: (N + 1,) int64."""
-    npairs = start[n]
-    rows = layout[L_ROWS:L_ROWS + nb + 1]
-    rows[0] = 0
-    for b in range(1, nb):
-        target = (b * npairs) // nb
-        lo = rows[b - 1]
-        hi = n
-        while lo < hi:                      # first row i with start[i] >= target
-            mid = (lo + hi) // 2
-            if start[mid] < target:
-                lo = mid + 1
-            else:
-                hi = mid
-        rows[b] = lo
-    rows[nb] = n
-    for g in range(n + 1):
-        scratch[g] = 0
-    m = 0
-    for b in range(nb):
-        layout[L_OUT + b] = m
-        hi = rows[b + 1]
-        for i in range(rows[b], hi):
-            for k in range(start[i], start[i + 1]):
-                if index[k] >= hi:
-                    cross_i[m] = i
-                    cross_k[m] = k
-                    scratch[index[k] + 1] += 1
-                    m += 1
-    layout[L_OUT + nb] = m
-    for g in range(n):
-        scratch[g + 1] += scratch[g]
-    for b in range(nb + 1):
-        layout[L_IN + b] = scratch[rows[b]]
-    for q in range(m):                       # counting sort by j, stable in slot order
-        k = cross_k[q]
-        cross_in[scratch[index[k]]] = k
-        scratch[index[k]] += 1
-    layout[L_BUILT] = nb
-
-
-@njit(inline="always", cache=NUMBA_CACHE)
-def _pair(i, j, k, x, z, vx, vz, spin, radius, mass, shear, width, dt, c_n, c_t, damping, friction):
-    """hertz_mindlin for listed pair slot k = (i, j), updating shear[k] (0 once apart), with the
-    same inputs as _fill / _laws give it (same bits)."""
-    mi = mass[i]
-    mj = mass[j]
-    fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
-        minimum_image(x[j] - x[i], width), z[j] - z[i], vx[j] - vx[i], vz[j] - vz[i], spin[i], spin[j],
-        radius[i], radius[j], mi * mj / (mi + mj), shear[k], dt, c_n, c_t, damping, friction)
-    shear[k] = ds
-    return fx, fz, ti, tj
+def reverse_list(start, index, n, rev_start, rev_slot):
+    """The list by second grain: rev_slot[rev_start[g]:rev_start[g + 1]] are the slots k of the
+    pairs (i, g), i < g, in increasing k (a stable counting sort of index by value).
+    rev_start: (N + 1,) int64; rev_slot: (capacity,) int32."""
+    bucket_order(index[:start[n]], n, rev_start, rev_slot)
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
 def _fill(i, k0, k1, base, x, z, vx, vz, spin, radius, mass, index, shear, width, buf):
-    """Copy the inputs of pair slots k0:k1 of row i into buf[:, k - base] (block-crossing slots
-    too, which keeps the loop free of branches; _scatter ignores their results)."""
+    """Copy the inputs of pair slots k0:k1 of row i into buf[:, k - base]."""
     xi = x[i]
     zi = z[i]
     vxi = vx[i]
@@ -122,136 +70,132 @@ def _fill(i, k0, k1, base, x, z, vx, vz, spin, radius, mass, index, shear, width
 
 
 @njit(error_model="numpy", cache=NUMBA_CACHE)
-def _laws(m, buf, dt, c_n, c_t, damping, friction):
-    """hertz_mindlin on buf[:, :m], results in place: a loop without branches or gathers, which
-    LLVM vectorises (SIMD lanes do the same IEEE operations as the scalar law: same bits)."""
+def _laws(m, buf, base, dt, c_n, c_t, damping, friction, shear, pair_fx, pair_fz, pair_ti, pair_tj):
+    """hertz_mindlin on buf[:, :m] (slots base:base + m), results to shear and pair_* [force on j,
+    torques on i and j] at those slots: a loop without branches or gathers, which LLVM
+    vectorises (SIMD lanes do the same IEEE operations as the scalar law: same bits)."""
     for q in range(m):
+        k = np.uint64(base + q)
         mi = buf[B_MI, q]
         mj = buf[B_MJ, q]
         fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
             buf[B_DX, q], buf[B_DZ, q], buf[B_DVX, q], buf[B_DVZ, q], buf[B_WI, q], buf[B_WJ, q],
             buf[B_RI, q], buf[B_RJ, q], mi * mj / (mi + mj), buf[B_SHEAR, q], dt, c_n, c_t, damping, friction)
-        buf[B_FX, q] = fx
-        buf[B_FZ, q] = fz
-        buf[B_TI, q] = ti
-        buf[B_TJ, q] = tj
-        buf[B_SHEAR, q] = ds
+        pair_fx[k] = fx
+        pair_fz[k] = fz
+        pair_ti[k] = ti
+        pair_tj[k] = tj
+        shear[k] = ds
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
-def _scatter(i, k0, k1, base, hi, index, shear, pair_fx, pair_fz, pair_ti, force_x, force_z, torque, buf,
-             drag, drag_x, drag_z):
-    """Sum the results of slots k0:k1 of row i (buf[:, k - base]) into the grain forces, in slot
-    order: + on j, - on i; slots with j >= hi take their stored crossing-pair values. drag: this
-    is the end of row i, so grain i's contact force is complete (rows after i only add to
-    grains after i): add its drag."""
-    fxi = force_x[i]
-    fzi = force_z[i]
-    tsi = torque[i]
-    for k in range(k0, k1):
-        j = np.uint32(index[k])
-        if j >= hi:
-            fxi -= pair_fx[k]
-            fzi -= pair_fz[k]
-            tsi += pair_ti[k]
-            continue
-        q = np.uint64(k - base)
-        fx = buf[B_FX, q]
-        fz = buf[B_FZ, q]
-        force_x[j] += fx
-        force_z[j] += fz
-        torque[j] += buf[B_TJ, q]
-        fxi -= fx
-        fzi -= fz
-        tsi += buf[B_TI, q]
-        shear[k] = buf[B_SHEAR, q]
-    if drag:
-        fxi += drag_x[i]
-        fzi += drag_z[i]
-    force_x[i] = fxi
-    force_z[i] = fzi
-    torque[i] = tsi
+def _pair_range(k_lo, k_hi, x, z, vx, vz, spin, radius, mass, start, index, shear, pair_fx, pair_fz, pair_ti,
+                pair_tj, buf, width, dt, c_n, c_t, damping, friction):
+    """The law for list slots k_lo:k_hi, in chunks of PAIR_BUF slots (copy in, SIMD law)."""
+    if k_lo >= k_hi:
+        return
+    lo = 0                                   # row of slot k_lo: last i with start[i] <= k_lo
+    hi = start.shape[0] - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if start[mid] <= k_lo:
+            lo = mid
+        else:
+            hi = mid - 1
+    i = lo
+    k0 = k_lo
+    while k0 < k_hi:
+        k1 = min(k0 + PAIR_BUF, k_hi)
+        k = k0
+        while k < k1:
+            while start[i + 1] <= k:         # rows without slots
+                i += 1
+            end = min(start[i + 1], k1)
+            _fill(i, k, end, k0, x, z, vx, vz, spin, radius, mass, index, shear, width, buf)
+            k = end
+        _laws(k1 - k0, buf, k0, dt, c_n, c_t, damping, friction, shear, pair_fx, pair_fz, pair_ti, pair_tj)
+        k0 = k1
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def _sum_range(g0, g1, start, rev_start, rev_slot, pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque,
+               drag, drag_x, drag_z):
+    """Force and torque of grains g0:g1 from the pair results, in the one fixed order: the pairs
+    where g is second (+, increasing slot, i.e. increasing i), then its own row (-, in slot
+    order), then drag."""
+    for g in range(np.uint64(g0), np.uint64(g1)):
+        fx = 0.0
+        fz = 0.0
+        ts = 0.0
+        for r in range(rev_start[g], rev_start[g + 1]):
+            k = np.uint32(rev_slot[r])
+            fx += pair_fx[k]
+            fz += pair_fz[k]
+            ts += pair_tj[k]
+        for k in range(np.uint64(start[g]), np.uint64(start[g + 1])):
+            fx -= pair_fx[k]
+            fz -= pair_fz[k]
+            ts += pair_ti[k]
+        if drag:
+            fx += drag_x[g]
+            fz += drag_z[g]
+        force_x[g] = fx
+        force_z[g] = fz
+        torque[g] = ts
 
 
 @njit(cache=NUMBA_CACHE)
 def contact_forces(grains, lists, pairs, drag_x, drag_z, params):
     """grains.force_x, force_z, torque (N,) = contact forces of all listed pairs (+ drag_x, drag_z
-    (N,) when they have N entries; (0,) for none); lists.shear updated; see _contact_pass.
-    grains, lists, pairs: kernels.layout.Grains, Lists, Pairs."""
-    _contact_pass(grains.x, grains.z, grains.vx, grains.vz, grains.spin, grains.radius, grains.mass, lists.start,
-                  lists.index, lists.shear, lists.cross_i, lists.cross_k, lists.cross_in, pairs.pair_fx,
-                  pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, pairs.pair_buf, grains.force_x, grains.force_z,
-                  grains.torque, drag_x, drag_z, lists.layout, lists.new_start, params)
+    (N,) when they have N entries; (0,) for none); lists.shear updated (thesis Eqs. 8-11).
+    grains, lists, pairs: kernels.layout.Grains, Lists, Pairs.
+
+    Two passes, each split into nb = params[THREADS] equal parts (no part reads what another
+    part of the same pass writes): the law of every listed pair (_law_pass) into pairs.pair_*,
+    then the sum per grain (_sum_pass) in the one fixed order of _sum_range. Every pair's result
+    and every sum are the same for any nb: same bits on any thread count. [Summing by pulling
+    replaced a scatter of each pair to its second grain, whose read-modify-writes cost ~45 % of
+    the pass. The passes are separate parallel functions: numba fuses adjacent prange loops
+    of equal range, which would let a part sum pairs another part has not yet computed.]"""
+    n = grains.x.shape[0]
+    if lists.layout[L_BUILT] < 0:
+        reverse_list(lists.start, lists.index, n, lists.rev_start, lists.rev_slot)
+        lists.layout[L_BUILT] = 1
+    nb = min(max(int(params[THREADS]), 1), max(n, 1), pairs.pair_buf.shape[0])
+    _law_pass(nb, grains.x, grains.z, grains.vx, grains.vz, grains.spin, grains.radius, grains.mass, lists.start,
+              lists.index, lists.shear, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, pairs.pair_buf,
+              params)
+    _sum_pass(nb, lists.start, lists.rev_start, lists.rev_slot, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti,
+              pairs.pair_tj, grains.force_x, grains.force_z, grains.torque, drag_x, drag_z)
 
 
 @njit(parallel=True, error_model="numpy", cache=NUMBA_CACHE)
-def _contact_pass(x, z, vx, vz, spin, radius, mass, start, index, shear, cross_i, cross_k, cross_in,
-                  pair_fx, pair_fz, pair_ti, pair_tj, pair_buf, force_x, force_z, torque, drag_x, drag_z,
-                  layout, scratch, params):
-    """force, torque (N,) = contact forces of all listed pairs (+ drag). [Arrays, not the records:
-    the parallel loops keep the code they were measured with.]
-
-    Summation order, the same for any thread count: grain g first receives the pairs where it
-    is second (j), in increasing i, then subtracts its own row in list order, then adds drag.
-    One thread walks the rows in order and scatters to j. With nb = params[THREADS] blocks of
-    rows (:func:`block_layout`), the few pairs whose j lies in a later block (neighbours have
-    nearby numbers) are computed first into pair_* [force on j, torques]; each block then
-    starts its grains from those and runs the serial walk, reading the stored values for its
-    own crossing pairs. The walk goes in chunks of PAIR_BUF slots: copy the pair inputs into
-    pair_buf[block] (N_BUF, PAIR_BUF), evaluate the law on the whole chunk in a SIMD loop, sum
-    in slot order. Shear history is updated in place (thesis Eqs. 8-11).
-    """
-    n = x.shape[0]
+def _law_pass(nb, x, z, vx, vz, spin, radius, mass, start, index, shear, pair_fx, pair_fz, pair_ti, pair_tj, pair_buf,
+              params):
+    """The law of every listed pair, slots in nb equal ranges (_pair_range), chunk buffers
+    pair_buf[part] (N_BUF, PAIR_BUF). [Arrays, not the records: the parallel loops keep the code
+    they were measured with.]"""
     dt = params[DT]
     width = params[WIDTH]
     c_n = params[C_NORMAL]
     c_t = params[C_TANGENTIAL]
     damping = params[DAMPING]
     friction = params[FRICTION]
-    has_drag = drag_x.shape[0] == n
-    nb = min(max(int(params[THREADS]), 1), MAX_BLOCKS, max(n, 1), pair_buf.shape[0])
-    if layout[L_BUILT] != nb:
-        block_layout(start, index, n, nb, layout, cross_i, cross_k, cross_in, scratch)
-    if nb > 1:
-        for b in prange(nb):
-            for q in range(layout[L_OUT + b], layout[L_OUT + b + 1]):
-                k = cross_k[q]
-                fx, fz, ti, tj = _pair(cross_i[q], index[k], k, x, z, vx, vz, spin, radius, mass, shear, width, dt,
-                                       c_n, c_t, damping, friction)
-                pair_fx[k] = fx
-                pair_fz[k] = fz
-                pair_ti[k] = ti
-                pair_tj[k] = tj
+    npairs = start[x.shape[0]]
     for b in prange(nb):
-        lo = layout[L_ROWS + b]
-        hi = layout[L_ROWS + b + 1]
-        buf = pair_buf[b]
-        for g in range(lo, hi):
-            force_x[g] = 0.0
-            force_z[g] = 0.0
-            torque[g] = 0.0
-        for q in range(layout[L_IN + b], layout[L_IN + b + 1]):
-            k = cross_in[q]
-            g = index[k]
-            force_x[g] += pair_fx[k]
-            force_z[g] += pair_fz[k]
-            torque[g] += pair_tj[k]
-        i0 = lo                              # chunk: slots k0:k1, rows i0..i1
-        k0 = start[lo]
-        while i0 < hi:
-            k1 = min(k0 + PAIR_BUF, start[hi])
-            i1 = i0
-            while i1 + 1 < hi and start[i1 + 1] < k1:
-                i1 += 1
-            for i in range(i0, i1 + 1):      # copy in
-                _fill(i, max(k0, start[i]), min(start[i + 1], k1), k0, x, z, vx, vz, spin, radius, mass, index,
-                      shear, width, buf)
-            _laws(k1 - k0, buf, dt, c_n, c_t, damping, friction)
-            for i in range(i0, i1 + 1):      # sum out
-                _scatter(i, max(k0, start[i]), min(start[i + 1], k1), k0, hi, index, shear, pair_fx, pair_fz,
-                         pair_ti, force_x, force_z, torque, buf, has_drag and start[i + 1] <= k1, drag_x, drag_z)
-            i0 = i1 + 1 if start[i1 + 1] <= k1 else i1
-            k0 = k1
+        _pair_range(b * npairs // nb, (b + 1) * npairs // nb, x, z, vx, vz, spin, radius, mass, start, index, shear,
+                    pair_fx, pair_fz, pair_ti, pair_tj, pair_buf[b], width, dt, c_n, c_t, damping, friction)
+
+
+@njit(parallel=True, cache=NUMBA_CACHE)
+def _sum_pass(nb, start, rev_start, rev_slot, pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque, drag_x,
+              drag_z):
+    """Force and torque of every grain (_sum_range), grains in nb equal ranges."""
+    n = force_x.shape[0]
+    has_drag = drag_x.shape[0] == n
+    for b in prange(nb):
+        _sum_range(b * n // nb, (b + 1) * n // nb, start, rev_start, rev_slot, pair_fx, pair_fz, pair_ti, pair_tj,
+                   force_x, force_z, torque, has_drag, drag_x, drag_z)
 
 
 @njit(cache=NUMBA_CACHE)
@@ -465,11 +409,11 @@ def rebuild(grains, lists, params, counters, drag_x, drag_z):
     npairs = build_neighbors(grains.x, grains.z, grains.radius, grains.body, params[WIDTH], params[SKIN],
                              lists.start, lists.index, lists.shear, lists.new_start, lists.new_index, lists.new_shear,
                              lists.x_build, lists.z_build, lists.cell_of, lists.order, lists.cell_count,
-                             layout, params[THREADS] <= 1.0)
+                             layout[L_SCRATCH:], params[THREADS] <= 1.0)
     if npairs < 0:
         counters[K_NEEDED_CAPACITY] = -npairs
         return False
-    layout[L_BUILT] = -1            # block layout stale; contact_forces rebuilds it
+    layout[L_BUILT] = -1            # reverse list stale; contact_forces rebuilds it
     counters[K_PAIRS] = npairs
     counters[K_REBUILDS] += 1
     counters[K_NEED_REBUILD] = 0

@@ -70,6 +70,7 @@ class State:
         self.top = np.flatnonzero(self.body == TOP).astype(np.int64)
         self.id = np.arange(n, dtype=np.int64)      # original grain number (grains are re-numbered in place)
         self.start = np.zeros(n + 1, np.int64)
+        self.rev_start = np.zeros(n + 1, np.int64)
         self.new_start = np.zeros(n + 1, np.int64)
         self.layout = np.zeros(L.N_LAYOUT, np.int64)
         self.layout[L.L_BUILT] = -1
@@ -78,7 +79,7 @@ class State:
         self.cell_count = np.zeros(2 * n + 64, np.int64)
         self.x_build = self.x.copy()
         self.z_build = self.z.copy()
-        # one chunk buffer of the force pass per row block, as many as numba may run threads
+        # one chunk buffer of the force pass per part, as many as numba may run threads
         self.pair_buf = np.zeros((max(numba.config.NUMBA_NUM_THREADS, 1), L.N_BUF, L.PAIR_BUF))
         self._allocate_pairs(4 * n + 64)     # ~2.5 listed pairs per grain in a dense layer; grows if needed
         self.counters[L.K_NEED_REBUILD] = 1
@@ -104,9 +105,7 @@ class State:
         old = {name: getattr(self, name, None) for name in ("index", "shear")}
         self.index = np.zeros(capacity, np.int32)
         self.shear = np.zeros(capacity)
-        self.cross_i = np.zeros(capacity, np.int32)
-        self.cross_k = np.zeros(capacity, np.int32)
-        self.cross_in = np.zeros(capacity, np.int32)
+        self.rev_slot = np.zeros(capacity, np.int32)
         self.layout[L.L_BUILT] = -1      # derived from the list: rebuilt when next needed
         for name, arr in old.items():
             if arr is not None and keep:

@@ -270,10 +270,11 @@ def sub_system(s, m: int) -> tuple[L.Grains, L.Lists, L.Pairs]:
     grains = L.Grains(**{name: getattr(s, name)[:m].copy() if name in per_grain else
                          np.zeros(m if name in ("force_x", "force_z", "torque") else 0, getattr(s, name).dtype)
                          for name in L.Grains._fields})
+    index = s.index[:npairs][keep].copy()
     lists = L.Lists(**{name: np.zeros(1, getattr(s, name).dtype) for name in L.Lists._fields})._replace(
-        start=start, index=s.index[:npairs][keep].copy(), shear=s.shear[:npairs][keep].copy(),
-        layout=np.full(L.N_LAYOUT, -1, s.layout.dtype), new_start=np.zeros(m + 1, s.new_start.dtype))
-    pairs = L.Pairs(*(np.zeros(1) for _ in range(4)), np.zeros((1, L.N_BUF, L.PAIR_BUF)))
+        start=start, index=index, shear=s.shear[:npairs][keep].copy(), layout=np.full(L.N_LAYOUT, -1, s.layout.dtype),
+        rev_start=np.zeros(m + 1, s.rev_start.dtype), rev_slot=np.zeros(index.size, s.rev_slot.dtype))
+    pairs = L.Pairs(*(np.zeros(index.size) for _ in range(4)), np.zeros((1, L.N_BUF, L.PAIR_BUF)))
     return grains, lists, pairs
 
 
