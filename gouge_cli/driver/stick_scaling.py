@@ -71,6 +71,7 @@ def set_inertia(sim, lam: float, dt_true: float):
     s.mass[...] = sphere_mass(s.radius, s.density * lam)
     s.inv_mass[...] = 1.0 / s.mass
     s.inv_inertia[...] = 1.0 / (s.mass * (2.0 * s.radius) ** 2 / 10.0)
+    s.list_changed()
     sim.dt = dt_true * math.sqrt(lam)
     sim.params[L.DT] = sim.dt
     sim.params[L.WALL_MASS] = sim.wall_mass_per_length * s.width * lam

@@ -21,12 +21,21 @@ from . import NUMBA_CACHE
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
-def hertz_mindlin(dx, dz, dvx, dvz, spin_i, spin_j, r_i, r_j, m_ij, shear, dt,
+def pair_constants(r_i, r_j, m_i, m_j):
+    """(R_ij, m_ij): effective radius 2 R_i R_j / (R_i + R_j) [d] (thesis Eq. 9) and reduced mass
+    m_i m_j / (m_i + m_j) [rho d^3] of a pair; the one expression for both (same bits wherever
+    they are computed)."""
+    return 2.0 * r_i * r_j / (r_i + r_j), m_i * m_j / (m_i + m_j)
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def hertz_mindlin(dx, dz, dvx, dvz, spin_i, spin_j, r_i, r_j, r_ij, m_ij, shear, dt,
                   c_normal, c_tangential, damping, friction):
     """Contact force of a touching pair.
 
     dx, dz: x_j - x_i (minimum image) [d]; dvx, dvz: v_j - v_i [v0];
-    spin_i, spin_j: angular velocities [1/t0]; m_ij: reduced mass [rho d^3];
+    spin_i, spin_j: angular velocities [1/t0]; r_ij, m_ij: effective radius [d] and reduced
+    mass [rho d^3] (pair_constants);
     shear: tangential displacement ds before this step [d];
     c_normal = sqrt(2) E / (3 (1 - nu^2)), c_tangential = 2^1.5 E / ((2 - nu)(1 + nu)) * factor.
     Returns (fx_j, fz_j, torque_i, torque_j, new_shear, overlap, normal_force); all zero
@@ -42,7 +51,6 @@ def hertz_mindlin(dx, dz, dvx, dvz, spin_i, spin_j, r_i, r_j, m_ij, shear, dt,
     overlap = rsum - r
     arm_i = r_i - 0.5 * overlap
     arm_j = r_j - 0.5 * overlap
-    r_ij = 2.0 * r_i * r_j / rsum
     root = math.sqrt(r_ij * overlap)
     v_n = dvx * nx + dvz * nz
     v_t = -dvx * nz + dvz * nx - (arm_i * spin_i + arm_j * spin_j)

@@ -28,9 +28,10 @@ Grains = namedtuple("Grains", ("x", "z", "vx", "vz", "spin", "radius", "mass", "
 # flags of the skin check)
 Lists = namedtuple("Lists", ("start", "index", "shear", "rev_start", "rev_slot", "x_build", "z_build",
                              "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count"))
-# the force pass's per-pair results pair_fx, pair_fz (force on j), pair_ti, pair_tj (torques)
-# float64 (capacity,) and its per-part chunk buffers pair_buf (parts, N_BUF, PAIR_BUF)
-Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_buf"))
+# the force pass's per-pair data, float64 (capacity,): results pair_fx, pair_fz (force on j),
+# pair_ti, pair_tj (torques), constants pair_reff, pair_meff (kernels.contact.pair_constants,
+# with rev_start/rev_slot; layout[L_BUILT]); per-part chunk buffers pair_buf (parts, N_BUF, PAIR_BUF)
+Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_reff", "pair_meff", "pair_buf"))
 
 # params: float64 array
 DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \
@@ -55,15 +56,16 @@ COMPACTION, LOADING = 0, 1
 OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
 
 
-# layout: int64 (N_LAYOUT,): layout[L_BUILT] is 1 while rev_start/rev_slot match the list, -1
-# once it changed (contact_forces then rebuilds them); layout[L_SCRATCH:] the list build's
+# layout: int64 (N_LAYOUT,): layout[L_BUILT] is 1 while rev_start/rev_slot and the pair constants
+# match the list and the masses, -1 once either changed (contact_forces then recomputes them,
+# see model.state.State.list_changed); layout[L_SCRATCH:] the list build's
 # per-block counters (kernels.neighbors.build_neighbors, 2 LIST_BLOCKS + 1)
 LIST_BLOCKS = 16    # row blocks of a parallel list build
 L_BUILT, L_SCRATCH = 0, 1
 N_LAYOUT = L_SCRATCH + 2 * LIST_BLOCKS + 1
 # pair_buf: float64 (parts, N_BUF, PAIR_BUF), per-part chunk of pair inputs
-B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ, B_RI, B_RJ, B_MI, B_MJ, B_SHEAR = range(11)
-N_BUF = 11
+B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ, B_RI, B_RJ, B_SHEAR = range(9)
+N_BUF = 9
 PAIR_BUF = 256
 
 # ---- fluid grid (kernels.deposit, pressure, drag, fluid_update; model.fluid.FluidGrid) ----------

@@ -10,7 +10,7 @@ from numba import njit
 from . import NUMBA_CACHE
 from .layout import (BOTTOM_FX, BOTTOM_FZ, CONTACT_ENERGY, COORDINATION, KINETIC, MAX_OVERLAP, NONFINITE, POROSITY,
                      THICKNESS, WORST_I, WORST_J, Z_BOTTOM, Z_TOP)
-from .contact import hertz_mindlin
+from .contact import hertz_mindlin, pair_constants
 from .neighbors import minimum_image
 
 
@@ -101,9 +101,10 @@ def contact_list(x, z, radius, start, index, shear, width, c_normal, c_tangentia
     for i in range(x.shape[0]):
         for k in range(start[i], start[i + 1]):
             j = index[k]
+            r_ij, _ = pair_constants(radius[i], radius[j], 1.0, 1.0)
             fx, fz, _, _, _, overlap, _ = hertz_mindlin(
                 minimum_image(x[j] - x[i], width), z[j] - z[i], 0.0, 0.0, 0.0, 0.0, radius[i], radius[j],
-                0.0, shear[k], 0.0, c_normal, c_tangential, 0.0, friction)
+                r_ij, 0.0, shear[k], 0.0, c_normal, c_tangential, 0.0, friction)
             if overlap > 0.0:
                 out_i[m] = i
                 out_j[m] = j

@@ -73,7 +73,7 @@ class State:
         self.rev_start = np.zeros(n + 1, np.int64)
         self.new_start = np.zeros(n + 1, np.int64)
         self.layout = np.zeros(L.N_LAYOUT, np.int64)
-        self.layout[L.L_BUILT] = -1
+        self.list_changed()
         self.cell_of = np.zeros(n, np.int64)
         self.order = np.zeros(n, np.int64)
         self.cell_count = np.zeros(2 * n + 64, np.int64)
@@ -106,7 +106,7 @@ class State:
         self.index = np.zeros(capacity, np.int32)
         self.shear = np.zeros(capacity)
         self.rev_slot = np.zeros(capacity, np.int32)
-        self.layout[L.L_BUILT] = -1      # derived from the list: rebuilt when next needed
+        self.list_changed()
         for name, arr in old.items():
             if arr is not None and keep:
                 getattr(self, name)[:keep] = arr[:keep]
@@ -116,6 +116,13 @@ class State:
         self.pair_fz = np.zeros(capacity)
         self.pair_ti = np.zeros(capacity)
         self.pair_tj = np.zeros(capacity)
+        self.pair_reff = np.zeros(capacity)
+        self.pair_meff = np.zeros(capacity)
+
+    def list_changed(self):
+        """The list or the masses changed: the arrays derived from them (reverse list, pair
+        constants; kernels.layout L_BUILT) are recomputed by the next contact pass."""
+        self.layout[L.L_BUILT] = -1
 
     def grow_pairs(self, needed: int):
         """Enlarge pair arrays to hold `needed` pairs (with 25 % headroom), keeping the list."""
@@ -176,4 +183,4 @@ class State:
                 if target.shape != source.shape:
                     raise ValueError(f"checkpoint array {name!r} has shape {source.shape}, scene has {target.shape}")
                 target[...] = source
-        self.layout[L.L_BUILT] = -1
+        self.list_changed()

@@ -27,7 +27,8 @@ def call(dx, dz=0.0, dvx=0.0, dvz=0.0, spin_sum=0.0, r_i=0.5, r_j=0.5, m_ij=math
     spins on the contact-point arms a = R - overlap/2 (which sum to the distance r)."""
     r = math.hypot(dx, dz)
     w = spin_sum / r if r > 0 else 0.0
-    fx, fz, ti, tj, ds, xi, fn = hertz_mindlin(dx, dz, dvx, dvz, w, w, r_i, r_j, m_ij, shear, dt,
+    r_ij = 2.0 * r_i * r_j / (r_i + r_j)
+    fx, fz, ti, tj, ds, xi, fn = hertz_mindlin(dx, dz, dvx, dvz, w, w, r_i, r_j, r_ij, m_ij, shear, dt,
                                                C_N, C_T, damping, friction)
     mfs = ti / (r_i - 0.5 * xi) if xi > 0 else 0.0
     if xi > 0:
