@@ -324,24 +324,17 @@ def kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inert
                 double, params, late):
     """Half kick (two if double) and drift of every grain; returns how many grains lie farther
     than skin/2 from their build positions (the list must be rebuilt before forces).
-    late: (N,) int64 scratch for per-grain flags (a prange reduction would allocate per call).
-    One thread: a plain loop (no flags). [A prange over blocks of grains with an inner loop
-    measured 2-4x slower than this prange over grains: 35 against 13 us at 10,000 grains.]"""
+    Grains in params[THREADS] equal parts (move_range); late: (N,) int64 scratch, one count per
+    part. [This replaced a prange over grains with per-grain flags summed serially, which took
+    28 us on two threads against 20 us on one at 10,000 grains; this takes 12 us.]"""
     n = x.shape[0]
-    if params[THREADS] <= 1.0:
-        return move_range(0, n, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                          x_build, z_build, double, params)
-    dt = params[DT]
-    width = params[WIDTH]
-    damp = params[BG_DAMPING]
-    reach = 0.5 * params[SKIN]
-    reach2 = reach * reach
-    for i in prange(n):
-        late[i] = _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body,
-                            x_build, z_build, double, dt, width, damp, reach2)
+    nb = min(max(int(params[THREADS]), 1), max(n, 1))
+    for b in prange(nb):
+        late[b] = move_range(b * n // nb, (b + 1) * n // nb, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass,
+                             inv_inertia, body, x_build, z_build, double, params)
     total = 0
-    for i in range(n):
-        total += late[i]
+    for b in range(nb):
+        total += late[b]
     return total
 
 
