@@ -28,10 +28,10 @@ Grains = namedtuple("Grains", ("x", "z", "vx", "vz", "spin", "radius", "mass", "
 # flags of the skin check)
 Lists = namedtuple("Lists", ("start", "index", "shear", "rev_start", "rev_slot", "x_build", "z_build",
                              "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count"))
-# the force pass's per-pair data, float64 (capacity,): results pair_fx, pair_fz (force on j),
-# pair_ti, pair_tj (torques), constants pair_reff, pair_meff (kernels.contact.pair_constants,
-# with rev_start/rev_slot; layout[L_BUILT]); per-part chunk buffers pair_buf (parts, N_BUF, PAIR_BUF)
-Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_reff", "pair_meff", "pair_buf"))
+# the force pass's per-pair data: results pair_fx, pair_fz (force on j), pair_ti, pair_tj (torques)
+# float64 (capacity,); constants pair_const float64 (N_PAIR_CONST, capacity), rows PC_* (set with
+# rev_start/rev_slot, layout[L_BUILT]); per-part chunk buffers pair_buf (parts, N_BUF, PAIR_BUF)
+Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_const", "pair_buf"))
 
 # params: float64 array
 DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \
@@ -63,9 +63,12 @@ OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
 LIST_BLOCKS = 16    # row blocks of a parallel list build
 L_BUILT, L_SCRATCH = 0, 1
 N_LAYOUT = L_SCRATCH + 2 * LIST_BLOCKS + 1
-# pair_buf: float64 (parts, N_BUF, PAIR_BUF), per-part chunk of pair inputs
-B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ, B_RI, B_RJ, B_SHEAR = range(9)
-N_BUF = 9
+# pair_buf: float64 (parts, N_BUF, PAIR_BUF), per-part chunk of the pair inputs gathered per step
+B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ = range(6)
+N_BUF = 6
+# pair_const rows: radii R_i, R_j [d], effective radius and reduced mass (kernels.contact.pair_constants)
+PC_RI, PC_RJ, PC_REFF, PC_MEFF = range(4)
+N_PAIR_CONST = 4
 PAIR_BUF = 256
 
 # ---- fluid grid (kernels.deposit, pressure, drag, fluid_update; model.fluid.FluidGrid) ----------

@@ -25,7 +25,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (BG_DAMPING, B_DVX, B_DVZ, B_DX, B_DZ, B_RI, B_RJ, B_SHEAR, B_WI, B_WJ, C_ANCHOR,
+from .layout import (BG_DAMPING, B_DVX, B_DVZ, B_DX, B_DZ, B_WI, B_WJ, C_ANCHOR, PC_MEFF, PC_REFF, PC_RI, PC_RJ,
                      C_DRIVE_TIME, C_NORMAL, C_TANGENTIAL, C_TIME, DAMPING, DRIVE, DT, FREE, FRICTION,
                      K_NEEDED_CAPACITY, K_NEED_REBUILD, K_PAIRS, K_REBUILDS, K_STEP, LIST_OVERFLOW, L_BUILT, L_SCRATCH,
                      MID_STEP, OK, PAIR_BUF, SIGMA, SKIN, SORT_EVERY, SPRING, THREADS, TOP, V_LOAD, WALL_MASS,
@@ -44,26 +44,28 @@ def reverse_list(start, index, n, rev_start, rev_slot):
 
 
 @njit(cache=NUMBA_CACHE)
-def list_constants(start, index, radius, mass, reff, meff):
-    """reff, meff (capacity,) = kernels.contact.pair_constants of every listed pair, constant
-    while the list and the masses are: computed once per change instead of every step."""
+def list_constants(start, index, radius, mass, const):
+    """const (N_PAIR_CONST, capacity), rows PC_*: the radii and kernels.contact.pair_constants of
+    every listed pair, constant while the list and the masses are: set once per change
+    instead of gathered every step."""
     for i in range(radius.shape[0]):
         ri = radius[i]
         mi = mass[i]
         for k in range(start[i], start[i + 1]):
             j = index[k]
-            reff[k], meff[k] = pair_constants(ri, radius[j], mi, mass[j])
+            const[PC_RI, k] = ri
+            const[PC_RJ, k] = radius[j]
+            const[PC_REFF, k], const[PC_MEFF, k] = pair_constants(ri, radius[j], mi, mass[j])
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
-def _fill(i, k0, k1, base, x, z, vx, vz, spin, radius, index, shear, width, buf):
+def _fill(i, k0, k1, base, x, z, vx, vz, spin, index, width, buf):
     """Copy the inputs of pair slots k0:k1 of row i into buf[:, k - base]."""
     xi = x[i]
     zi = z[i]
     vxi = vx[i]
     vzi = vz[i]
     wi = spin[i]
-    ri = radius[i]
     for k in range(k0, k1):
         j = np.uint32(index[k])
         q = np.uint64(k - base)
@@ -73,22 +75,20 @@ def _fill(i, k0, k1, base, x, z, vx, vz, spin, radius, index, shear, width, buf)
         buf[B_DVZ, q] = vz[j] - vzi
         buf[B_WI, q] = wi
         buf[B_WJ, q] = spin[j]
-        buf[B_RI, q] = ri
-        buf[B_RJ, q] = radius[j]
-        buf[B_SHEAR, q] = shear[k]
 
 
 @njit(error_model="numpy", cache=NUMBA_CACHE)
-def _laws(m, buf, base, dt, c_n, c_t, damping, friction, shear, reff, meff, pair_fx, pair_fz, pair_ti, pair_tj):
-    """hertz_mindlin on buf[:, :m] (slots base:base + m, constants reff, meff), results to shear
-    and pair_* [force on j, torques on i and j] at those slots: a loop without branches or
-    gathers, which LLVM vectorises (SIMD lanes do the same IEEE operations as the scalar law:
-    same bits)."""
+def _laws(m, buf, base, dt, c_n, c_t, damping, friction, shear, const, pair_fx, pair_fz, pair_ti, pair_tj):
+    """hertz_mindlin on buf[:, :m] for slots base:base + m (their shear history and constants read
+    in place), results to shear and pair_* [force on j, torques on i and j] at those slots: a
+    loop without branches or gathers, which LLVM vectorises (SIMD lanes do the same IEEE
+    operations as the scalar law: same bits)."""
     for q in range(m):
         k = np.uint64(base + q)
         fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
             buf[B_DX, q], buf[B_DZ, q], buf[B_DVX, q], buf[B_DVZ, q], buf[B_WI, q], buf[B_WJ, q],
-            buf[B_RI, q], buf[B_RJ, q], reff[k], meff[k], buf[B_SHEAR, q], dt, c_n, c_t, damping, friction)
+            const[PC_RI, k], const[PC_RJ, k], const[PC_REFF, k], const[PC_MEFF, k], shear[k], dt, c_n, c_t,
+            damping, friction)
         pair_fx[k] = fx
         pair_fz[k] = fz
         pair_ti[k] = ti
@@ -97,8 +97,8 @@ def _laws(m, buf, base, dt, c_n, c_t, damping, friction, shear, reff, meff, pair
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
-def _pair_range(k_lo, k_hi, x, z, vx, vz, spin, radius, start, index, shear, reff, meff, pair_fx, pair_fz, pair_ti,
-                pair_tj, buf, width, dt, c_n, c_t, damping, friction):
+def _pair_range(k_lo, k_hi, x, z, vx, vz, spin, start, index, shear, const, pair_fx, pair_fz, pair_ti, pair_tj,
+                buf, width, dt, c_n, c_t, damping, friction):
     """The law for list slots k_lo:k_hi, in chunks of PAIR_BUF slots (copy in, SIMD law)."""
     if k_lo >= k_hi:
         return
@@ -119,10 +119,9 @@ def _pair_range(k_lo, k_hi, x, z, vx, vz, spin, radius, start, index, shear, ref
             while start[i + 1] <= k:         # rows without slots
                 i += 1
             end = min(start[i + 1], k1)
-            _fill(i, k, end, k0, x, z, vx, vz, spin, radius, index, shear, width, buf)
+            _fill(i, k, end, k0, x, z, vx, vz, spin, index, width, buf)
             k = end
-        _laws(k1 - k0, buf, k0, dt, c_n, c_t, damping, friction, shear, reff, meff, pair_fx, pair_fz, pair_ti,
-              pair_tj)
+        _laws(k1 - k0, buf, k0, dt, c_n, c_t, damping, friction, shear, const, pair_fx, pair_fz, pair_ti, pair_tj)
         k0 = k1
 
 
@@ -169,19 +168,18 @@ def contact_forces(grains, lists, pairs, drag_x, drag_z, params):
     n = grains.x.shape[0]
     if lists.layout[L_BUILT] < 0:
         reverse_list(lists.start, lists.index, n, lists.rev_start, lists.rev_slot)
-        list_constants(lists.start, lists.index, grains.radius, grains.mass, pairs.pair_reff, pairs.pair_meff)
+        list_constants(lists.start, lists.index, grains.radius, grains.mass, pairs.pair_const)
         lists.layout[L_BUILT] = 1
     nb = min(max(int(params[THREADS]), 1), max(n, 1), pairs.pair_buf.shape[0])
-    _law_pass(nb, grains.x, grains.z, grains.vx, grains.vz, grains.spin, grains.radius, lists.start, lists.index,
-              lists.shear, pairs.pair_reff, pairs.pair_meff, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti,
-              pairs.pair_tj, pairs.pair_buf, params)
+    _law_pass(nb, grains.x, grains.z, grains.vx, grains.vz, grains.spin, lists.start, lists.index, lists.shear,
+              pairs.pair_const, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, pairs.pair_buf, params)
     _sum_pass(nb, lists.start, lists.rev_start, lists.rev_slot, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti,
               pairs.pair_tj, grains.force_x, grains.force_z, grains.torque, drag_x, drag_z)
 
 
 @njit(parallel=True, error_model="numpy", cache=NUMBA_CACHE)
-def _law_pass(nb, x, z, vx, vz, spin, radius, start, index, shear, reff, meff, pair_fx, pair_fz, pair_ti, pair_tj,
-              pair_buf, params):
+def _law_pass(nb, x, z, vx, vz, spin, start, index, shear, const, pair_fx, pair_fz, pair_ti, pair_tj, pair_buf,
+              params):
     """The law of every listed pair, slots in nb equal ranges (_pair_range), chunk buffers
     pair_buf[part] (N_BUF, PAIR_BUF). [Arrays, not the records: the parallel loops keep the code
     they were measured with.]"""
@@ -193,8 +191,8 @@ def _law_pass(nb, x, z, vx, vz, spin, radius, start, index, shear, reff, meff, p
     friction = params[FRICTION]
     npairs = start[x.shape[0]]
     for b in prange(nb):
-        _pair_range(b * npairs // nb, (b + 1) * npairs // nb, x, z, vx, vz, spin, radius, start, index, shear, reff,
-                    meff, pair_fx, pair_fz, pair_ti, pair_tj, pair_buf[b], width, dt, c_n, c_t, damping, friction)
+        _pair_range(b * npairs // nb, (b + 1) * npairs // nb, x, z, vx, vz, spin, start, index, shear, const,
+                    pair_fx, pair_fz, pair_ti, pair_tj, pair_buf[b], width, dt, c_n, c_t, damping, friction)
 
 
 @njit(parallel=True, cache=NUMBA_CACHE)

@@ -116,8 +116,7 @@ class State:
         self.pair_fz = np.zeros(capacity)
         self.pair_ti = np.zeros(capacity)
         self.pair_tj = np.zeros(capacity)
-        self.pair_reff = np.zeros(capacity)
-        self.pair_meff = np.zeros(capacity)
+        self.pair_const = np.zeros((L.N_PAIR_CONST, capacity))
 
     def list_changed(self):
         """The list or the masses changed: the arrays derived from them (reverse list, pair

@@ -274,7 +274,8 @@ def sub_system(s, m: int) -> tuple[L.Grains, L.Lists, L.Pairs]:
     lists = L.Lists(**{name: np.zeros(1, getattr(s, name).dtype) for name in L.Lists._fields})._replace(
         start=start, index=index, shear=s.shear[:npairs][keep].copy(), layout=np.full(L.N_LAYOUT, -1, s.layout.dtype),
         rev_start=np.zeros(m + 1, s.rev_start.dtype), rev_slot=np.zeros(index.size, s.rev_slot.dtype))
-    pairs = L.Pairs(*(np.zeros(index.size) for _ in range(6)), np.zeros((1, L.N_BUF, L.PAIR_BUF)))
+    pairs = L.Pairs(*(np.zeros(index.size) for _ in range(4)), np.zeros((L.N_PAIR_CONST, index.size)),
+                    np.zeros((1, L.N_BUF, L.PAIR_BUF)))
     return grains, lists, pairs
 
 
