@@ -228,11 +228,12 @@ def bench(
             out.print(f"{t} thread(s): fastest / slowest size {max(rates) / min(rates):.2f}", highlight=False)
     if results["profile_us"]:
         prof = Table(title="microseconds per step, by part (best of 3 x 50 calls)")
-        for col in ("N", "threads", "contact pass", "kick pass", "rebuild (each)", "steps/rebuild",
+        for col in ("N", "threads", "contact pass", "(law", "sum)", "kick pass", "rebuild (each)", "steps/rebuild",
                     "rebuild/step", "renumber (each)", "renumber/step", "whole step"):
             prof.add_column(col, justify="right")
         for r in results["profile_us"]:
-            prof.add_row(str(r["n_grains"]), str(r["threads"]), f"{r['contact_forces']:.0f}", f"{r['kick_drift']:.0f}",
+            prof.add_row(str(r["n_grains"]), str(r["threads"]), f"{r['contact_forces']:.0f}", f"{r['law_pass']:.0f}",
+                         f"{r['sum_pass']:.0f}", f"{r['kick_drift']:.0f}",
                          f"{r['rebuild_each']:.0f}", f"{r['steps_per_rebuild']:.0f}",
                          f"{r['rebuild_per_step']:.0f}", f"{r['renumber_each']:.0f}", f"{r['renumber_per_step']:.1f}",
                          f"{r['whole_step']:.0f}")

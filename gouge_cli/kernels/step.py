@@ -15,7 +15,7 @@ needs whole-step velocities mid-call takes them from ``closed_velocity`` (the fl
 The scene's arrays come as records addressed by field name (kernels.layout.Grains, Lists, Pairs,
 built by model.state.State); indices of params, wall, clock and counters: kernels.layout.
 
-Size (~500 lines): the pair pass (reverse_list .. _sum_pass) and the step (kicks, drift,
+Size (~500 lines): the pair pass (reverse_list .. sum_pass) and the step (kicks, drift,
 rebuild, advance) stay in one file for now; the pair pass is the natural next split (forces.py).
 """
 
@@ -153,32 +153,39 @@ def _sum_range(g0, g1, start, rev_start, rev_slot, pair_fx, pair_fz, pair_ti, pa
 
 
 @njit(cache=NUMBA_CACHE)
+def derive_list(grains, lists, pairs):
+    """The arrays the force pass derives from the list and the masses: the reverse list
+    (lists.rev_start, rev_slot) and the pair constants (pairs.pair_const); marks them current."""
+    reverse_list(lists.start, lists.index, grains.x.shape[0], lists.rev_start, lists.rev_slot)
+    list_constants(lists.start, lists.index, grains.radius, grains.mass, pairs.pair_const)
+    lists.layout[L_BUILT] = 1
+
+
+@njit(cache=NUMBA_CACHE)
 def contact_forces(grains, lists, pairs, drag_x, drag_z, params):
     """grains.force_x, force_z, torque (N,) = contact forces of all listed pairs (+ drag_x, drag_z
     (N,) when they have N entries; (0,) for none); lists.shear updated (thesis Eqs. 8-11).
     grains, lists, pairs: kernels.layout.Grains, Lists, Pairs.
 
     Two passes, each split into nb = params[THREADS] equal parts (no part reads what another
-    part of the same pass writes): the law of every listed pair (_law_pass) into pairs.pair_*,
-    then the sum per grain (_sum_pass) in the one fixed order of _sum_range. Every pair's result
+    part of the same pass writes): the law of every listed pair (law_pass) into pairs.pair_*,
+    then the sum per grain (sum_pass) in the one fixed order of _sum_range. Every pair's result
     and every sum are the same for any nb: same bits on any thread count. [Summing by pulling
     replaced a scatter of each pair to its second grain, whose read-modify-writes cost ~45 % of
     the pass. The passes are separate parallel functions: numba fuses adjacent prange loops
     of equal range, which would let a part sum pairs another part has not yet computed.]"""
     n = grains.x.shape[0]
     if lists.layout[L_BUILT] < 0:
-        reverse_list(lists.start, lists.index, n, lists.rev_start, lists.rev_slot)
-        list_constants(lists.start, lists.index, grains.radius, grains.mass, pairs.pair_const)
-        lists.layout[L_BUILT] = 1
+        derive_list(grains, lists, pairs)
     nb = min(max(int(params[THREADS]), 1), max(n, 1), pairs.pair_buf.shape[0])
-    _law_pass(nb, grains.x, grains.z, grains.vx, grains.vz, grains.spin, lists.start, lists.index, lists.shear,
+    law_pass(nb, grains.x, grains.z, grains.vx, grains.vz, grains.spin, lists.start, lists.index, lists.shear,
               pairs.pair_const, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, pairs.pair_buf, params)
-    _sum_pass(nb, lists.start, lists.rev_start, lists.rev_slot, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti,
+    sum_pass(nb, lists.start, lists.rev_start, lists.rev_slot, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti,
               pairs.pair_tj, grains.force_x, grains.force_z, grains.torque, drag_x, drag_z)
 
 
 @njit(parallel=True, error_model="numpy", cache=NUMBA_CACHE)
-def _law_pass(nb, x, z, vx, vz, spin, start, index, shear, const, pair_fx, pair_fz, pair_ti, pair_tj, pair_buf,
+def law_pass(nb, x, z, vx, vz, spin, start, index, shear, const, pair_fx, pair_fz, pair_ti, pair_tj, pair_buf,
               params):
     """The law of every listed pair, slots in nb equal ranges (_pair_range), chunk buffers
     pair_buf[part] (N_BUF, PAIR_BUF). [Arrays, not the records: the parallel loops keep the code
@@ -196,7 +203,7 @@ def _law_pass(nb, x, z, vx, vz, spin, start, index, shear, const, pair_fx, pair_
 
 
 @njit(parallel=True, cache=NUMBA_CACHE)
-def _sum_pass(nb, start, rev_start, rev_slot, pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque, drag_x,
+def sum_pass(nb, start, rev_start, rev_slot, pair_fx, pair_fz, pair_ti, pair_tj, force_x, force_z, torque, drag_x,
               drag_z):
     """Force and torque of every grain (_sum_range), grains in nb equal ranges."""
     n = force_x.shape[0]

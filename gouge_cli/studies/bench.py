@@ -210,9 +210,10 @@ def best_seconds(fn, calls: int, repeats: int, reset=None) -> float:
 
 
 def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) -> dict:
-    """Microseconds per step in each part: contact pass, the kick pass (the closing half kick
-    of one step, the first of the next and the drift, fused), and the
-    neighbour rebuild (per rebuild, and amortised over the measured steps between rebuilds)."""
+    """Microseconds per step in each part: contact pass (law pass + sum pass, also timed alone),
+    the kick pass (the closing half kick of one step, the first of the next and the drift,
+    fused), and the neighbour rebuild with the arrays derived from the list (per rebuild, and
+    amortised over the measured steps between rebuilds)."""
     sim.threads = threads
     s, p = sim.state, sim.params.copy()
     p[L.THREADS] = threads
@@ -234,13 +235,20 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
         s.shear[:] = shear0
         s.vx[:], s.vz[:], s.spin[:], s.x[:], s.z[:] = v0
 
+    nb = min(threads, s.n, pairs.pair_buf.shape[0])
     out = {
         "contact_forces": timed(lambda: K.compute_forces(g, lists, pairs, s.wall, p, *sim.drag), reset=reset),
+        "law_pass": timed(lambda: K.law_pass(nb, g.x, g.z, g.vx, g.vz, g.spin, lists.start, lists.index, lists.shear,
+                                             pairs.pair_const, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti,
+                                             pairs.pair_tj, pairs.pair_buf, p), reset=reset),
+        "sum_pass": timed(lambda: K.sum_pass(nb, lists.start, lists.rev_start, lists.rev_slot, pairs.pair_fx,
+                                             pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, g.force_x, g.force_z,
+                                             g.torque, *sim.drag)),
         "kick_drift": timed(lambda: K.kick_drift(g.x, g.z, g.vx, g.vz, g.spin, g.force_x, g.force_z, g.torque,
                                                   g.inv_mass, g.inv_inertia, g.body, lists.x_build, lists.z_build,
                                                   True, p, lists.cell_of), reset=reset),
-        "rebuild_each": timed(lambda: K.rebuild(g, lists, p, s.counters, *sim.drag), n=max(3, repeats // 10),
-                              reset=reset),
+        "rebuild_each": timed(lambda: (K.rebuild(g, lists, p, s.counters, *sim.drag), K.derive_list(g, lists, pairs)),
+                              n=max(3, repeats // 10), reset=reset),
         "steps_per_rebuild": per_rebuild_steps,
         "renumber_each": timed(lambda: K.renumber(g, lists, *sim.drag, p[L.WIDTH]), n=max(3, repeats // 10)),
         "rebuilds_per_renumber": sort_every,
