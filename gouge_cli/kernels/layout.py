@@ -63,6 +63,7 @@ OK, LIST_OVERFLOW, FLUID_FAILED = 0, 1, 2
 LIST_BLOCKS = 16    # row blocks of a parallel list build
 L_BUILT, L_SCRATCH = 0, 1
 N_LAYOUT = L_SCRATCH + 2 * LIST_BLOCKS + 1
+PARTS_PER_THREAD = 4    # parts of each force pass per thread, when threads > 1
 # pair_buf: float64 (parts, N_BUF, PAIR_BUF), per-part chunk of the pair inputs gathered per step
 B_DX, B_DZ, B_DVX, B_DVZ, B_WI, B_WJ = range(6)
 N_BUF = 6

@@ -25,11 +25,11 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (BG_DAMPING, B_DVX, B_DVZ, B_DX, B_DZ, B_WI, B_WJ, C_ANCHOR, PC_MEFF, PC_REFF, PC_RI, PC_RJ,
-                     C_DRIVE_TIME, C_NORMAL, C_TANGENTIAL, C_TIME, DAMPING, DRIVE, DT, FREE, FRICTION,
-                     K_NEEDED_CAPACITY, K_NEED_REBUILD, K_PAIRS, K_REBUILDS, K_STEP, LIST_OVERFLOW, L_BUILT, L_SCRATCH,
-                     MID_STEP, OK, PAIR_BUF, SIGMA, SKIN, SORT_EVERY, SPRING, THREADS, TOP, V_LOAD, WALL_MASS,
-                     WIDTH, W_FX, W_FZ, W_VX, W_VZ, W_X, W_Z)
+from .layout import (BG_DAMPING, B_DVX, B_DVZ, B_DX, B_DZ, B_WI, B_WJ, C_ANCHOR, C_DRIVE_TIME, C_NORMAL,
+                     C_TANGENTIAL, C_TIME, DAMPING, DRIVE, DT, FREE, FRICTION, K_NEEDED_CAPACITY, K_NEED_REBUILD,
+                     K_PAIRS, K_REBUILDS, K_STEP, LIST_OVERFLOW, L_BUILT, L_SCRATCH, MID_STEP, OK, PAIR_BUF,
+                     PARTS_PER_THREAD, PC_MEFF, PC_REFF, PC_RI, PC_RJ, SIGMA, SKIN, SORT_EVERY, SPRING, THREADS, TOP,
+                     V_LOAD, WALL_MASS, WIDTH, W_FX, W_FZ, W_VX, W_VZ, W_X, W_Z)
 from .contact import hertz_mindlin, pair_constants
 from .neighbors import bucket_order, build_neighbors, minimum_image
 from .reorder import permute, renumber_list, spatial_order
@@ -162,12 +162,21 @@ def derive_list(grains, lists, pairs):
 
 
 @njit(cache=NUMBA_CACHE)
+def force_parts(threads, n, buffers):
+    """Parts of each force pass for params[THREADS] = threads: 1 on one thread, else
+    PARTS_PER_THREAD per thread, at most n and the number of chunk buffers."""
+    t = max(int(threads), 1)
+    return min(1 if t == 1 else PARTS_PER_THREAD * t, max(n, 1), buffers)
+
+
+@njit(cache=NUMBA_CACHE)
 def contact_forces(grains, lists, pairs, drag_x, drag_z, params):
     """grains.force_x, force_z, torque (N,) = contact forces of all listed pairs (+ drag_x, drag_z
     (N,) when they have N entries; (0,) for none); lists.shear updated (thesis Eqs. 8-11).
     grains, lists, pairs: kernels.layout.Grains, Lists, Pairs.
 
-    Two passes, each split into nb = params[THREADS] equal parts (no part reads what another
+    Two passes, each split into nb equal parts, PARTS_PER_THREAD per thread when there are
+    several (smaller parts measured ~10 % faster on two threads; no part reads what another
     part of the same pass writes): the law of every listed pair (law_pass) into pairs.pair_*,
     then the sum per grain (sum_pass) in the one fixed order of _sum_range. Every pair's result
     and every sum are the same for any nb: same bits on any thread count. [Summing by pulling
@@ -177,7 +186,7 @@ def contact_forces(grains, lists, pairs, drag_x, drag_z, params):
     n = grains.x.shape[0]
     if lists.layout[L_BUILT] < 0:
         derive_list(grains, lists, pairs)
-    nb = min(max(int(params[THREADS]), 1), max(n, 1), pairs.pair_buf.shape[0])
+    nb = force_parts(params[THREADS], n, pairs.pair_buf.shape[0])
     law_pass(nb, grains.x, grains.z, grains.vx, grains.vz, grains.spin, lists.start, lists.index, lists.shear,
               pairs.pair_const, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, pairs.pair_buf, params)
     sum_pass(nb, lists.start, lists.rev_start, lists.rev_slot, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti,

@@ -79,8 +79,8 @@ class State:
         self.cell_count = np.zeros(2 * n + 64, np.int64)
         self.x_build = self.x.copy()
         self.z_build = self.z.copy()
-        # one chunk buffer of the force pass per part, as many as numba may run threads
-        self.pair_buf = np.zeros((max(numba.config.NUMBA_NUM_THREADS, 1), L.N_BUF, L.PAIR_BUF))
+        # one chunk buffer of the force pass per part: PARTS_PER_THREAD for each thread numba may run
+        self.pair_buf = np.zeros((L.PARTS_PER_THREAD * max(numba.config.NUMBA_NUM_THREADS, 1), L.N_BUF, L.PAIR_BUF))
         self._allocate_pairs(4 * n + 64)     # ~2.5 listed pairs per grain in a dense layer; grows if needed
         self.counters[L.K_NEED_REBUILD] = 1
         if self.top.size:

@@ -235,7 +235,7 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
         s.shear[:] = shear0
         s.vx[:], s.vz[:], s.spin[:], s.x[:], s.z[:] = v0
 
-    nb = min(threads, s.n, pairs.pair_buf.shape[0])
+    nb = K.force_parts(threads, s.n, pairs.pair_buf.shape[0])
     out = {
         "contact_forces": timed(lambda: K.compute_forces(g, lists, pairs, s.wall, p, *sim.drag), reset=reset),
         "law_pass": timed(lambda: K.law_pass(nb, g.x, g.z, g.vx, g.vz, g.spin, lists.start, lists.index, lists.shear,
