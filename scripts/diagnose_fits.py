@@ -11,7 +11,10 @@ frequency f_s = sqrt(k/m_b)/2pi -- "shape" (< 12 f_s: the velocity is not a half
 mu_d is not constant), "vibration" (12-40 f_s: the layer's natural vibration, which thesis
 Sec. 4.1 calls an artifact Eq. 3 does not describe), "noise" (above) -- and R^2 of the same
 fit refitted after a notch (q = 3) at the residual's spectral peak above 12 f_s (the layer's
-natural frequency), i.e. with that vibration removed. Diagnosis only: the study's statistics
+natural frequency), i.e. with that vibration removed; and Eq. 7's mu_d(t) (notch-filtered, as
+`gouge plot`) averaged over tenths of the slip: mu_d_drop = mu_s minus its mean over the central
+60 % (the Delta mu of Eq. 3), mu_d_spread = the range of those six means (how far mu_d is from the
+constant Eq. 3 assumes). Diagnosis only: the study's statistics
 use the unfiltered fit.
 """
 
@@ -25,7 +28,7 @@ import numpy as np
 from scipy import signal
 
 from gouge_cli.analysis.blockslider import fit_block_slider
-from gouge_cli.analysis.catalog import fit_slip, read_catalog, slip_window
+from gouge_cli.analysis.catalog import fit_slip, read_catalog, slip_friction, slip_window
 from gouge_cli.analysis.friction import estimate_natural_frequency, notch_filter
 from gouge_cli.analysis.study import DURATION_TOL, GOOD_R2, transient_slips
 from gouge_cli.io.runfile import RunReader
@@ -58,8 +61,13 @@ def diagnose(reader: RunReader) -> list[dict]:
         window = SimpleNamespace(onset_index=int(idx[0]), end_index=int(idx[-1]), onset_time=float(e["onset_time"]),
                                  duration=float(e["duration"]), peak_velocity=float(e["peak_velocity"]))
         notched = fit_block_slider(t, v_notched, window, info.k, info.m_b, info.sigma)
+        fr = slip_friction(reader, e, notch=True, pad=0.0)
+        mu = fr.filtered if fr.filtered is not None else fr.friction
+        phase = (fr.t - fr.onset_time) / (fr.end_time - fr.onset_time)
+        tenths = [float(np.mean(mu[(phase >= a) & (phase < a + 0.1)])) for a in np.arange(0.2, 0.8, 0.1)]
         rows.append({
-            "slip": int(e["number"]), "stress_drop": float(e["stress_drop"]),
+            "slip": int(e["number"]), "mu_d_drop": fr.mu_s - float(np.mean(tenths)),
+            "mu_d_spread": float(np.ptp(tenths)), "stress_drop": float(e["stress_drop"]),
             "peak_over_Vs": float(e["peak_velocity"]) / info.V_s, "duration": float(e["duration"]),
             "r2": fit.r2, "fit_ok": fit.success, "T_fit": fit.half_period, "m_eff_over_m_b": fit.m_eff / info.m_b,
             "start_shift": fit.t0 - float(e["onset_time"]),
@@ -76,7 +84,7 @@ def diagnose(reader: RunReader) -> list[dict]:
 
 
 def print_table(rows: list[dict]) -> None:
-    cols = ("slip", "stress_drop", "peak_over_Vs", "duration_over_median", "r2", "r2_notched", "T_fit",
+    cols = ("slip", "mu_d_drop", "mu_d_spread", "stress_drop", "peak_over_Vs", "duration_over_median", "r2", "r2_notched", "T_fit",
             "m_eff_over_m_b", "start_shift", "rise_over_fall", "res_shape", "res_vibration", "res_noise",
             "f_nat_over_f_s")
     print(",".join(cols))
@@ -87,10 +95,16 @@ def print_table(rows: list[dict]) -> None:
     good_n = sum(1 for r in rows if r["fit_ok"] and r["r2_notched"] > GOOD_R2)
     within = sum(1 for r in rows if abs(r["duration_over_median"] - 1.0) <= DURATION_TOL)
     m = np.array([r["m_eff_over_m_b"] for r in rows if r["fit_ok"]])
+    def ratio(sel):
+        x = [r["mu_d_spread"] / r["mu_d_drop"] for r in rows if sel(r)]
+        return f"{np.median(x):.2f}" if x else "-"
+    print(f"# median mu_d_spread / mu_d_drop: slips with R^2 > {GOOD_R2} {ratio(lambda r: r['r2'] > GOOD_R2)}, "
+          f"the others {ratio(lambda r: r['r2'] <= GOOD_R2)}, all {ratio(lambda r: True)}")
     share = {k: np.mean([r[f"res_{k}"] for r in rows]) for k, _, _ in BANDS}
     print(f"# {n} non-transient slips: R^2 > {GOOD_R2}: {good} ({good / n:.0%}); with the natural vibration "
           f"notched: {good_n} ({good_n / n:.0%}); durations within {DURATION_TOL:.0%} of the median: "
-          f"{within} ({within / n:.0%}); m_eff/m_b {m.mean():.3g} +- {m.std():.2g}; mean residual power share "
+          f"{within} ({within / n:.0%}); stress drops {min(r['stress_drop'] for r in rows):.3f}-"
+          f"{max(r['stress_drop'] for r in rows):.3f}; m_eff/m_b {m.mean():.3g} +- {m.std():.2g}; mean residual power share "
           + ", ".join(f"{k} {x:.0%}" for k, x in share.items()))
 
 
@@ -135,7 +149,10 @@ def main(argv: list[str]) -> None:
         argv = argv[:i] + argv[i + 2:]
     with RunReader(argv[0]) as reader:
         rows = diagnose(reader)
+        catalog = read_catalog(reader)
+        end = reader.series(["time"], reader.info.n_samples - 1)["time"][0] - reader.time_offset()
     print_table(rows)
+    print(f"# {len(catalog)} slips ({len(rows)} steady) in {end:.3g} t0 of loading")
     if len(argv) > 1:
         plot_worst(rows, argv[1], worst)
 
