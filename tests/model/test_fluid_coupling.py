@@ -5,6 +5,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
+import numba
 import numpy as np
 import pytest
 
@@ -123,7 +124,7 @@ def test_fluid_bits_do_not_depend_on_advance_calls(sheared):
         assert values.tobytes() == cut.fluid.arrays()[name].tobytes(), name
     two = Simulation(wet.model_copy(update={"numerics": wet.numerics.model_copy(update={"threads": 2})}),
                      arrays=arrays)
-    assert two.threads == 2
+    assert two.threads == min(2, numba.config.NUMBA_NUM_THREADS)   # 1 where numba may run only one
     two.advance(600)
     steps = Simulation(wet, arrays=arrays)       # one step per call: no overlapped drift at all
     for _ in range(600):
