@@ -26,8 +26,10 @@ Rules of :class:`StickScaling` (checked on every time-series row):
   V_s, or tau/sigma lead_stress / 4 below its peak since the rollback), the slip detector has
   closed what it saw (no raw or pending event, no pending pre-slip state: the slip is in the
   catalog or dropped as too small) and the wall has then been quiet for
-  quiet_window = max(slips.merge_gap + 2 output.series_interval, D), D the duration of the last
-  slip the detector closed in this stretch (0 if none): no row with v_wall >= start_factor V_s,
+  quiet_window = max(slips.merge_gap + 2 output.series_interval, min(D, slips.lead)), D the
+  duration of the last slip the detector closed in this stretch (0 if none; capped at the lead,
+  the window of the first version, so that no scene waits longer than it did): no row with
+  v_wall >= start_factor V_s,
   |mean wall velocity| over the window (displacement / time) and |v_wall| of the last row below
   end_factor V_s (the instantaneous wall velocity rattles above end_factor V_s in ~15 % of
   stick rows). The window is tied to the slip, not to slips.lead: the lead is spent at true
@@ -86,6 +88,11 @@ def quiet_floor(config: Config) -> float:
     """Shortest quiet window before scaling resumes [t0]: slips.merge_gap + 2 series intervals
     (the detector closes a slip merge_gap after its end; two rows more for the row cadence)."""
     return config.slips.merge_gap + 2.0 * config.output.series_interval
+
+
+def quiet_window(floor: float, slip: float, lead: float) -> float:
+    """Quiet time [t0] before scaling resumes after a slip of duration `slip` (module docstring)."""
+    return max(floor, min(slip, lead))
 
 
 def closed(recorder) -> bool:
@@ -206,7 +213,8 @@ class StickScaling:
             if self.quiet_since is None:
                 if abs(v) < self.lo:
                     self.quiet_since, self.quiet_x = t, x
-            elif t - self.quiet_since >= max(self.quiet_time, self.slip_span) and closed(recorder):
+            elif t - self.quiet_since >= quiet_window(self.quiet_time, self.slip_span, self.lead) \
+                    and closed(recorder):
                 if abs(v) < self.lo and abs(x - self.quiet_x) / (t - self.quiet_since) < self.lo:
                     self._set(sim, self.target)
                     self.resumed_at = t         # kept in the ring: no later rollback goes back past it
@@ -298,7 +306,7 @@ def cycle_steps(config: Config, lam: float, cycle: float, slip: float) -> tuple[
     """(steps at lambda = 1, steps at `lam`) of one loading cycle of `cycle` [t0] with a slip of
     `slip` [t0], by the rules above: per cycle the true-inertia stretch is the rollback lead
     (at least slips.lead, the ring spaced lead/4: 1.25 lead), the slip and the quiet window
-    max(quiet_floor, slip); the rest of the cycle and the discarded scaled stretch (1.25 lead)
+    (quiet_window); the rest of the cycle and the discarded scaled stretch (1.25 lead)
     run at dt sqrt(lambda). An estimate for projections (gouge bench); the ladder measures it."""
     dt = choose_dt(config)
     true_t, lead = true_stretch(config, cycle, slip)
@@ -315,4 +323,4 @@ def true_stretch(config: Config, cycle: float, slip: float) -> tuple[float, floa
     from .slips import lead_time
 
     lead = lead_time(config)
-    return min(cycle, 1.25 * lead + slip + max(quiet_floor(config), slip)), lead
+    return min(cycle, 1.25 * lead + slip + quiet_window(quiet_floor(config), slip, lead)), lead

@@ -136,6 +136,8 @@ def test_cycle_projection_counts_the_true_inertia_stretch():
     assert plain / scaled < 4.0
     # a short slip: the quiet window is merge_gap + 2 series intervals, not a second lead
     assert true_stretch(config, 1e4, 10.0) == (125.0 + 10.0 + 50.0, 100.0)
+    # a slip longer than the lead: the window is the lead (never longer than the first version's)
+    assert true_stretch(config, 1e4, 300.0) == (125.0 + 300.0 + 100.0, 100.0)
     # the structural cap: lambda -> inf still computes the true stretch and the discarded lead
     _, huge = cycle_steps(config, 1e12, 1e4, 50.0)
     assert 1e4 / dt / huge == pytest.approx(1e4 / true_t, rel=1e-4)
@@ -164,16 +166,16 @@ def _slip_rows(V, t_slip, t_end, t_stop, dt=10.0):
     return rows
 
 
-@pytest.mark.parametrize("merge_gap", [30.0, 400.0])
-def test_scaling_resumes_after_the_closed_slip_and_a_quiet_window_tied_to_it(merge_gap):
+@pytest.mark.parametrize("merge_gap, lead", [(30.0, 2000.0), (400.0, 2000.0), (30.0, 120.0)])
+def test_scaling_resumes_after_the_closed_slip_and_a_quiet_window_tied_to_it(merge_gap, lead):
     """After a rollback the true-inertia stretch slips from t = 100 to 300; scaling resumes once
     the detector has closed that slip (merge_gap after its end) and the wall has been quiet for
-    max(merge_gap + 2 series intervals, slip duration), long before a second lead (2,000 t0)."""
+    max(merge_gap + 2 series intervals, min(slip duration, lead)), long before a second lead."""
     from gouge_cli.driver.slips import SlipRecorder
     from gouge_cli.driver.stick_scaling import closed
 
     V = 4e-5
-    sim = _sim(slips={"lead": 2000.0, "merge_gap": merge_gap, "start_factor": 5, "end_factor": 1.5},
+    sim = _sim(slips={"lead": lead, "merge_gap": merge_gap, "start_factor": 5, "end_factor": 1.5},
                output={"series_interval": 10.0})
     ctl = StickScaling(sim.config, sim, quiet=True)
     recorder = SlipRecorder(sim.config, sim, None, None)
@@ -184,10 +186,10 @@ def test_scaling_resumes_after_the_closed_slip_and_a_quiet_window_tied_to_it(mer
     duration = recorder.slips[0]["duration"]
     assert duration == pytest.approx(200.0, abs=10.0)
     quiet_from = 300.0                      # first row below end_factor V_s after the slip
-    window = max(merge_gap + 20.0, duration)
+    window = max(merge_gap + 20.0, min(duration, lead))
     assert resumed is not None and quiet_from + window <= resumed <= quiet_from + window + 10.0
     assert resumed >= recorder.slips[0]["end_time"] + merge_gap      # the detector closed it first
-    assert resumed < 100.0 + 2000.0         # not a second lead
+    assert resumed <= quiet_from + max(merge_gap + 20.0, lead) + 10.0     # the first version's window at most
     assert ctl.lam == 16.0 and ctl.resumed_at == resumed and ctl.slip_span == 0.0
     assert recorder.ring[-1].time == sim.state.time                  # the resume state is kept
     assert ctl.state_dict()["slip_span"] == 0.0
