@@ -18,7 +18,9 @@ Rules of :class:`StickScaling` (checked on every time-series row):
   slip recorder's pre-slip state (the newest ring state at least slips.lead before the onset
   estimate, driver.slips.SlipRecorder.choose_pre_slip; the oldest kept one if none is that old; never one
   from before scaling last resumed, whose state is put in the ring then, since the stretch
-  before it was at true inertia already: so a run cannot loop). Rows,
+  before it was at true inertia already: so a run cannot loop). The ring then holds that state
+  alone (an older one would not retrace the recomputation: the pre-slip checkpoint is it or a
+  later one, kept at true inertia). Rows,
   snapshots and catalog entries after it are dropped (RunFile.truncate_after), the recorder
   and the energy guard are restored to that moment, lambda becomes 1 and the run computes
   again from there. Without a kept state it switches to lambda = 1 where it is (``in_place``).
@@ -34,6 +36,10 @@ Rules of :class:`StickScaling` (checked on every time-series row):
   end_factor V_s (the instantaneous wall velocity rattles above end_factor V_s in ~15 % of
   stick rows). The window is tied to the slip, not to slips.lead: the lead is spent at true
   inertia once per cycle, before the onset (the rollback), not a second time after the slip.
+  At the resume the recorder's stress peak starts afresh (SlipRecorder.forget_peak): after a
+  slow slip that never reached the trigger the old peak would keep the ring empty through the
+  scaled stretch, and the next rollback would go back to the resume, recomputing the whole
+  stretch at true inertia.
 * **Miss.** If the recomputation reaches the scaled onset time + slips.lead without moving so,
   it is counted in ``misses`` and simply continues at lambda = 1 until it does.
 * **Guard.** If, in a scaled stretch while the wall is quiet (v_wall < end_factor V_s), the
@@ -218,6 +224,7 @@ class StickScaling:
                 if abs(v) < self.lo and abs(x - self.quiet_x) / (t - self.quiet_since) < self.lo:
                     self._set(sim, self.target)
                     self.resumed_at = t         # kept in the ring: no later rollback goes back past it
+                    recorder.forget_peak()      # else a stale peak (a slow slip) keeps the ring empty
                     recorder.keep(sim, {"guards": guard.state_dict() if guard else {}}, always=True)
                     self.onset_scaled, self.triggered, self.quiet_since, self.missed_now = None, False, None, False
                     self.slip_span = 0.0

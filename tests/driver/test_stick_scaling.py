@@ -192,6 +192,8 @@ def test_scaling_resumes_after_the_closed_slip_and_a_quiet_window_tied_to_it(mer
     assert resumed <= quiet_from + max(merge_gap + 20.0, lead) + 10.0     # the first version's window at most
     assert ctl.lam == 16.0 and ctl.resumed_at == resumed and ctl.slip_span == 0.0
     assert recorder.ring[-1].time == sim.state.time                  # the resume state is kept
+    assert recorder.peak_tau == -np.inf                              # with the stress peak afresh
+    assert recorder.ring[-1].extra["slip_recorder"]["peak_tau"] == -np.inf
     assert ctl.state_dict()["slip_span"] == 0.0
 
 
