@@ -270,9 +270,12 @@ def bench(
                       highlight=False)
         for lam, v in r24.get("stick_scaling", {}).items():      # stick scaling: projected cycle
             hours = ", ".join(f"{h:.1f} h on {t} thread(s)" for t, h in v["cycle_hours"].items())
-            out.print(f"  with numerics.stick_scaling {float(lam):g}{' (the measured default)' if v['default'] else ''}: "
+            out.print(f"  with numerics.stick_scaling {float(lam):g}{' (chosen by the ladder)' if v['default'] else ''}: "
                       f"{v['step_ratio']:.2f}x fewer steps per cycle (stick_scaling.cycle_steps): {hours}",
                       highlight=False)
+        if "stick_scaling_cap" in r24:
+            out.print(f"  stick scaling's cap (lead, slip and quiet window at true inertia): "
+                      f"{r24['stick_scaling_cap']:.1f}x", highlight=False)
     out.print(f"peak RSS {results['peak_rss_mb']:.0f} MB; results in {json_out}")
 
 

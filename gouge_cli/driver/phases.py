@@ -62,7 +62,7 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
             row.update(scaling.columns(s, row))
         writer.append(row)
         slip = recorder.observe(row)
-        if scaling is not None and scaling.after_row(s, row, recorder, writer, guards[0].action):
+        if scaling is not None and scaling.after_row(s, row, recorder, writer, guards[0].action, slip):
             return                              # stick scaling: went back to a pre-slip state
         if slip is not None and stop_after_slip:
             stop["now"] = True

@@ -101,7 +101,9 @@ class SlipRecorder:
 
     def rewind_to(self, ck: Checkpoint):
         """Stick scaling: back to the moment ring state `ck` was kept (detector, peak, count as
-        then; later ring states and the pending state dropped)."""
+        then; the pending state and every other ring state dropped: the run goes on from `ck` at
+        true inertia, so no older state leads to what it computes next, and a pre-slip
+        checkpoint from before `ck` would not retrace it)."""
         state = ck.extra["slip_recorder"]
         self.detector = SlipDetector.from_state_dict(state["detector"])
         self.count = int(state["count"])
@@ -109,9 +111,13 @@ class SlipRecorder:
         self.peak_tau, self.peak_time = float(state["peak_tau"]), float(state["peak_time"])
         self.pending = None
         self._deborah.clear()
-        kept = [c for c in self.ring if c.step <= ck.step]
         self.ring.clear()
-        self.ring.extend(kept)
+        self.ring.append(ck)
+
+    def forget_peak(self):
+        """Stick scaling, when scaling resumes after a stretch that moved: the stress peak starts
+        afresh (as after a slip), so that the scaled stretch keeps ring states near its own peak."""
+        self.peak_tau = -np.inf
 
     def choose_pre_slip(self, onset_estimate: float) -> Checkpoint | None:
         """Newest kept state at least `lead` before the onset estimate, else the oldest kept

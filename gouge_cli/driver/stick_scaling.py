@@ -18,16 +18,28 @@ Rules of :class:`StickScaling` (checked on every time-series row):
   slip recorder's pre-slip state (the newest ring state at least slips.lead before the onset
   estimate, driver.slips.SlipRecorder.choose_pre_slip; the oldest kept one if none is that old; never one
   from before scaling last resumed, whose state is put in the ring then, since the stretch
-  before it was at true inertia already: so a run cannot loop). Rows,
+  before it was at true inertia already: so a run cannot loop). The ring then holds that state
+  alone (an older one would not retrace the recomputation: the pre-slip checkpoint is it or a
+  later one, kept at true inertia). Rows,
   snapshots and catalog entries after it are dropped (RunFile.truncate_after), the recorder
   and the energy guard are restored to that moment, lambda becomes 1 and the run computes
   again from there. Without a kept state it switches to lambda = 1 where it is (``in_place``).
 * **Resume.** Scaling resumes once the true-inertia stretch has moved (v_wall >= start_factor
-  V_s, or tau/sigma lead_stress / 4 below its peak since the rollback) and then been quiet for
-  quiet_time = max(slips.lead, slips.merge_gap + 2 output.series_interval): no row with
-  v_wall >= start_factor V_s, |mean wall velocity| over the window (displacement / time) and
-  |v_wall| of the last row below end_factor V_s (the instantaneous wall velocity rattles above end_factor V_s
-  in ~15 % of stick rows), so that the detector has closed the slip before the step changes.
+  V_s, or tau/sigma lead_stress / 4 below its peak since the rollback), the slip detector has
+  closed what it saw (no raw or pending event, no pending pre-slip state: the slip is in the
+  catalog or dropped as too small) and the wall has then been quiet for
+  quiet_window = max(slips.merge_gap + 2 output.series_interval, min(D, slips.lead)), D the
+  duration of the last slip the detector closed in this stretch (0 if none; capped at the lead,
+  the window of the first version, so that no scene waits longer than it did): no row with
+  v_wall >= start_factor V_s,
+  |mean wall velocity| over the window (displacement / time) and |v_wall| of the last row below
+  end_factor V_s (the instantaneous wall velocity rattles above end_factor V_s in ~15 % of
+  stick rows). The window is tied to the slip, not to slips.lead: the lead is spent at true
+  inertia once per cycle, before the onset (the rollback), not a second time after the slip.
+  At the resume the recorder's stress peak starts afresh (SlipRecorder.forget_peak): after a
+  slow slip that never reached the trigger the old peak would keep the ring empty through the
+  scaled stretch, and the next rollback would go back to the resume, recomputing the whole
+  stretch at true inertia.
 * **Miss.** If the recomputation reaches the scaled onset time + slips.lead without moving so,
   it is counted in ``misses`` and simply continues at lambda = 1 until it does.
 * **Guard.** If, in a scaled stretch while the wall is quiet (v_wall < end_factor V_s), the
@@ -60,7 +72,9 @@ from ..kernels import layout as L
 from ..model.portable import sphere_mass
 from ..model.timestep import choose_dt
 
-LADDER_DEFAULT = 1.0     # the largest lambda the ladder found within the seed spread (README)
+# The largest lambda the ladder found within the seed spread (README: configs/scaling_long.yaml, 8
+# seeds). Not the shipped numerics.stick_scaling, which stays 1 (off): README says why.
+LADDER_DEFAULT = 64.0
 
 
 def set_inertia(sim, lam: float, dt_true: float):
@@ -77,6 +91,24 @@ def set_inertia(sim, lam: float, dt_true: float):
     sim.params[L.WALL_MASS] = sim.wall_mass_per_length * s.width * lam
     sim.params[L.DAMPING] = sim.config.material.damping / math.sqrt(lam)
     sim.inertia_scale = lam
+
+
+def quiet_floor(config: Config) -> float:
+    """Shortest quiet window before scaling resumes [t0]: slips.merge_gap + 2 series intervals
+    (the detector closes a slip merge_gap after its end; two rows more for the row cadence)."""
+    return config.slips.merge_gap + 2.0 * config.output.series_interval
+
+
+def quiet_window(floor: float, slip: float, lead: float) -> float:
+    """Quiet time [t0] before scaling resumes after a slip of duration `slip` (module docstring)."""
+    return max(floor, min(slip, lead))
+
+
+def closed(recorder) -> bool:
+    """True if the slip recorder has nothing open: no raw or pending detector event and no
+    pending pre-slip state (driver.slips.SlipRecorder)."""
+    d = recorder.detector
+    return d.raw is None and d.pending is None and recorder.pending is None
 
 
 def stick_deborah_bound(config: Config, lam: float, diffusivity: float, half_thickness: float) -> float:
@@ -100,7 +132,7 @@ class StickScaling:
         from .slips import lead_time
 
         self.lead = lead_time(config)
-        self.quiet_time = max(self.lead, config.slips.merge_gap + 2.0 * config.output.series_interval)
+        self.quiet_time = quiet_floor(config)
         st = dict(state or {})
         self.lam = float(st.get("lam", self.target))
         self.onset_scaled = st.get("onset_scaled")      # time of the scaled onset being recomputed
@@ -108,6 +140,7 @@ class StickScaling:
         self.quiet_since = st.get("quiet_since")        # start (t, x_wall) of the quiet window
         self.quiet_x = st.get("quiet_x")
         self.missed_now = bool(st.get("missed_now", False))
+        self.slip_span = float(st.get("slip_span", 0.0))    # D: duration of the slip closed in this stretch
         self.peak_tau = float(st.get("peak_tau", -math.inf))        # tau/sigma peak of this stretch
         self.resumed_at = float(st.get("resumed_at", -math.inf))    # when scaling last resumed [t0]
         self.drop = 0.25 * config.slips.lead_stress
@@ -123,7 +156,7 @@ class StickScaling:
     def state_dict(self) -> dict:
         return {"lam": self.lam, "onset_scaled": self.onset_scaled, "triggered": self.triggered,
                 "quiet_since": self.quiet_since, "quiet_x": self.quiet_x, "missed_now": self.missed_now,
-                "peak_tau": self.peak_tau,
+                "slip_span": self.slip_span, "peak_tau": self.peak_tau,
                 "resumed_at": self.resumed_at, **self.counts}
 
     @property
@@ -155,8 +188,9 @@ class StickScaling:
         return out
 
     # ---- control --------------------------------------------------------------------------
-    def after_row(self, sim, row: dict, recorder, writer, guard) -> bool:
-        """Called after the recorder saw `row`; True if the run went back in time."""
+    def after_row(self, sim, row: dict, recorder, writer, guard, slip=None) -> bool:
+        """Called after the recorder saw `row` (`slip`: the slip it closed on this row, if any);
+        True if the run went back in time."""
         self.tally(sim)
         t, v = row["time"], row["wall_vx"]
         if self.scaled:
@@ -181,17 +215,22 @@ class StickScaling:
             self.counts["misses"] += 1
             self._say(f"stick scaling: the true-inertia recomputation did not slip by t = {t:.6g} t0 "
                       f"(scaled onset {self.onset_scaled:.6g} t0); it goes on at true inertia")
+        if slip is not None:
+            self.slip_span = float(slip.duration)
         if self.triggered or self.onset_scaled is None:
             x = row["wall_x"]
             if self.quiet_since is None:
                 if abs(v) < self.lo:
                     self.quiet_since, self.quiet_x = t, x
-            elif t - self.quiet_since >= self.quiet_time:
+            elif t - self.quiet_since >= quiet_window(self.quiet_time, self.slip_span, self.lead) \
+                    and closed(recorder):
                 if abs(v) < self.lo and abs(x - self.quiet_x) / (t - self.quiet_since) < self.lo:
                     self._set(sim, self.target)
                     self.resumed_at = t         # kept in the ring: no later rollback goes back past it
+                    recorder.forget_peak()      # else a stale peak (a slow slip) keeps the ring empty
                     recorder.keep(sim, {"guards": guard.state_dict() if guard else {}}, always=True)
                     self.onset_scaled, self.triggered, self.quiet_since, self.missed_now = None, False, None, False
+                    self.slip_span = 0.0
                 else:
                     self.quiet_since, self.quiet_x = t, x
         return False
@@ -219,6 +258,7 @@ class StickScaling:
             later = [c for c in recorder.ring if c.time >= self.resumed_at]
             ck = later[0] if later else None
         self.onset_scaled, self.triggered, self.quiet_since, self.missed_now = t_onset, False, None, False
+        self.slip_span = 0.0
         if ck is None:
             self.counts["in_place"] += 1
             self.triggered = True
@@ -275,16 +315,22 @@ class StickScaling:
 def cycle_steps(config: Config, lam: float, cycle: float, slip: float) -> tuple[float, float]:
     """(steps at lambda = 1, steps at `lam`) of one loading cycle of `cycle` [t0] with a slip of
     `slip` [t0], by the rules above: per cycle the true-inertia stretch is the rollback lead
-    (at least slips.lead, the ring spaced lead/4: 1.25 lead), the slip and the quiet wait
-    quiet_time; the rest of the cycle and the discarded scaled stretch (1.25 lead) run at
-    dt sqrt(lambda). An estimate for projections (gouge bench); the ladder measures it."""
-    from .slips import lead_time
-
+    (at least slips.lead, the ring spaced lead/4: 1.25 lead), the slip and the quiet window
+    (quiet_window); the rest of the cycle and the discarded scaled stretch (1.25 lead)
+    run at dt sqrt(lambda). An estimate for projections (gouge bench); the ladder measures it."""
     dt = choose_dt(config)
-    lead = lead_time(config)
-    quiet = max(lead, config.slips.merge_gap + 2.0 * config.output.series_interval)
-    true_t = min(cycle, 1.25 * lead + slip + quiet)
+    true_t, lead = true_stretch(config, cycle, slip)
     if lam <= 1.0:
         return cycle / dt, cycle / dt
     scaled_t = cycle - true_t + 1.25 * lead
     return cycle / dt, true_t / dt + scaled_t / (dt * math.sqrt(lam))
+
+
+def true_stretch(config: Config, cycle: float, slip: float) -> tuple[float, float]:
+    """(true-inertia time per cycle [t0], slips.lead [t0]): 1.25 lead + slip + quiet window,
+    at most the cycle. cycle / true time is the structural cap on the step ratio (lambda -> inf
+    still computes that stretch at true inertia and the discarded 1.25 lead at dt sqrt(lambda))."""
+    from .slips import lead_time
+
+    lead = lead_time(config)
+    return min(cycle, 1.25 * lead + slip + quiet_window(quiet_floor(config), slip, lead)), lead

@@ -326,10 +326,11 @@ def run24_projection(rates: dict) -> dict:
     for threads, rate in rates.items():
         out["by_threads"][threads] = {"rate": rate, "cycle_hours": RUN24_CYCLE / dt * n / rate / 3600,
                                       "slip_minutes": slip / dt * n / rate / 60}
-    from ..driver.stick_scaling import LADDER_DEFAULT, cycle_steps     # stick scaling: the same cycle, scaled
+    from ..driver.stick_scaling import LADDER_DEFAULT, cycle_steps, true_stretch     # stick scaling: the same cycle
 
     out["stick_scaling"] = {}
-    for lam in sorted({LADDER_DEFAULT, 16.0, 256.0}):
+    out["stick_scaling_cap"] = RUN24_CYCLE / true_stretch(config, RUN24_CYCLE, slip)[0]    # lambda -> inf
+    for lam in sorted({LADDER_DEFAULT, 16.0, 64.0, 256.0}):
         plain, scaled = cycle_steps(config, lam, RUN24_CYCLE, slip)
         out["stick_scaling"][lam] = {"default": lam == LADDER_DEFAULT, "step_ratio": plain / scaled,
                                      "cycle_hours": {t: v["cycle_hours"] * scaled / plain

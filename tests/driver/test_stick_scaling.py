@@ -125,12 +125,95 @@ def test_ladder_statistics_and_default():
 
 def test_cycle_projection_counts_the_true_inertia_stretch():
     from gouge_cli.driver.slips import lead_time
-    from gouge_cli.driver.stick_scaling import cycle_steps
+    from gouge_cli.driver.stick_scaling import cycle_steps, true_stretch
 
-    config = build_config({**SMALL, "slips": {"lead": 100.0}, "output": {"series_interval": 10.0}})
+    config = build_config({**SMALL, "slips": {"lead": 100.0, "merge_gap": 30.0}, "output": {"series_interval": 10.0}})
     dt = choose_dt(config)
     assert cycle_steps(config, 1.0, 1e4, 50.0) == (1e4 / dt, 1e4 / dt)
     plain, scaled = cycle_steps(config, 16.0, 1e4, 50.0)
-    true_t = 1.25 * lead_time(config) + 50.0 + 100.0
+    true_t = 1.25 * lead_time(config) + 50.0 + max(30.0 + 20.0, 50.0)     # lead, slip, quiet window
     assert scaled == pytest.approx(true_t / dt + (1e4 - true_t + 125.0) / (4.0 * dt), rel=1e-12)
     assert plain / scaled < 4.0
+    # a short slip: the quiet window is merge_gap + 2 series intervals, not a second lead
+    assert true_stretch(config, 1e4, 10.0) == (125.0 + 10.0 + 50.0, 100.0)
+    # a slip longer than the lead: the window is the lead (never longer than the first version's)
+    assert true_stretch(config, 1e4, 300.0) == (125.0 + 300.0 + 100.0, 100.0)
+    # the structural cap: lambda -> inf still computes the true stretch and the discarded lead
+    _, huge = cycle_steps(config, 1e12, 1e4, 50.0)
+    assert 1e4 / dt / huge == pytest.approx(1e4 / true_t, rel=1e-4)
+
+
+def _feed(ctl, sim, recorder, rows):
+    """Rows through the recorder and the controller as phases.load_phase does; the time of the
+    row at which scaling resumed (None if it did not)."""
+    for row in rows:
+        slip = recorder.observe(row)
+        ctl.after_row(sim, row, recorder, None, None, slip)
+        if ctl.scaled:
+            return row["time"]
+    return None
+
+
+def _slip_rows(V, t_slip, t_end, t_stop, dt=10.0):
+    """Wall rows: creep at V/2, a slip at 20 V from t_slip to t_end, creep again to t_stop."""
+    rows, x, tau = [], 0.0, 0.3
+    for t in np.arange(0.0, t_stop, dt):
+        v = 20.0 * V if t_slip <= t < t_end else 0.5 * V
+        x += v * dt
+        tau += -1e-4 if t_slip <= t < t_end else 1e-6
+        rows.append({"time": float(t), "wall_vx": v, "wall_x": x, "tau_over_sigma": tau, "porosity": 0.2,
+                     "thickness": 6.0})
+    return rows
+
+
+@pytest.mark.parametrize("merge_gap, lead", [(30.0, 2000.0), (400.0, 2000.0), (30.0, 120.0)])
+def test_scaling_resumes_after_the_closed_slip_and_a_quiet_window_tied_to_it(merge_gap, lead):
+    """After a rollback the true-inertia stretch slips from t = 100 to 300; scaling resumes once
+    the detector has closed that slip (merge_gap after its end) and the wall has been quiet for
+    max(merge_gap + 2 series intervals, min(slip duration, lead)), long before a second lead."""
+    from gouge_cli.driver.slips import SlipRecorder
+    from gouge_cli.driver.stick_scaling import closed
+
+    V = 4e-5
+    sim = _sim(slips={"lead": lead, "merge_gap": merge_gap, "start_factor": 5, "end_factor": 1.5},
+               output={"series_interval": 10.0})
+    ctl = StickScaling(sim.config, sim, quiet=True)
+    recorder = SlipRecorder(sim.config, sim, None, None)
+    ctl.onset_scaled = 0.0                 # as after a rollback: a true-inertia recomputation
+    ctl._set(sim, 1.0, rescale=False)
+    resumed = _feed(ctl, sim, recorder, _slip_rows(V, 100.0, 300.0, 3000.0))
+    assert recorder.count == 1 and closed(recorder)
+    duration = recorder.slips[0]["duration"]
+    assert duration == pytest.approx(200.0, abs=10.0)
+    quiet_from = 300.0                      # first row below end_factor V_s after the slip
+    window = max(merge_gap + 20.0, min(duration, lead))
+    assert resumed is not None and quiet_from + window <= resumed <= quiet_from + window + 10.0
+    assert resumed >= recorder.slips[0]["end_time"] + merge_gap      # the detector closed it first
+    assert resumed <= quiet_from + max(merge_gap + 20.0, lead) + 10.0     # the first version's window at most
+    assert ctl.lam == 16.0 and ctl.resumed_at == resumed and ctl.slip_span == 0.0
+    assert recorder.ring[-1].time == sim.state.time                  # the resume state is kept
+    assert recorder.peak_tau == -np.inf                              # with the stress peak afresh
+    assert recorder.ring[-1].extra["slip_recorder"]["peak_tau"] == -np.inf
+    assert ctl.state_dict()["slip_span"] == 0.0
+
+
+def test_no_resume_while_the_wall_creeps_above_the_end_threshold():
+    """Mean wall velocity above end_factor V_s after the slip: no resume, however long."""
+    from gouge_cli.driver.slips import SlipRecorder
+
+    V = 4e-5
+    sim = _sim(slips={"lead": 2000.0, "merge_gap": 30.0, "start_factor": 5, "end_factor": 1.5},
+               output={"series_interval": 10.0})
+    ctl = StickScaling(sim.config, sim, quiet=True)
+    recorder = SlipRecorder(sim.config, sim, None, None)
+    ctl.onset_scaled = 0.0
+    ctl._set(sim, 1.0, rescale=False)
+    rows = _slip_rows(V, 100.0, 300.0, 1500.0)
+    for i, row in enumerate(rows):           # after the slip: quiet rows alternating with 2.9 V rows
+        if row["time"] >= 300.0 and i % 2:
+            row["wall_vx"] = 2.9 * V
+    x = 0.0
+    for row in rows:
+        x += row["wall_vx"] * 10.0
+        row["wall_x"] = x
+    assert _feed(ctl, sim, recorder, rows) is None and ctl.lam == 1.0
