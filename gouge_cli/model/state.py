@@ -22,7 +22,7 @@ FREE, BOTTOM, TOP = L.FREE, L.BOTTOM, L.TOP
 
 # fixed properties of a grain, re-ordered with it (kernels.step.renumber)
 STATIC = ("radius", "mass", "inv_mass", "inv_inertia", "body")
-# (block layout, crossing pairs and cell arrays are derived or scratch, rebuilt on demand)
+# (the reverse list, pair constants and cell arrays are derived or scratch, rebuilt on demand)
 EVOLVING = ("id", "x", "z", "vx", "vz", "spin", "force_x", "force_z", "torque",
             "start", "index", "shear", "x_build", "z_build", "wall", "clock", "counters")
 

@@ -267,8 +267,9 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
 def sub_system(s, m: int) -> tuple[L.Grains, L.Lists, L.Pairs]:
     """Grains 0..m-1 of state s and the listed pairs among them (same order, shear copied), as the
     records kernels.step.contact_forces takes for one thread (without drag): fields the contact
-    pass does not read are empty, every field has the state's dtype (an int64 crossing list here
-    once compiled the kernel a second time)."""
+    pass does not read are empty, every field has the state's dtype (an int64 list array here
+    once compiled the kernel a second time); the reverse list and pair constants are derived on
+    the first call."""
     rows = np.repeat(np.arange(s.n), np.diff(s.start))
     npairs = int(s.start[-1])
     keep = (rows < m) & (s.index[:npairs] < m)
