@@ -344,7 +344,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
                   permeability: float | None = 1e-5, lammps_max: int = 40000, cache: Path | None = None,
                   profile: bool = True, projection: bool = True) -> dict:
     all_threads = numba.config.NUMBA_NUM_THREADS
-    threads = threads or sorted({1, all_threads})
+    threads = sorted({min(max(int(t), 1), all_threads) for t in threads}) if threads else sorted({1, all_threads})
     rows: list[BenchRow] = []
     fluid = []
     profiles = []

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import yaml
 
+import numba
 import numpy as np
 
 from gouge_cli.studies.bench import footprint_profile, prepare, run_benchmark, sub_system
@@ -22,15 +23,17 @@ REPO = Path(__file__).resolve().parents[2]
 def test_benchmark_runs_on_a_tiny_scene():
     results = run_benchmark(sizes=(600,), threads=[1, 2], steps=60, repeats=1, lammps=False, permeability=1e-5)
     rows = results["rows"]
-    assert [r["threads"] for r in rows] == [1, 2]
+    threads = sorted({1, min(2, numba.config.NUMBA_NUM_THREADS)})    # more than numba may run: clamped
+    assert [r["threads"] for r in rows] == threads
     for r in rows:
         assert r["code"] == "gouge" and r["n_grains"] == 600 and r["steps"] == 60
         assert r["rate_min"] > 0 and r["bytes_per_grain"] > 100
         assert r["identical_to_1_thread"] is True
     shares = results["fluid"]
-    assert len(shares) == 4 and all(0.0 < s["rate_undrained"] for s in shares)   # bench dt and Run 24 dt
+    assert len(shares) == 2 * len(threads)                    # bench dt and Run 24 dt, each thread count
+    assert all(0.0 < s["rate_undrained"] for s in shares)
     assert {s["fluid_interval_steps"] for s in shares} == {1, 3}
-    assert [a["per_step"] for a in results["allocations"]] == [0.0, 0.0]   # nothing allocated in the step loop
+    assert [a["per_step"] for a in results["allocations"]] == [0.0] * len(threads)   # none in the step loop
     for prof in results["profile_us"]:
         assert all(prof[k] > 0 for k in ("contact_forces", "kick_drift", "rebuild_each", "whole_step"))
         assert prof["steps_per_rebuild"] > 5    # (no timing comparisons here: the machine is shared)
