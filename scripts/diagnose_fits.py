@@ -30,7 +30,7 @@ from scipy import signal
 from gouge_cli.analysis.blockslider import fit_block_slider
 from gouge_cli.analysis.catalog import fit_slip, read_catalog, slip_friction, slip_window
 from gouge_cli.analysis.friction import estimate_natural_frequency, notch_filter
-from gouge_cli.analysis.study import DURATION_TOL, GOOD_R2, transient_slips
+from gouge_cli.analysis.study import DURATION_TOL, GOOD_R2, transient_slips, within_median
 from gouge_cli.io.runfile import RunReader
 
 BANDS = (("shape", 0.0, 12.0), ("vibration", 12.0, 40.0), ("noise", 40.0, math.inf))
@@ -78,8 +78,9 @@ def diagnose(reader: RunReader) -> list[dict]:
                                                       fit.amplitude * np.sin(fit.omega * (t[inside] - fit.t0)) / info.V_s),
         })
     med = float(np.median([r["duration"] for r in rows])) if rows else math.nan
-    for r in rows:
+    for r, ok in zip(rows, within_median([r["duration"] for r in rows])):
         r["duration_over_median"] = r["duration"] / med
+        r["duration_within"] = ok
     return rows
 
 
@@ -93,7 +94,7 @@ def print_table(rows: list[dict]) -> None:
     n = len(rows)
     good = sum(1 for r in rows if r["fit_ok"] and r["r2"] > GOOD_R2)
     good_n = sum(1 for r in rows if r["fit_ok"] and r["r2_notched"] > GOOD_R2)
-    within = sum(1 for r in rows if abs(r["duration_over_median"] - 1.0) <= DURATION_TOL)
+    within = sum(1 for r in rows if r["duration_within"])
     m = np.array([r["m_eff_over_m_b"] for r in rows if r["fit_ok"]])
     def ratio(sel):
         x = [r["mu_d_spread"] / r["mu_d_drop"] for r in rows if sel(r)]

@@ -18,7 +18,7 @@ from .forkpairs import ForkPair
 from ..io.runfile import RunReader
 
 __all__ = ["STUDY_COLUMNS", "THESIS", "TRANSIENT_TOL", "DURATION_TOL", "GOOD_R2",
-           "transient_slips", "study_rows", "study_summary", "summary_lines"]
+           "transient_slips", "within_median", "study_rows", "study_summary", "summary_lines"]
 
 _NAN = float("nan")
 TRANSIENT_TOL = 0.3     # a slip is steady when S and stress drop are within 30 % of the late medians
@@ -104,6 +104,14 @@ def _spread(values) -> dict:
             "cv": float(a.std() / a.mean()) if a.mean() else _NAN, "min": float(a.min()), "max": float(a.max())}
 
 
+def within_median(values, tol: float = DURATION_TOL) -> list[bool]:
+    """For each value: within tol (a fraction) of the median of the finite ones (the study's
+    "characteristic duration" test, thesis Sec. 4.1)."""
+    finite = [v for v in values if math.isfinite(v)]
+    med = statistics.median(finite) if finite else _NAN
+    return [abs(v - med) <= tol * med for v in values]
+
+
 def study_summary(rows: list[dict]) -> dict:
     """Statistics over the non-transient rows (one per pair; drained slips counted once).
 
@@ -118,6 +126,7 @@ def study_summary(rows: list[dict]) -> dict:
     drained = {r["slip"]: r for r in steady}.values()
     durations = [r["drained_duration"] for r in drained if math.isfinite(r["drained_duration"])]
     med = statistics.median(durations) if durations else _NAN
+    within = dict(zip((r["slip"] for r in drained), within_median([r["drained_duration"] for r in drained])))
     n_d = len(drained)
 
     def frac(rs, test):
@@ -138,7 +147,7 @@ def study_summary(rows: list[dict]) -> dict:
         "n_drained": n_d,
         "drained_frac_fit_ok": frac(drained, lambda r: r["drained_fit_ok"]),
         "drained_frac_r2_good": frac(drained, lambda r: r["drained_fit_ok"] and r["drained_fit_r2"] > GOOD_R2),
-        "drained_frac_duration_within": frac(drained, lambda r: abs(r["drained_duration"] - med) <= DURATION_TOL * med),
+        "drained_frac_duration_within": frac(drained, lambda r: within[r["slip"]]),
         "drained_duration_median": med,
         "m_eff_over_m_b": _spread(r["m_eff_over_m_b"] for r in drained),
     }

@@ -114,6 +114,11 @@ class SlipRecorder:
         self.ring.clear()
         self.ring.append(ck)
 
+    def closed(self) -> bool:
+        """Nothing open: no raw or pending detector event and no pending pre-slip state (every
+        slip seen is in the catalog or dropped as too small)."""
+        return self.detector.raw is None and self.detector.pending is None and self.pending is None
+
     def forget_peak(self):
         """Stick scaling, when scaling resumes after a stretch that moved: the stress peak starts
         afresh (as after a slip), so that the scaled stretch keeps ring states near its own peak."""

@@ -104,13 +104,6 @@ def quiet_window(floor: float, slip: float, lead: float) -> float:
     return max(floor, min(slip, lead))
 
 
-def closed(recorder) -> bool:
-    """True if the slip recorder has nothing open: no raw or pending detector event and no
-    pending pre-slip state (driver.slips.SlipRecorder)."""
-    d = recorder.detector
-    return d.raw is None and d.pending is None and recorder.pending is None
-
-
 def stick_deborah_bound(config: Config, lam: float, diffusivity: float, half_thickness: float) -> float:
     """De_stick = sqrt(lambda) l V_s / D [-] of a wet loading run (l: half the layer [d])."""
     return math.sqrt(lam) * half_thickness * config.loading.velocity / max(diffusivity, 1e-300)
@@ -132,7 +125,7 @@ class StickScaling:
         from .slips import lead_time
 
         self.lead = lead_time(config)
-        self.quiet_time = quiet_floor(config)
+        self.quiet_floor = quiet_floor(config)
         st = dict(state or {})
         self.lam = float(st.get("lam", self.target))
         self.onset_scaled = st.get("onset_scaled")      # time of the scaled onset being recomputed
@@ -222,8 +215,8 @@ class StickScaling:
             if self.quiet_since is None:
                 if abs(v) < self.lo:
                     self.quiet_since, self.quiet_x = t, x
-            elif t - self.quiet_since >= quiet_window(self.quiet_time, self.slip_span, self.lead) \
-                    and closed(recorder):
+            elif t - self.quiet_since >= quiet_window(self.quiet_floor, self.slip_span, self.lead) \
+                    and recorder.closed():
                 if abs(v) < self.lo and abs(x - self.quiet_x) / (t - self.quiet_since) < self.lo:
                     self._set(sim, self.target)
                     self.resumed_at = t         # kept in the ring: no later rollback goes back past it

@@ -172,7 +172,6 @@ def test_scaling_resumes_after_the_closed_slip_and_a_quiet_window_tied_to_it(mer
     the detector has closed that slip (merge_gap after its end) and the wall has been quiet for
     max(merge_gap + 2 series intervals, min(slip duration, lead)), long before a second lead."""
     from gouge_cli.driver.slips import SlipRecorder
-    from gouge_cli.driver.stick_scaling import closed
 
     V = 4e-5
     sim = _sim(slips={"lead": lead, "merge_gap": merge_gap, "start_factor": 5, "end_factor": 1.5},
@@ -182,7 +181,7 @@ def test_scaling_resumes_after_the_closed_slip_and_a_quiet_window_tied_to_it(mer
     ctl.onset_scaled = 0.0                 # as after a rollback: a true-inertia recomputation
     ctl._set(sim, 1.0, rescale=False)
     resumed = _feed(ctl, sim, recorder, _slip_rows(V, 100.0, 300.0, 3000.0))
-    assert recorder.count == 1 and closed(recorder)
+    assert recorder.count == 1 and recorder.closed()
     duration = recorder.slips[0]["duration"]
     assert duration == pytest.approx(200.0, abs=10.0)
     quiet_from = 300.0                      # first row below end_factor V_s after the slip
