@@ -222,6 +222,10 @@ def bench(
                       f"{r['bytes_per_grain']:.0f}" if r["bytes_per_grain"] else "",
                       {None: "", True: "yes", False: "NO"}[r["identical_to_1_thread"]], ratio)
     out.print(table)
+    for s in results.get("scaling", []):
+        for t, ratio in s["paired_ratio"].items():
+            out.print(f"N {s['n_grains']}: {t} threads / fewest, median of the per-repeat ratios (thread counts take "
+                      f"turns within each repeat): {ratio:.2f}x", highlight=False)
     for t in sorted({r["threads"] for r in results["rows"] if r["code"] == "gouge"}):
         rates = [r["rate_median"] for r in results["rows"] if r["code"] == "gouge" and r["threads"] == t]
         if len(rates) > 1:

@@ -110,20 +110,35 @@ def prepare(n_grains: int, dt: float, skin: float, cache: Path | None = None) ->
     return sim, start
 
 
-def time_gouge(sim: Simulation, start: dict, threads: int, steps: int, repeats: int) -> tuple[list[float], dict]:
-    sim.threads = threads
-    sim.state.restore(start)
-    sim.advance(10)  # warm-up (compiled already; touches memory)
-    rates = []
-    final = None
-    for _ in range(repeats):
+def time_gouge(sim: Simulation, start: dict, threads: int | list[int], steps: int,
+               repeats: int) -> tuple[dict[int, list[float]], dict[int, dict]]:
+    """Grain-steps per second of `steps` steps from `start`, `repeats` times per thread count.
+    The thread counts take turns within each repeat (1, 2, 1, 2, ...), so that a slow stretch of
+    a shared machine falls on both and the paired ratios (scaling) stay comparable. Returns the
+    rates and the final state arrays per thread count."""
+    counts = [threads] if isinstance(threads, int) else list(threads)
+    for t in counts:
+        sim.threads = t
         sim.state.restore(start)
-        t0 = time.perf_counter()
-        sim.advance(steps)
-        rates.append(steps * sim.state.n / (time.perf_counter() - t0))
-        final = sim.state.arrays()
+        sim.advance(10)  # warm-up (compiled already; touches memory)
+    rates = {t: [] for t in counts}
+    final = {}
+    for _ in range(repeats):
+        for t in counts:
+            sim.threads = t
+            sim.state.restore(start)
+            t0 = time.perf_counter()
+            sim.advance(steps)
+            rates[t].append(steps * sim.state.n / (time.perf_counter() - t0))
+            final[t] = sim.state.arrays()
     sim.check()
     return rates, final
+
+
+def paired_scaling(rates: dict[int, list[float]]) -> dict[int, float]:
+    """Median over repeats of rate(t) / rate(fewest threads) within the same repeat."""
+    base = min(rates)
+    return {t: float(np.median(np.asarray(r) / np.asarray(rates[base]))) for t, r in rates.items() if t != base}
 
 
 def lammps_script() -> Path | None:
@@ -350,6 +365,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
     profiles = []
     allocations = []
     footprint = []
+    scaling = []
     run24 = None
     run24_dt = choose_dt(run24_config())
     for n in sizes:
@@ -360,12 +376,12 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
                 for t in threads:
                     fluid.append(fluid_share(n, start, step, skin, permeability, t, steps, repeats))
         per_grain = state_bytes(sim) / sim.state.n
-        reference = None
+        all_rates, finals = time_gouge(sim, start, threads, n_steps, repeats)
+        reference = finals[threads[0]]
+        scaling.append({"n_grains": n, "paired_ratio": paired_scaling(all_rates)})
         for t in threads:
-            rates, final = time_gouge(sim, start, t, n_steps, repeats)
-            if reference is None:
-                reference = final
-            identical = all(np.array_equal(reference[k], final[k]) for k in reference)
+            rates = all_rates[t]
+            identical = all(np.array_equal(reference[k], finals[t][k]) for k in reference)
             rows.append(BenchRow("gouge", sim.state.n, t, n_steps, min(rates), float(np.median(rates)), max(rates),
                                  per_grain, identical))
             allocations.append({"n_grains": n, "threads": t,
@@ -375,11 +391,9 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
         if profile and len(sizes) > 1 and n == max(sizes):
             footprint = footprint_profile(sim, start, sizes)
         if projection and n == 10000:
-            run24 = {}
             at_dt = Simulation(bench_config(n, run24_dt, skin), arrays=start)
-            for t in threads:
-                rates, _ = time_gouge(at_dt, start, t, steps, repeats)
-                run24[t] = float(np.median(rates))
+            rates, _ = time_gouge(at_dt, start, threads, steps, repeats)
+            run24 = {t: float(np.median(r)) for t, r in rates.items()}
             run24 = run24_projection(run24)
         if lammps and n <= lammps_max:
             for style in lammps_styles:
@@ -397,6 +411,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
         "profile_us": profiles,
         "allocations": allocations,
         "footprint": footprint,
+        "scaling": scaling,
         "run24": run24,
     }
 

@@ -13,7 +13,7 @@ import yaml
 import numba
 import numpy as np
 
-from gouge_cli.studies.bench import footprint_profile, prepare, run_benchmark, sub_system
+from gouge_cli.studies.bench import footprint_profile, paired_scaling, prepare, run_benchmark, sub_system
 from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K
 
@@ -29,6 +29,7 @@ def test_benchmark_runs_on_a_tiny_scene():
         assert r["code"] == "gouge" and r["n_grains"] == 600 and r["steps"] == 60
         assert r["rate_min"] > 0 and r["bytes_per_grain"] > 100
         assert r["identical_to_1_thread"] is True
+    assert [sorted(s["paired_ratio"]) for s in results["scaling"]] == [threads[1:]]
     shares = results["fluid"]
     assert len(shares) == 2 * len(threads)                    # bench dt and Run 24 dt, each thread count
     assert all(0.0 < s["rate_undrained"] for s in shares)
@@ -37,6 +38,14 @@ def test_benchmark_runs_on_a_tiny_scene():
     for prof in results["profile_us"]:
         assert all(prof[k] > 0 for k in ("contact_forces", "kick_drift", "rebuild_each", "whole_step"))
         assert prof["steps_per_rebuild"] > 5    # (no timing comparisons here: the machine is shared)
+
+
+def test_paired_scaling_is_the_median_of_ratios_within_each_repeat():
+    # a slow second repeat (both counts 2x slower) leaves the paired ratios at 1.9; the ratio of the
+    # medians of the two columns would mix repeats: median(10, 9, 5) / median(5, 4.7368, 2.5) = 9 / 4.7368
+    rates = {1: [5.0, 2.5, 4.7368], 2: [9.5, 4.75, 9.0]}
+    got = paired_scaling(rates)
+    assert list(got) == [2] and abs(got[2] - 1.9) < 1e-3
 
 
 def test_footprint_sub_systems_are_the_first_rows_of_the_packing():
