@@ -17,6 +17,7 @@ from numba import njit, prange
 from . import NUMBA_CACHE
 from .layout import CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11
 from .deposit import cell_weights, corner_shares, grain_area
+from .lanes import bilinear_pairs
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -44,19 +45,33 @@ def pressure_gradient(P, dx, dz, p_bot, p_top, gx, gz):
             gz[i, j] = 0.5 * (below + above)
 
 
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _density(gx, gz, s):
+    """Drag per unit grain area of one cell, -(gx, gz) / s, or (0, 0) where s <= 0."""
+    if s > 0.0:
+        inv = -1.0 / s
+        return gx * inv, gz * inv
+    return 0.0, 0.0
+
+
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def drag_density(gx, gz, s, fx, fz):
     """Drag per unit grain area f = -grad P / s [E/d] (s = 1 - phi unclamped; 0 where s = 0)."""
     nx, nz = s.shape
     for i in range(nx):
         for j in range(nz):
-            if s[i, j] > 0.0:
-                inv = -1.0 / s[i, j]
-                fx[i, j] = gx[i, j] * inv
-                fz[i, j] = gz[i, j] * inv
-            else:
-                fx[i, j] = 0.0
-                fz[i, j] = 0.0
+            fx[i, j], fz[i, j] = _density(gx[i, j], gz[i, j], s[i, j])
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def drag_density_pairs(gx, gz, s, pairs):
+    """drag_density into interleaved pairs: pairs[2c], pairs[2c + 1] = fx, fz of flat cell c
+    (float64[2 nx nz]), the layout grain_drag_at gathers from."""
+    nx, nz = s.shape
+    for i in range(nx):
+        for j in range(nz):
+            c = np.uint64(2 * (i * nz + j))
+            pairs[c], pairs[c + np.uint64(1)] = _density(gx[i, j], gz[i, j], s[i, j])
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
@@ -94,17 +109,16 @@ def grain_drag(x, z, radius, n, Lx, z_bot, z_top, fx, fz, drag_x, drag_z):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
-def grain_drag_at(corners, n, fx, fz, drag_x, drag_z):
-    """grain_drag with the corner cells and areas the deposit stored (same positions): the
-    same values, without recomputing areas and weights."""
-    nx, nz = fx.shape
-    flat_x = fx.reshape(nx * nz)
-    flat_z = fz.reshape(nx * nz)
+def grain_drag_at(corners, n, pairs, drag_x, drag_z):
+    """grain_drag with the corner cells and areas the deposit stored (same positions) and the
+    density as interleaved pairs (drag_density_pairs): the same values, without recomputing
+    areas and weights, x and z in the two lanes of one vector sum (kernels.lanes)."""
+    c00, c10 = corners[CR_00], corners[CR_10]
     for k in prange(n):
-        if corners[CR_00, k] < 0.0:
+        if c00[k] < 0.0:
             drag_x[k] = 0.0
             drag_z[k] = 0.0
             continue
-        drag_x[k], drag_z[k] = _gather(flat_x, flat_z, np.uint64(corners[CR_00, k]), np.uint64(corners[CR_10, k]),
-                                       corners[CR_A00, k], corners[CR_A10, k], corners[CR_A01, k], corners[CR_A11, k])
-
+        drag_x[k], drag_z[k] = bilinear_pairs(pairs, np.uint64(c00[k]) * np.uint64(2), np.uint64(c10[k]) * np.uint64(2),
+                                              corners[CR_A00, k], corners[CR_A10, k], corners[CR_A01, k],
+                                              corners[CR_A11, k])

@@ -40,7 +40,7 @@ from .layout import (G_CAPACITY, G_DIAG, G_FX, G_FZ, G_GX, G_GZ, G_Q, G_RHS, G_S
                      P_TOL, SOLVER_EXPLICIT, STATUS_NONFINITE, STATUS_OK, STATUS_SOLVER, S_DT_MAX,
                      S_ITERATIONS, S_RESIDUAL, S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
 from .deposit import deposit
-from .drag import drag_density, grain_drag_at, pressure_gradient
+from .drag import drag_density_pairs, grain_drag_at, pressure_gradient
 from .pressure import (conjugate_gradient, explicit_bound, explicit_diffusion, face_conductances,
                        permeability_field, undrained_source)
 
@@ -67,7 +67,7 @@ def _finish_grid(Lx, z_bot, z_top, P, s, uz, work, w_bot, w_top):
     if not _all_finite(P):
         return STATUS_NONFINITE
     pressure_gradient(P, dx, dz, 0.0, 0.0, work[G_GX], work[G_GZ])
-    drag_density(work[G_GX], work[G_GZ], s, work[G_FX], work[G_FZ])
+    drag_density_pairs(work[G_GX], work[G_GZ], s, work[G_FX:G_FZ + 1].reshape(2 * nx * nz))
     return STATUS_OK
 
 
@@ -80,7 +80,8 @@ def fluid_drag(n, work, corners, drag_x, drag_z, status):
             drag_x[k] = 0.0
             drag_z[k] = 0.0
         return
-    grain_drag_at(corners, n, work[G_FX], work[G_FZ], drag_x, drag_z)
+    nx, nz = work.shape[1], work.shape[2]
+    grain_drag_at(corners, n, work[G_FX:G_FZ + 1].reshape(2 * nx * nz), drag_x, drag_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")

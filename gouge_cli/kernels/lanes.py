@@ -69,3 +69,33 @@ def add4_scaled(typingctx, array, index, x0, x1, x2, x3, scale):
         _add_into(context, builder, signature.args[0], args[0], args[1], vec, 4)
         return context.get_dummy_value()
     return types.void(array, index, x0, x1, x2, x3, scale), codegen
+
+
+@intrinsic
+def bilinear_pairs(typingctx, pairs, index0, index1, a00, a10, a01, a11):
+    """(x, z) = a00 p[c00] + a10 p[c10] + a01 p[c01] + a11 p[c11], summed in that order, from
+    interleaved (x, z) pairs: p[c] = pairs[2c], pairs[2c + 1]; index0 = 2 c00 and index1 = 2 c10,
+    with c01 = c00 + 1 and c11 = c10 + 1 (so each is one 4-lane load). x and z share the lanes of
+    each multiply and add: the bits of the two scalar sums."""
+    _check(pairs, index0, (a00, a10, a01, a11))
+    if index1 != types.uint64:
+        raise TypeError("lanes: the index must be uint64")
+    result = types.UniTuple(types.float64, 2)
+
+    def codegen(context, builder, signature, args):
+        data = context.make_array(signature.args[0])(context, builder, args[0]).data
+        v4 = ir.VectorType(ir.DoubleType(), 4)
+        i32 = ir.IntType(32)
+
+        def load(index):
+            return builder.load(builder.bitcast(builder.gep(data, [index]), v4.as_pointer()), align=8)
+
+        def half(vec, h):
+            return builder.shuffle_vector(vec, vec, ir.Constant(ir.VectorType(i32, 2), [2 * h, 2 * h + 1]))
+
+        left = builder.fmul(_lanes(builder, (args[3], args[3], args[5], args[5]), 4), load(args[1]))   # c00, c01
+        right = builder.fmul(_lanes(builder, (args[4], args[4], args[6], args[6]), 4), load(args[2]))  # c10, c11
+        total = builder.fadd(builder.fadd(builder.fadd(half(left, 0), half(right, 0)), half(left, 1)), half(right, 1))
+        return context.make_tuple(builder, result, [builder.extract_element(total, ir.Constant(i32, m))
+                                                    for m in range(2)])
+    return result(pairs, index0, index1, a00, a10, a01, a11), codegen

@@ -81,11 +81,17 @@ def test_grouped_deposit_and_cached_drag():
         assert np.allclose(a, b, rtol=1e-13, atol=1e-15 * np.abs(a).max())
     assert np.sum(corners[0] < 0) == np.sum([KD.in_domain_area(zk, rk, z_bot, z_top) <= 0
                                              for zk, rk in zip(z, radius)]) > 0
-    fx, fz = rng.normal(size=(2, 5, 4))
+    gx, gz = rng.normal(size=(2, 5, 4))
+    s = rng.uniform(-0.2, 1.0, (5, 4))          # some cells without solid: zero density there
+    fx, fz = np.empty((2, 5, 4))
+    KG.drag_density(gx, gz, s, fx, fz)
+    pairs = np.empty(2 * 20)
+    KG.drag_density_pairs(gx, gz, s, pairs)     # the same bits, interleaved (x, z) per cell
+    assert pairs[0::2].tobytes() == fx.tobytes() and pairs[1::2].tobytes() == fz.tobytes() and np.any(fx == 0)
     expected = np.zeros((2, x.size))
     cached = np.zeros((2, x.size))
     KG.grain_drag(x, z, radius, x.size, width, z_bot, z_top, fx, fz, expected[0], expected[1])
-    KG.grain_drag_at(corners, x.size, fx, fz, cached[0], cached[1])
+    KG.grain_drag_at(corners, x.size, pairs, cached[0], cached[1])
     assert expected.tobytes() == cached.tobytes() and np.abs(expected).max() > 0
 
 
