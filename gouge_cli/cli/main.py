@@ -259,6 +259,11 @@ def bench(
         per = "unavailable" if a["per_step"] is None else f"{a['per_step']:g}"
         out.print(f"numba runtime allocations per step, N {a['n_grains']}, {a['threads']} thread(s): {per}",
                   highlight=False)
+    for f in results.get("fluid_profile_us", []):
+        out.print(f"one fluid update (N {f['n_grains']}, grid {f['grid'][0]}x{f['grid'][1]}, dt {f['dt']:.3g}), "
+                  f"{f['threads']} thread(s), best of 3 x 30 calls: deposit {f['deposit']:.0f} us, grid solve "
+                  f"{f['solve']:.0f} us ({f['cg_iterations']:.0f} CG iterations; serial), drag {f['drag']:.0f} us, "
+                  f"together {f['update']:.0f} us", highlight=False)
     for f in results["fluid"]:
         out.print(f"undrained (kappa_c {f['permeability']:g}, grid {f['grid'][0]}x{f['grid'][1]}, dt {f['dt']:.3g}, "
                   f"fluid update every {f['fluid_interval_steps']} steps), N {f['n_grains']}, {f['threads']} "

@@ -189,6 +189,45 @@ def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability
             "fluid_share_best": 1.0 - max(rates["undrained"]) / max(rates["dry"])}
 
 
+def profile_fluid(n_grains: int, start: dict, dt: float, skin: float, permeability: float, threads: int,
+                  calls: int = 30) -> dict:
+    """Microseconds of one fluid update's parts on the undrained scene (kernels.fluid_update), best
+    of 3 x `calls`: the deposit (with the owed half kick, as in the running loop), the grid solve
+    (serial on any thread count; P and the fluid state restored before each call) and the drag."""
+    from ..kernels import fluid_update as F
+
+    sim = Simulation(bench_config(n_grains, dt, skin, permeability), arrays=start)
+    sim.threads = threads
+    numba.set_num_threads(threads)
+    sim.advance(2 * sim.fluid_interval)
+    s, fl = sim.state, sim.fluid.record()
+    z_bot, z_top = sim.wall_planes()[0], float(s.wall[L.W_Z])
+    dt_f = sim.fluid_interval * sim.dt
+    kick = (True, s.force_x, s.force_z, s.inv_mass, s.body, 0.5 * sim.dt, sim.params[L.BG_DAMPING],
+            s.wall[L.W_VX], s.wall[L.W_VZ])
+    fstate, pressure = fl.state.copy(), fl.pressure.copy()
+
+    def reset():
+        fl.state[:] = fstate
+        fl.pressure[:] = pressure
+
+    def begin():
+        F.fluid_begin(s.x, s.z, s.vx, s.vz, s.radius, s.n, s.width, z_bot, z_top, dt_f, fl.state, fl.s, fl.s_old,
+                      fl.ux, fl.uz, fl.work, fl.corners, fl.partial, kick)
+
+    def solve():
+        F.fluid_solve(s.width, z_bot, z_top, dt_f, fl.params, fl.state, fl.pressure, fl.s, fl.s_old, fl.ux, fl.uz,
+                      fl.permeability, fl.div_u, fl.work)
+
+    out = {"n_grains": n_grains, "threads": threads, "dt": dt, "grid": list(fl.pressure.shape),
+           "deposit": best_seconds(lambda: (reset(), begin()), calls, 3) * 1e6,
+           "solve": best_seconds(solve, calls, 3, reset) * 1e6,
+           "drag": best_seconds(lambda: F.fluid_drag(s.n, fl.work, fl.corners, *sim.drag, 0), calls, 3) * 1e6,
+           "cg_iterations": float(fl.state[L.S_ITERATIONS])}
+    out["update"] = out["deposit"] + out["solve"] + out["drag"]
+    return out
+
+
 def allocations_per_step(sim: Simulation, start: dict, threads: int, steps: int = 400) -> float | None:
     """numba runtime allocations per step: advance(steps) and advance(4 steps) from the same
     state allocate the same fixed count per call (array arguments), so the difference / 3
@@ -365,6 +404,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
     profiles = []
     allocations = []
     footprint = []
+    fluid_parts = []
     scaling = []
     run24 = None
     run24_dt = choose_dt(run24_config())
@@ -375,6 +415,8 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
             for step in (dt, run24_dt):
                 for t in threads:
                     fluid.append(fluid_share(n, start, step, skin, permeability, t, steps, repeats))
+            if profile:
+                fluid_parts = [profile_fluid(n, start, run24_dt, skin, permeability, t) for t in threads]
         per_grain = state_bytes(sim) / sim.state.n
         all_rates, finals = time_gouge(sim, start, threads, n_steps, repeats)
         reference = finals[threads[0]]
@@ -408,6 +450,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "rows": [asdict(r) for r in rows],
         "fluid": fluid,
+        "fluid_profile_us": fluid_parts,
         "profile_us": profiles,
         "allocations": allocations,
         "footprint": footprint,

@@ -34,6 +34,10 @@ def test_benchmark_runs_on_a_tiny_scene():
     assert len(shares) == 2 * len(threads)                    # bench dt and Run 24 dt, each thread count
     assert all(0.0 < s["rate_undrained"] for s in shares)
     assert {s["fluid_interval_steps"] for s in shares} == {1, 3}
+    parts = results["fluid_profile_us"]                       # one update's parts at the thesis dt
+    assert [f["threads"] for f in parts] == threads and all(f["cg_iterations"] >= 1 for f in parts)
+    assert all(f["deposit"] > 0 and f["solve"] > 0 and f["drag"] > 0 for f in parts)
+    assert all(abs(f["update"] - f["deposit"] - f["solve"] - f["drag"]) < 1e-9 for f in parts)
     assert [a["per_step"] for a in results["allocations"]] == [0.0] * len(threads)   # none in the step loop
     for prof in results["profile_us"]:
         assert all(prof[k] > 0 for k in ("contact_forces", "kick_drift", "rebuild_each", "whole_step"))
