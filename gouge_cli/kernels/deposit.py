@@ -226,13 +226,13 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
         r = radius[k]
         area = math.pi * r * r
         xi = x[k] * inv_dx - 0.5
-        fi = math.floor(xi)
+        fi = np.floor(xi)        # (a float: math.floor returns an int, a conversion AVX2 cannot vectorise)
         fx = xi - fi
         fi = fi + fnx if fi < 0.0 else fi
         f1 = fi + 1.0
         f1 = 0.0 if f1 == fnx else f1
         zeta = (zk - z_bot) * inv_dz - 0.5
-        fj = math.floor(zeta)
+        fj = np.floor(zeta)
         inside = (fj >= 0.0) & (fj < fnz - 1.0)
         top = fj >= fnz - 1.0
         j0 = fj if inside else (fnz - 2.0 if top else 0.0)
@@ -245,7 +245,7 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
         a10[k] = a0 * fx
         a01[k] = a1 * (1.0 - fx)
         a11[k] = a1 * fx
-        odd = (zk - z_bot < r) | (z_top - zk < r) | (fi < 0.0) | (fi >= fnx)
+        odd = (zk - z_bot < r) | (z_top - zk < r) | (fi < 0.0) | (fi != fi) | (fi >= fnx)   # (a NaN x is odd)
         dfz[k] = -1.0 if odd else (inv_dz if inside else 0.0)
     for k in range(first, last):
         if dfz[k] >= 0.0:
