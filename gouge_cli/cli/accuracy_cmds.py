@@ -76,6 +76,8 @@ def accuracy(
     seeds: int = typer.Option(3, "--seeds", min=2, help="stick-scaling ladder: seeds (config seed, +1, ...)"),
     transient: float = typer.Option(0.2, "--transient", min=0.0, max=0.9,
                                     help="stick-scaling ladder: fraction of the loading ignored as transient"),
+    keep: bool = typer.Option(False, "--keep", help="stick-scaling ladder: keep the runs already in the output "
+                                                    "directory (same scene) and run only the missing ones"),
 ):
     """Errors and run times of a scene at ladders of dt_safety, fluid cell size, fluid step and solver, and of analytic cases; observed orders.
 
@@ -88,7 +90,7 @@ def accuracy(
     if config is None and slip_checkpoint is None:
         fail("give a CONFIG, a --slip-checkpoint, or both")
     if stick_scaling is not None:           # stick scaling: its own ladder
-        return _stick_ladder(config, set_, stick_scaling, seeds, transient, out_dir)
+        return _stick_ladder(config, set_, stick_scaling, seeds, transient, out_dir, keep)
     try:
         cfg = load_config(config, set_) if config is not None else None
         if cfg is None and set_:
@@ -111,7 +113,7 @@ def register(app: typer.Typer):
     app.command("accuracy")(guarded(accuracy))
 
 
-def _stick_ladder(config, set_, lambdas, seeds, transient, out_dir):
+def _stick_ladder(config, set_, lambdas, seeds, transient, out_dir, keep=False):
     """`gouge accuracy CONFIG --stick-scaling 1,4,16 --seeds 3`: run, print the table, write files."""
     from ..studies.scaling_ladder import QUANTITIES, run_ladder
 
@@ -127,7 +129,7 @@ def _stick_ladder(config, set_, lambdas, seeds, transient, out_dir):
     target = out_dir or Path("runs") / "accuracy" / f"{cfg.name}_stick_scaling"
     result = run_ladder(cfg, values, seeds, target, transient, progress=lambda r: err.print(
         f"lambda {r['lam']:g} seed {r['seed']}: {len(r['slips'])} slips, {r['steps']} steps, {r['wall']:.1f} s",
-        highlight=False))
+        highlight=False), keep=keep)
     from rich.table import Table
 
     table = Table(title=f"stick-scaling ladder ({seeds} seeds; differences from lambda = 1: mean ± 95 % CI "

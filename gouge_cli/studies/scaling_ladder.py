@@ -15,6 +15,11 @@ transient (the first `transient` fraction of the loading interval), pooled over 
 
 A rung passes when |diff| <= spread for every Q; the recommended default is the largest lambda
 such that it and every smaller rung pass.
+
+With ``keep`` (``gouge accuracy --keep``) the runs already in out_dir/scaling_runs.json of the same
+scene (scene_key: the config less seed and the settings the ladder sets) are kept and not run
+again, so that seeds or rungs can be added to a ladder; the summary is over the requested
+lambdas and seeds only, the file keeps every run.
 """
 
 from __future__ import annotations
@@ -28,8 +33,32 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Config, build_config
+from ..errors import ConfigError
 
 QUANTITIES = ("static_strength", "stress_drop", "recurrence", "peak_velocity", "duration")
+
+
+def scene_key(config: Config) -> str:
+    """Fingerprint of the ladder's scene [hex]: the config without seed and the keys the ladder
+    sets per run (numerics.stick_scaling, stick_inertial_max, threads); runs with the same key
+    differ only by seed and lambda."""
+    import hashlib
+
+    data = config.to_dict()
+    data.pop("seed", None)
+    data["numerics"] = {k: v for k, v in data["numerics"].items()
+                        if k not in ("stick_scaling", "stick_inertial_max", "threads")}
+    return hashlib.sha256(json.dumps(data, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def kept_runs(path: Path, key: str) -> list[dict]:
+    """The runs recorded in `path` (scaling_runs.json); ConfigError if one is of another scene."""
+    runs = json.loads(Path(path).read_text()) if Path(path).exists() else []
+    other = [f"lambda {r['lam']:g} seed {r['seed']}" for r in runs if r.get("scene") != key]
+    if other:
+        raise ConfigError(f"--keep: {path} holds runs of another scene or without a scene key "
+                          f"({', '.join(other[:3])}{', ...' if len(other) > 3 else ''}); use another --out")
+    return runs
 
 
 def _run_rung(config: Config, packing, lam: float, out_dir: Path) -> dict:
@@ -130,28 +159,37 @@ def summarize(runs: list[dict], transient: float) -> dict:
 
 
 def run_ladder(config: Config, lambdas: list[float], seeds: int, out_dir: Path, transient: float = 0.2,
-               progress=None) -> dict:
+               progress=None, keep: bool = False) -> dict:
     """Run the ladder (one run at a time) into out_dir/lam_<L>/seed_<S>; write scaling_ladder.json,
-    scaling_ladder.csv and scaling_ladder.png; returns summarize()'s dict plus the runs."""
+    scaling_ladder.csv and scaling_ladder.png; returns summarize()'s dict plus the runs (those
+    summarized). `keep`: reuse the runs of out_dir/scaling_runs.json (module docstring)."""
     from ..io.checkpoint import snapshot_of
     from ..driver.simulation import Simulation
 
     out_dir = Path(out_dir)
     lambdas = sorted({float(v) for v in lambdas} | {1.0})
-    runs = []
+    key = scene_key(config)
+    runs = kept_runs(out_dir / "scaling_runs.json", key) if keep else []
+    done = {(r["lam"], r["seed"]) for r in runs}
     for k in range(seeds):
         seed = config.seed + k
+        todo = [lam for lam in lambdas if (lam, seed) not in done]
+        if not todo:
+            continue
         cfg = build_config(config.to_dict(), {"seed": seed, "numerics.threads": 1, "numerics.stick_scaling": 1.0})
         sim = Simulation(cfg)
         sim.compact()
         packing = snapshot_of(sim)
-        for lam in lambdas:
+        for lam in todo:
             r = _run_rung(cfg, packing, lam, out_dir / f"lam_{lam:g}" / f"seed_{seed}")
-            r["seed"] = seed
+            r["seed"], r["scene"] = seed, key
             runs.append(r)
             if progress:
                 progress(r)
+            out_dir.mkdir(parents=True, exist_ok=True)
             (out_dir / "scaling_runs.json").write_text(json.dumps(runs, indent=1))
+    wanted = {config.seed + k for k in range(seeds)}
+    runs = sorted((r for r in runs if r["lam"] in lambdas and r["seed"] in wanted), key=lambda r: (r["seed"], r["lam"]))
     result = summarize(runs, transient)
     write_outputs(result, out_dir)
     result["runs"] = runs

@@ -216,3 +216,32 @@ def test_no_resume_while_the_wall_creeps_above_the_end_threshold():
         x += row["wall_vx"] * 10.0
         row["wall_x"] = x
     assert _feed(ctl, sim, recorder, rows) is None and ctl.lam == 1.0
+
+
+def test_ladder_keep_reuses_runs_of_the_same_scene_only(tmp_path):
+    import json
+
+    from gouge_cli.studies.scaling_ladder import run_ladder, scene_key
+
+    config = build_config({**SMALL, "numerics": {"stick_scaling": 1}})
+    key = scene_key(config)
+    # seed, lambda and the keys the ladder sets per run do not change the scene; the loading does
+    assert scene_key(build_config({**SMALL, "seed": 9, "numerics": {"stick_scaling": 64, "threads": 2}})) == key
+    assert scene_key(build_config({**SMALL, "loading": {"spring_constant": 2e-4, "velocity": 8e-6}})) != key
+    runs = [dict(_run(lam, seed, drops), scene=key) for lam, seed, drops in
+            [(1.0, 3, [0.10] * 3), (1.0, 4, [0.12] * 3), (4.0, 3, [0.11] * 3), (4.0, 4, [0.11] * 3),
+             (16.0, 3, [0.2] * 3), (16.0, 4, [0.2] * 3), (1.0, 5, [0.5] * 3)]]
+    (tmp_path / "scaling_runs.json").write_text(json.dumps(runs))
+    ran = []
+    res = run_ladder(config, [4.0], 2, tmp_path, progress=ran.append, keep=True)
+    assert ran == [] and not (tmp_path / "lam_1").exists()          # nothing was run again
+    assert [r["lambda"] for r in res["rows"]] == [1.0, 4.0]          # only the requested rungs and seeds
+    assert {(r["lam"], r["seed"]) for r in res["runs"]} == {(1.0, 3), (1.0, 4), (4.0, 3), (4.0, 4)}
+    assert res["rows"][1]["stress_drop_diff"] == pytest.approx(0.0)    # seed 5's 0.5 is not pooled
+    assert len(json.loads((tmp_path / "scaling_runs.json").read_text())) == 7   # the file keeps every run
+    assert (tmp_path / "scaling_ladder.csv").exists()
+    # runs of another scene (or from before the key) are refused, naming the option
+    other = dict(runs[0], scene="0" * 16)
+    (tmp_path / "scaling_runs.json").write_text(json.dumps(runs + [other]))
+    with pytest.raises(ConfigError, match="--keep"):
+        run_ladder(config, [4.0], 2, tmp_path, keep=True)
