@@ -55,6 +55,13 @@ def _all_finite(P):
     return True
 
 
+@njit(cache=NUMBA_CACHE, inline="always")
+def _drag_pairs(work):
+    """The drag density's interleaved (x, z) pairs per cell: work rows G_FX and G_FZ as one flat
+    float64[2 nx nz] (kernels.drag.drag_density_pairs)."""
+    return work[G_FX:G_FZ + 1].reshape(2 * work.shape[1] * work.shape[2])
+
+
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _finish_grid(Lx, z_bot, z_top, P, s, uz, work, w_bot, w_top):
     """Absolute uz, finiteness check, gradient and drag density; returns a status."""
@@ -67,7 +74,7 @@ def _finish_grid(Lx, z_bot, z_top, P, s, uz, work, w_bot, w_top):
     if not _all_finite(P):
         return STATUS_NONFINITE
     pressure_gradient(P, dx, dz, 0.0, 0.0, work[G_GX], work[G_GZ])
-    drag_density_pairs(work[G_GX], work[G_GZ], s, work[G_FX:G_FZ + 1].reshape(2 * nx * nz))
+    drag_density_pairs(work[G_GX], work[G_GZ], s, _drag_pairs(work))
     return STATUS_OK
 
 
@@ -80,8 +87,7 @@ def fluid_drag(n, work, corners, drag_x, drag_z, status):
             drag_x[k] = 0.0
             drag_z[k] = 0.0
         return
-    nx, nz = work.shape[1], work.shape[2]
-    grain_drag_at(corners, n, work[G_FX:G_FZ + 1].reshape(2 * nx * nz), drag_x, drag_z)
+    grain_drag_at(corners, n, _drag_pairs(work), drag_x, drag_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
