@@ -88,7 +88,7 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     # slip recorder's states)
     def build() -> list[Every]:
         """The callbacks; their periods are step counts, so stick scaling rebuilds them when dt changes."""
-        recorder.ring_every = sim.steps_for(recorder.lead / 4.0)
+        recorder.ring_every = recorder.ring_steps(sim)
         return guards + slip_frame_callbacks(sim, writer, recorder) + [
                  Every.t0(sim, config.output.series_interval, record, "series"),
                  Every.t0(sim, config.output.snapshot_interval, writer.snapshot, "snapshots"),

@@ -24,6 +24,8 @@ from ..config import Config
 from .detector import Slip, SlipDetector
 from ..kernels.layout import W_VX
 
+RING_PER_LEAD = 4      # pre-slip ring states kept per slips.lead (spaced lead / RING_PER_LEAD)
+
 
 def lead_time(config: Config) -> float:
     """Checkpoint lead before onset [t0]: slips.lead, or lead_stress sigma / (k V_s)."""
@@ -49,7 +51,7 @@ class SlipRecorder:
         self.run_file = run_file
         self.checkpoint_dir = checkpoint_dir
         self.lead = lead_time(config)
-        self.ring_every = sim.steps_for(self.lead / 4.0)
+        self.ring_every = self.ring_steps(sim)
         self.ring: deque[Checkpoint] = deque(maxlen=config.slips.ring)
         self.hi = config.slips.start_factor * config.loading.velocity
         self.lo = config.slips.end_factor * config.loading.velocity
@@ -98,6 +100,10 @@ class SlipRecorder:
         tau = sim.tau_over_sigma()
         if always or (sim.state.wall[W_VX] < self.lo and tau >= self.peak_tau - self.peak_band):
             self.ring.append(snapshot_of(sim, {"slip_recorder": self.state_dict(), **(extra or {})}))
+
+    def ring_steps(self, sim) -> int:
+        """Steps between ring states at sim's current dt: lead / RING_PER_LEAD."""
+        return sim.steps_for(self.lead / RING_PER_LEAD)
 
     def rewind_to(self, ck: Checkpoint):
         """Stick scaling: back to the moment ring state `ck` was kept (detector, peak, count as

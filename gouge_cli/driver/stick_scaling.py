@@ -71,11 +71,14 @@ from ..errors import ConfigError
 from ..kernels import layout as L
 from ..model.portable import sphere_mass
 from ..model.timestep import choose_dt
+from .slips import RING_PER_LEAD, lead_time
 
 # The largest lambda the ladder found within the seed spread with every smaller rung
 # (README: configs/scaling_long.yaml, 16 seeds: 64 fails on slip duration; 8 seeds had given 64).
 # Not the shipped numerics.stick_scaling, which stays 1 (off): README says why.
 LADDER_DEFAULT = 16.0
+# a rollback lands at least one lead and at most one ring spacing more before the onset: 1.25 leads
+ROLLBACK_LEADS = 1.0 + 1.0 / RING_PER_LEAD
 
 
 def set_inertia(sim, lam: float, dt_true: float):
@@ -123,8 +126,6 @@ class StickScaling:
         self.d_mean = 0.5 * (p.diameter_min + p.diameter_max)
         self.hi = config.slips.start_factor * config.loading.velocity
         self.lo = config.slips.end_factor * config.loading.velocity
-        from .slips import lead_time
-
         self.lead = lead_time(config)
         self.quiet_floor = quiet_floor(config)
         st = dict(state or {})
@@ -316,7 +317,7 @@ def cycle_steps(config: Config, lam: float, cycle: float, slip: float) -> tuple[
     true_t, lead = true_stretch(config, cycle, slip)
     if lam <= 1.0:
         return cycle / dt, cycle / dt
-    scaled_t = cycle - true_t + 1.25 * lead
+    scaled_t = cycle - true_t + ROLLBACK_LEADS * lead
     return cycle / dt, true_t / dt + scaled_t / (dt * math.sqrt(lam))
 
 
@@ -324,7 +325,5 @@ def true_stretch(config: Config, cycle: float, slip: float) -> tuple[float, floa
     """(true-inertia time per cycle [t0], slips.lead [t0]): 1.25 lead + slip + quiet window,
     at most the cycle. cycle / true time is the structural cap on the step ratio (lambda -> inf
     still computes that stretch at true inertia and the discarded 1.25 lead at dt sqrt(lambda))."""
-    from .slips import lead_time
-
     lead = lead_time(config)
-    return min(cycle, 1.25 * lead + slip + quiet_window(quiet_floor(config), slip, lead)), lead
+    return min(cycle, ROLLBACK_LEADS * lead + slip + quiet_window(quiet_floor(config), slip, lead)), lead
