@@ -10,7 +10,13 @@ resumes) and the run goes back to lambda = 1:
 * as_is: velocities as they are (as a rollback restores a ring state of a scaled stretch);
 * energy: velocities times sqrt(lambda) (the kinetic energy kept, as the controller's in-place switches);
 * ramp: lambda / 4, / 16, ... each for `stage` t0 (velocities as they are), then 1;
+* damped: as_is, with the dashpot rate kept at material.damping in the scaled window (force per
+  velocity x lambda, damping ratio x sqrt(lambda); damped4: four times that rate);
+* grains: as_is, with the top wall at its true mass (only the grains scaled);
+* wall: only the top wall's mass scaled (grains and step at true inertia);
 * control: lambda = 1 throughout, the same time.
+
+`--modes` picks some (control is always run last).
 
 Printed per mode: the largest wall speed [V_s] in the 200 t0 after the switch back, and when
 tau/sigma peaks in them [t0] (200 or so: still rising; 0: falling from the switch on). The
@@ -32,7 +38,7 @@ from gouge_cli.driver.stick_scaling import set_inertia
 from gouge_cli.kernels import layout as L
 from gouge_cli.model.timestep import choose_dt
 
-MODES = ("control", "as_is", "energy", "ramp")
+MODES = ("as_is", "energy", "ramp", "damped", "damped4", "grains", "wall", "control")
 
 
 def _scale_velocities(sim, f: float):
@@ -60,7 +66,11 @@ def main():
     ap.add_argument("--lam", type=float, default=256.0)
     ap.add_argument("--window", type=float, default=2000.0)
     ap.add_argument("--stage", type=float, default=300.0)
+    ap.add_argument("--modes", default="as_is,energy,ramp", help="comma-separated, from " + ", ".join(MODES[:-1]))
     a = ap.parse_args()
+    modes = [m for m in a.modes.split(",") if m != "control"] + ["control"]
+    if not set(modes) <= set(MODES):
+        ap.error(f"--modes: unknown {sorted(set(modes) - set(MODES))}; choose from {', '.join(MODES)}")
     base = load_config(a.config, [])
     cfg = build_config(base.to_dict(), {"seed": a.seed, "numerics.threads": 1, "numerics.stick_scaling": 1.0})
     V, lo = cfg.loading.velocity, cfg.slips.end_factor * cfg.loading.velocity
@@ -68,18 +78,26 @@ def main():
     sim.compact()
     dt1 = choose_dt(cfg)
     sim.run(1.6e5)
-    res = {m: [] for m in MODES}
+    res = {m: [] for m in modes}
     for _ in range(12):
         sim.run(1.5e4)
         if abs(sim.observe()["wall_vx"]) >= lo:
             continue
         start = sim.state.arrays()
-        for mode in MODES[1:] + MODES[:1]:          # control last: the run goes on from it
+        for mode in modes:                          # control last: the run goes on from it
             sim.state.restore(start)
             set_inertia(sim, 1.0, dt1)
             if mode != "control":
                 _scale_velocities(sim, 1.0 / math.sqrt(a.lam))
                 set_inertia(sim, a.lam, dt1)
+                if mode in ("damped", "damped4"):
+                    sim.params[L.DAMPING] = sim.config.material.damping * (4.0 if mode == "damped4" else 1.0)
+                elif mode == "grains":
+                    sim.params[L.WALL_MASS] = sim.wall_mass_per_length * sim.state.width
+                elif mode == "wall":
+                    wall_mass = sim.params[L.WALL_MASS]
+                    set_inertia(sim, 1.0, dt1)
+                    sim.params[L.WALL_MASS] = wall_mass
                 _watch(sim, a.window, V)
                 if mode == "energy":
                     _scale_velocities(sim, math.sqrt(a.lam))
@@ -92,7 +110,7 @@ def main():
             else:
                 _watch(sim, a.window, V)
             res[mode].append(_watch(sim, 200.0, V))
-    for mode in MODES:
+    for mode in modes:
         r = np.array(res[mode])
         print(f"{mode}: {len(r)} states; largest wall speed in the 200 t0 after the switch: median {np.median(r[:, 0]):.1f} "
               f"V_s ({', '.join(f'{v:.1f}' for v in r[:, 0])}); tau peak after median {np.median(r[:, 1]):.0f} t0")
