@@ -13,7 +13,8 @@ resumes) and the run goes back to lambda = 1:
 * damped: as_is, with the dashpot rate kept at material.damping in the scaled window (force per
   velocity x lambda, damping ratio x sqrt(lambda); damped4: four times that rate);
 * grains: as_is, with the top wall at its true mass (only the grains scaled);
-* wall: only the top wall's mass scaled (grains and step at true inertia);
+* wall: only the top wall's mass scaled (grains and step at true inertia; the grains' velocities
+  are still divided by sqrt(lambda) at the start, as in every mode);
 * control: lambda = 1 throughout, the same time.
 
 `--modes` picks some (control is always run last).
