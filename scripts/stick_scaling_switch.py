@@ -88,17 +88,18 @@ def main():
         for mode in modes:                          # control last: the run goes on from it
             sim.state.restore(start)
             set_inertia(sim, 1.0, dt1)
+            true_params = sim.params.copy()
             if mode != "control":
                 _scale_velocities(sim, 1.0 / math.sqrt(a.lam))
                 set_inertia(sim, a.lam, dt1)
                 if mode in ("damped", "damped4"):
-                    sim.params[L.DAMPING] = sim.config.material.damping * (4.0 if mode == "damped4" else 1.0)
+                    sim.params[L.DAMPING] = true_params[L.DAMPING] * (4.0 if mode == "damped4" else 1.0)
                 elif mode == "grains":
-                    sim.params[L.WALL_MASS] = sim.wall_mass_per_length * sim.state.width
+                    sim.params[L.WALL_MASS] = true_params[L.WALL_MASS]
                 elif mode == "wall":
-                    wall_mass = sim.params[L.WALL_MASS]
+                    scaled_wall = sim.params[L.WALL_MASS]
                     set_inertia(sim, 1.0, dt1)
-                    sim.params[L.WALL_MASS] = wall_mass
+                    sim.params[L.WALL_MASS] = scaled_wall
                 _watch(sim, a.window, V)
                 if mode == "energy":
                     _scale_velocities(sim, math.sqrt(a.lam))
