@@ -38,6 +38,7 @@ from ..io import provenance
 from ..config import build_config, find_config, load_config
 from ..kernels import layout as L
 from ..kernels import step as K
+from ..kernels.probe import stream_probe
 from ..driver.simulation import Simulation
 from ..model.timestep import choose_dt, slip_duration
 
@@ -110,18 +111,23 @@ def prepare(n_grains: int, dt: float, skin: float, cache: Path | None = None) ->
     return sim, start
 
 
-def time_gouge(sim: Simulation, start: dict, threads: int | list[int], steps: int,
-               repeats: int) -> tuple[dict[int, list[float]], dict[int, dict]]:
+def time_gouge(sim: Simulation, start: dict, threads: int | list[int], steps: int, repeats: int,
+               probe_bytes: int = 0) -> tuple[dict[int, list[float]], dict[int, dict], dict[int, list[float]]]:
     """Grain-steps per second of `steps` steps from `start`, `repeats` times per thread count.
     The thread counts take turns within each repeat (1, 2, 1, 2, ...), so that a slow stretch of
-    a shared machine falls on both and the paired ratios (scaling) stay comparable. Returns the
-    rates and the final state arrays per thread count."""
+    a shared machine falls on both and the paired ratios (scaling) stay comparable. With
+    probe_bytes, each timing is followed by the machine probe (stream_probe over two arrays of
+    probe_bytes together) on the same thread count: what the machine allows such a loop at that
+    moment. Returns the rates, the final state arrays and the probe's rates [elements/s] per
+    thread count (empty without probe_bytes)."""
     counts = [threads] if isinstance(threads, int) else list(threads)
     for t in counts:
         sim.threads = t
         sim.state.restore(start)
         sim.advance(10)  # warm-up (compiled already; touches memory)
+    probe = _Probe(probe_bytes) if probe_bytes > 0 else None
     rates = {t: [] for t in counts}
+    probe_rates = {t: [] for t in counts} if probe else {}
     final = {}
     for _ in range(repeats):
         for t in counts:
@@ -131,8 +137,29 @@ def time_gouge(sim: Simulation, start: dict, threads: int | list[int], steps: in
             sim.advance(steps)
             rates[t].append(steps * sim.state.n / (time.perf_counter() - t0))
             final[t] = sim.state.arrays()
+            if probe:
+                probe_rates[t].append(probe.rate(t))
     sim.check()
-    return rates, final
+    return rates, final, probe_rates
+
+
+class _Probe:
+    """kernels.probe.stream_probe over two float64 arrays of `n_bytes` together, in as many fixed
+    parts as the most threads any call uses, ~0.1 s per call on one thread."""
+
+    def __init__(self, n_bytes: int):
+        n = max(n_bytes // 16, 1024)
+        self.a = np.linspace(0.0, 1.0, n)
+        self.b = np.zeros(n)
+        self.reps = max(1, int(2e8 // n))
+        self.parts = numba.config.NUMBA_NUM_THREADS
+        stream_probe(self.a, self.b, self.parts, 1)        # compile / warm
+
+    def rate(self, threads: int) -> float:
+        numba.set_num_threads(threads)
+        t0 = time.perf_counter()
+        stream_probe(self.a, self.b, self.parts, self.reps)
+        return self.reps * self.a.size / (time.perf_counter() - t0)
 
 
 def paired_scaling(rates: dict[int, list[float]]) -> dict[int, float]:
@@ -418,9 +445,12 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
             if profile:
                 fluid_parts = [profile_fluid(n, start, run24_dt, skin, permeability, t) for t in threads]
         per_grain = state_bytes(sim) / sim.state.n
-        all_rates, finals = time_gouge(sim, start, threads, n_steps, repeats)
+        all_rates, finals, probe_rates = time_gouge(sim, start, threads, n_steps, repeats,
+                                                    probe_bytes=state_bytes(sim) if len(threads) > 1 else 0)
         reference = finals[threads[0]]
-        scaling.append({"n_grains": n, "paired_ratio": paired_scaling(all_rates)})
+        scaling.append({"n_grains": n, "paired_ratio": paired_scaling(all_rates),
+                        "machine_stream_ratio": paired_scaling(probe_rates) if probe_rates else {},
+                        "probe_bytes": state_bytes(sim)})
         for t in threads:
             rates = all_rates[t]
             identical = all(np.array_equal(reference[k], finals[t][k]) for k in reference)
@@ -434,7 +464,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
             footprint = footprint_profile(sim, start, sizes)
         if projection and n == 10000:
             at_dt = Simulation(bench_config(n, run24_dt, skin), arrays=start)
-            rates, _ = time_gouge(at_dt, start, threads, steps, repeats)
+            rates, _, _ = time_gouge(at_dt, start, threads, steps, repeats)
             run24 = {t: float(np.median(r)) for t, r in rates.items()}
             run24 = run24_projection(run24)
         if lammps and n <= lammps_max:

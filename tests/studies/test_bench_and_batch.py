@@ -16,6 +16,7 @@ import numpy as np
 from gouge_cli.studies.bench import footprint_profile, paired_scaling, prepare, run_benchmark, sub_system
 from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K
+from gouge_cli.kernels.probe import stream_probe
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -30,6 +31,9 @@ def test_benchmark_runs_on_a_tiny_scene():
         assert r["rate_min"] > 0 and r["bytes_per_grain"] > 100
         assert r["identical_to_1_thread"] is True
     assert [sorted(s["paired_ratio"]) for s in results["scaling"]] == [threads[1:]]
+    for s in results["scaling"]:            # the machine probe ran beside gouge on the same thread counts
+        assert sorted(s["machine_stream_ratio"]) == threads[1:] and all(v > 0 for v in s["machine_stream_ratio"].values())
+        assert abs(s["probe_bytes"] - 600 * rows[0]["bytes_per_grain"]) < 1e-6 * s["probe_bytes"]
     shares = results["fluid"]
     assert len(shares) == 2 * len(threads)                    # bench dt and Run 24 dt, each thread count
     assert all(0.0 < s["rate_undrained"] for s in shares)
@@ -42,6 +46,17 @@ def test_benchmark_runs_on_a_tiny_scene():
     for prof in results["profile_us"]:
         assert all(prof[k] > 0 for k in ("contact_forces", "kick_drift", "rebuild_each", "whole_step"))
         assert prof["steps_per_rebuild"] > 5    # (no timing comparisons here: the machine is shared)
+
+
+def test_stream_probe_is_the_stated_update_for_any_part_count():
+    a = np.linspace(0.0, 1.0, 1001)
+    expected = np.zeros_like(a)
+    for _ in range(3):
+        expected = 0.5 * (a + expected)
+    for parts in (1, 2, 3, 7):               # parts split the loop; every element gets the same three updates
+        b = np.zeros_like(a)
+        stream_probe(a, b, parts, 3)
+        assert np.array_equal(b, expected)
 
 
 def test_paired_scaling_is_the_median_of_ratios_within_each_repeat():
