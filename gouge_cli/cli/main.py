@@ -273,8 +273,9 @@ def bench(
         out.print(f"undrained (kappa_c {f['permeability']:g}, grid {f['grid'][0]}x{f['grid'][1]}, dt {f['dt']:.3g}, "
                   f"fluid update every {f['fluid_interval_steps']} steps), N {f['n_grains']}, {f['threads']} "
                   f"thread(s): {f['rate_undrained']:.3g} vs dry {f['rate_dry']:.3g} grain-steps/s, fluid share of a "
-                  f"step {100 * f['fluid_share']:.1f} % (medians; {100 * f['fluid_share_best']:.1f} % from the fastest "
-                  "repeats)", highlight=False)
+                  f"step {100 * f['fluid_share_paired']:.1f} % (median of the shares within each repeat, the two runs "
+                  f"back to back; {100 * f['fluid_share']:.1f} % from the medians, {100 * f['fluid_share_best']:.1f} % "
+                  "from the fastest repeats)", highlight=False)
     r24 = results["run24"]
     if r24:
         for t, v in r24["by_threads"].items():
