@@ -229,7 +229,7 @@ def bench(
             machine = s.get("machine_stream_ratio", {}).get(t)
             if machine:
                 out.print(f"  the machine's own ratio in the same repeats, for a loop streaming the same "
-                          f"{s['probe_bytes'] / 1e6:.1f} MB in {t} parts with nothing shared (kernels.probe): "
+                          f"{s['probe_bytes'] / 1e6:.1f} MB on {t} threads with nothing shared (kernels.probe): "
                           f"{machine:.2f}x; gouge reaches {ratio / machine:.0%} of it", highlight=False)
     for t in sorted({r["threads"] for r in results["rows"] if r["code"] == "gouge"}):
         rates = [r["rate_median"] for r in results["rows"] if r["code"] == "gouge" and r["threads"] == t]

@@ -145,7 +145,7 @@ def time_gouge(sim: Simulation, start: dict, threads: int | list[int], steps: in
 
 class _Probe:
     """kernels.probe.stream_probe over two float64 arrays of `n_bytes` together, in as many fixed
-    parts as the most threads any call uses, ~0.1 s per call on one thread."""
+    parts as numba has threads, ~0.1 s per call on one thread."""
 
     def __init__(self, n_bytes: int):
         n = max(n_bytes // 16, 1024)
@@ -162,10 +162,15 @@ class _Probe:
         return self.reps * self.a.size / (time.perf_counter() - t0)
 
 
+def median_ratio(numerators: list[float], denominators: list[float]) -> float:
+    """Median over repeats of numerator / denominator within the same repeat."""
+    return float(np.median(np.asarray(numerators) / np.asarray(denominators)))
+
+
 def paired_scaling(rates: dict[int, list[float]]) -> dict[int, float]:
     """Median over repeats of rate(t) / rate(fewest threads) within the same repeat."""
     base = min(rates)
-    return {t: float(np.median(np.asarray(r) / np.asarray(rates[base]))) for t, r in rates.items() if t != base}
+    return {t: median_ratio(r, rates[base]) for t, r in rates.items() if t != base}
 
 
 def lammps_script() -> Path | None:
@@ -216,7 +221,7 @@ def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability
             "fluid_interval_steps": wet.fluid_interval, "grid": list(wet.fluid.pressure.shape),
             "rate_dry": dry_rate, "rate_undrained": wet_rate, "fluid_share": 1.0 - wet_rate / dry_rate,
             "fluid_share_best": 1.0 - max(rates["undrained"]) / max(rates["dry"]),
-            "fluid_share_paired": 1.0 - float(np.median(np.asarray(rates["undrained"]) / np.asarray(rates["dry"])))}
+            "fluid_share_paired": 1.0 - median_ratio(rates["undrained"], rates["dry"])}
 
 
 def profile_fluid(n_grains: int, start: dict, dt: float, skin: float, permeability: float, threads: int,
@@ -447,13 +452,14 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
                     fluid.append(fluid_share(n, start, step, skin, permeability, t, steps, repeats))
             if profile:
                 fluid_parts = [profile_fluid(n, start, run24_dt, skin, permeability, t) for t in threads]
-        per_grain = state_bytes(sim) / sim.state.n
+        n_bytes = state_bytes(sim)
+        per_grain = n_bytes / sim.state.n
         all_rates, finals, probe_rates = time_gouge(sim, start, threads, n_steps, repeats,
-                                                    probe_bytes=state_bytes(sim) if len(threads) > 1 else 0)
+                                                    probe_bytes=n_bytes if len(threads) > 1 else 0)
         reference = finals[threads[0]]
         scaling.append({"n_grains": n, "paired_ratio": paired_scaling(all_rates),
                         "machine_stream_ratio": paired_scaling(probe_rates) if probe_rates else {},
-                        "probe_bytes": state_bytes(sim)})
+                        "probe_bytes": n_bytes})
         for t in threads:
             rates = all_rates[t]
             identical = all(np.array_equal(reference[k], finals[t][k]) for k in reference)
