@@ -22,18 +22,16 @@ from __future__ import annotations
 
 import math
 import sys
-from types import SimpleNamespace
 
 import numpy as np
 from scipy import signal
 
-from gouge_cli.analysis.blockslider import fit_block_slider
-from gouge_cli.analysis.catalog import fit_slip, read_catalog, slip_friction, slip_window
-from gouge_cli.analysis.friction import estimate_natural_frequency, notch_filter
+from gouge_cli.analysis.catalog import (NOTCH_ABOVE, NOTCH_PAD, fit_slip, fit_slip_notched, read_catalog,
+                                       slip_friction, slip_window)
 from gouge_cli.analysis.study import DURATION_TOL, GOOD_R2, transient_slips, within_median
 from gouge_cli.io.runfile import RunReader
 
-BANDS = (("shape", 0.0, 12.0), ("vibration", 12.0, 40.0), ("noise", 40.0, math.inf))
+BANDS = (("shape", 0.0, NOTCH_ABOVE), ("vibration", NOTCH_ABOVE, 40.0), ("noise", 40.0, math.inf))
 
 
 def diagnose(reader: RunReader) -> list[dict]:
@@ -46,21 +44,16 @@ def diagnose(reader: RunReader) -> list[dict]:
         if int(e["number"]) in transient:
             continue
         fit = fit_slip(reader, e)
-        i0, i1, j0, j1 = slip_window(reader, e, pad=0.6)
-        s = reader.series(["time", "wall_vx", "tau_over_sigma"], j0, j1)
-        t, v = s["time"], s["wall_vx"]
-        inside = (t >= e["onset_time"]) & (t <= e["end_time"])
-        idx = np.flatnonzero(inside)
+        nf = fit_slip_notched(reader, e, fit)
+        t, v, inside = nf.time, nf.velocity, nf.inside
+        j0, j1 = slip_window(reader, e, pad=NOTCH_PAD)[2:]
+        s = reader.series(["tau_over_sigma"], j0, j1)
         res = v[inside] - fit.amplitude * np.sin(fit.omega * (t[inside] - fit.t0))
         fs = 1.0 / float(np.mean(np.diff(t)))
         f, p = signal.periodogram(res, fs=fs, nfft=max(res.size, 65536), detrend=False)
         total = float(p.sum()) or 1.0
         share = {name: float(p[(f >= lo * f_s) & (f < hi * f_s)].sum()) / total for name, lo, hi in BANDS}
-        f_nat = estimate_natural_frequency(t[inside], res, f_min=12.0 * f_s)
-        v_notched, _ = notch_filter(t, v, f_nat, 3.0)
-        window = SimpleNamespace(onset_index=int(idx[0]), end_index=int(idx[-1]), onset_time=float(e["onset_time"]),
-                                 duration=float(e["duration"]), peak_velocity=float(e["peak_velocity"]))
-        notched = fit_block_slider(t, v_notched, window, info.k, info.m_b, info.sigma)
+        f_nat, v_notched, notched = nf.natural_frequency, nf.notched, nf.fit
         fr = slip_friction(reader, e, notch=True, pad=0.0)
         mu = fr.filtered if fr.filtered is not None else fr.friction
         phase = (fr.t - fr.onset_time) / (fr.end_time - fr.onset_time)

@@ -385,3 +385,27 @@ def test_campaign_summary_counts_and_ratios():
     assert summary["n_complex"] == 2 and summary["criteria"]["subevents"] == 2
     pv = summary["ratios"]["peak_velocity_ratio"]
     assert pv["n"] == 5 and pv["frac_below_1"] == 1.0 and pv["max"] < 0.61
+
+
+def test_notched_refit_removes_the_layers_vibration_and_recovers_eq3():
+    from gouge_cli.analysis.blockslider import fit_block_slider
+    from gouge_cli.analysis.catalog import notched_refit
+
+    k, m_b, sigma = 1e-6, 24.0, 3e-4
+    omega = math.sqrt(k / m_b)
+    half = math.pi / omega                                   # Eq. 3's slip duration, 15,390 t0
+    f_s = omega / (2.0 * math.pi)
+    t = np.arange(-0.6 * half, 1.6 * half, half / 2000.0)
+    amplitude = 5e-3
+    slip = np.where((t >= 0.0) & (t <= half), amplitude * np.sin(omega * t), 0.0)
+    v = slip + 0.25 * amplitude * np.sin(2.0 * math.pi * 30.0 * f_s * t)     # the layer's vibration at 30 f_s
+    inside = np.flatnonzero((t >= 0.0) & (t <= half))
+    plain = fit_block_slider(t, v, (int(inside[0]), int(inside[-1])), k, m_b, sigma)
+    entry = {"onset_time": 0.0, "end_time": half, "duration": half, "peak_velocity": amplitude}
+    nf = notched_refit(t, v, entry, plain, k, m_b, sigma)
+    # unfiltered, the vibration (variance 0.25^2 / 2 = 0.031 A^2) is all the residual, against a half sine's
+    # 1/2 - 4/pi^2 = 0.095 A^2: R^2 = 1 - 0.031 / (0.095 + 0.031) = 0.75
+    assert abs(plain.r2 - 0.75) < 0.02
+    assert abs(nf.natural_frequency / (30.0 * f_s) - 1.0) < 0.02
+    assert nf.fit.success and nf.fit.r2 > 0.98
+    assert abs(nf.fit.half_period / half - 1.0) < 0.01 and abs(nf.fit.amplitude / amplitude - 1.0) < 0.02

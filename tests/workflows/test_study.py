@@ -94,6 +94,9 @@ def test_study_end_to_end_idempotent_and_consistent(study_run):
     summary = json.loads((run_dir / "study" / "summary.json").read_text())
     assert summary["summary"]["n_rows"] == len(slips)
     assert any(line[0].startswith("Type II") and line[2] == "30 (20)" for line in summary["side_by_side"])
+    notched = [float(table[n]["drained_fit_r2_notched"]) for n in slips]    # the diagnostic refit, per drained slip
+    assert all(math.isnan(x) or x <= 1.0 for x in notched) and any(math.isfinite(x) for x in notched)
+    assert any("notched" in line[0] for line in summary["side_by_side"])
 
     # second invocation: nothing runs, nothing is rewritten
     again = gouge("study", run_dir, "--perm", "1e-5", "--slips", arg, "--no-figures")
