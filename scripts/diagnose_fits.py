@@ -45,15 +45,16 @@ def diagnose(reader: RunReader) -> list[dict]:
             continue
         fit = fit_slip(reader, e)
         nf = fit_slip_notched(reader, e, fit)
-        t, v, inside = nf.time, nf.velocity, nf.inside
         j0, j1 = slip_window(reader, e, pad=NOTCH_PAD)[2:]
-        s = reader.series(["tau_over_sigma"], j0, j1)
+        s = reader.series(["time", "wall_vx", "tau_over_sigma"], j0, j1)
+        t, v = s["time"], s["wall_vx"]
+        inside = (t >= e["onset_time"]) & (t <= e["end_time"])
         res = v[inside] - fit.amplitude * np.sin(fit.omega * (t[inside] - fit.t0))
         fs = 1.0 / float(np.mean(np.diff(t)))
         f, p = signal.periodogram(res, fs=fs, nfft=max(res.size, 65536), detrend=False)
         total = float(p.sum()) or 1.0
         share = {name: float(p[(f >= lo * f_s) & (f < hi * f_s)].sum()) / total for name, lo, hi in BANDS}
-        f_nat, v_notched, notched = nf.natural_frequency, nf.notched, nf.fit
+        f_nat, v_notched, r2_notched = (nf.natural_frequency, nf.notched, nf.fit.r2) if nf else (math.nan, v, math.nan)
         fr = slip_friction(reader, e, notch=True, pad=0.0)
         mu = fr.filtered if fr.filtered is not None else fr.friction
         phase = (fr.t - fr.onset_time) / (fr.end_time - fr.onset_time)
@@ -65,7 +66,7 @@ def diagnose(reader: RunReader) -> list[dict]:
             "r2": fit.r2, "fit_ok": fit.success, "T_fit": fit.half_period, "m_eff_over_m_b": fit.m_eff / info.m_b,
             "start_shift": fit.t0 - float(e["onset_time"]),
             "rise_over_fall": (float(e["peak_time"]) - e["onset_time"]) / (e["end_time"] - float(e["peak_time"])),
-            **{f"res_{k}": x for k, x in share.items()}, "f_nat_over_f_s": f_nat / f_s, "r2_notched": notched.r2,
+            **{f"res_{k}": x for k, x in share.items()}, "f_nat_over_f_s": f_nat / f_s, "r2_notched": r2_notched,
             "t": t - float(e["onset_time"]), "v": v / info.V_s, "v_notched": v_notched / info.V_s,
             "tau": s["tau_over_sigma"], "fit_curve": (t[inside] - e["onset_time"],
                                                       fit.amplitude * np.sin(fit.omega * (t[inside] - fit.t0)) / info.V_s),

@@ -293,22 +293,30 @@ class NotchedFit:
     inside: np.ndarray            # (n,) bool: samples between the slip's onset and end
 
 
-def notched_refit(t, v, entry: dict, fit: BlockSliderFit, k: float, m_b: float, sigma: float) -> NotchedFit:
+def notched_refit(t, v, entry: dict, fit: BlockSliderFit, k: float, m_b: float,
+                  sigma: float) -> NotchedFit | None:
     """:class:`NotchedFit` of a slip (catalog entry: onset_time, end_time, duration,
     peak_velocity) from its wall velocity v(t) (shape (n,), uniform cadence, covering the slip)
-    and its plain Eq. 3 fit."""
+    and its plain Eq. 3 fit; None (no diagnostic) when that fit failed the bar, the slip has
+    fewer than 16 samples, or the series is too coarse to hold a band above NOTCH_ABOVE f_s."""
     t = np.asarray(t, dtype=float)
     v = np.asarray(v, dtype=float)
     inside = (t >= float(entry["onset_time"])) & (t <= float(entry["end_time"]))
     idx = np.flatnonzero(inside)
+    if not fit.success or idx.size < 16:
+        return None
     residual = v[inside] - fit.amplitude * np.sin(fit.omega * (t[inside] - fit.t0))
-    f_nat = estimate_natural_frequency(t[inside], residual, f_min=NOTCH_ABOVE * math.sqrt(k / m_b) / (2.0 * math.pi))
-    notched, _ = notch_filter(t, v, f_nat, NOTCH_Q)
+    try:
+        f_nat = estimate_natural_frequency(t[inside], residual,
+                                           f_min=NOTCH_ABOVE * math.sqrt(k / m_b) / (2.0 * math.pi))
+        notched, _ = notch_filter(t, v, f_nat, NOTCH_Q)
+    except ValueError:
+        return None
     refit = fit_block_slider(t, notched, _fit_window(entry, int(idx[0]), int(idx[-1])), k, m_b, sigma)
     return NotchedFit(refit, f_nat, t, v, notched, inside)
 
 
-def fit_slip_notched(reader: RunReader, entry: dict, fit: BlockSliderFit | None = None) -> NotchedFit:
+def fit_slip_notched(reader: RunReader, entry: dict, fit: BlockSliderFit | None = None) -> NotchedFit | None:
     """:func:`notched_refit` of one slip of a run (``fit``: its :func:`fit_slip`, if already made)."""
     info = reader.info
     fit = fit if fit is not None else fit_slip(reader, entry)

@@ -79,7 +79,8 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
             n = int(p.row["slip"])
             if n not in fits and n in catalog:
                 fits[n] = fit_slip(reader, catalog[n])
-                notched[n] = fit_slip_notched(reader, catalog[n], fits[n]).fit.r2
+                refit = fit_slip_notched(reader, catalog[n], fits[n])
+                notched[n] = refit.fit.r2 if refit is not None else _NAN
     for p in sorted(pairs, key=lambda q: (int(q.row["slip"]), q.row["permeability"])):
         r, n = p.row, int(p.row["slip"])
         fit = fits.get(n)

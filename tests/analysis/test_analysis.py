@@ -409,3 +409,8 @@ def test_notched_refit_removes_the_layers_vibration_and_recovers_eq3():
     assert abs(nf.natural_frequency / (30.0 * f_s) - 1.0) < 0.02
     assert nf.fit.success and nf.fit.r2 > 0.98
     assert abs(nf.fit.half_period / half - 1.0) < 0.01 and abs(nf.fit.amplitude / amplitude - 1.0) < 0.02
+    # no diagnostic (None, a NaN in the study table) where there is nothing sound to refit
+    import dataclasses
+    assert notched_refit(t, v, entry, dataclasses.replace(plain, success=False), k, m_b, sigma) is None
+    coarse = slice(None, None, 200)                          # 11 samples inside the slip
+    assert notched_refit(t[coarse], v[coarse], entry, plain, k, m_b, sigma) is None
