@@ -287,10 +287,7 @@ class NotchedFit:
 
     fit: BlockSliderFit           # Eq. 3 refitted to the notched velocity over the same samples
     natural_frequency: float      # [1/t0] spectral peak of the plain fit's residual above NOTCH_ABOVE f_s
-    time: np.ndarray              # (n,) [t0] the slip and NOTCH_PAD durations on each side
-    velocity: np.ndarray          # (n,) [v0] the wall velocity there
-    notched: np.ndarray           # (n,) [v0] the same with the natural vibration notched (q = NOTCH_Q)
-    inside: np.ndarray            # (n,) bool: samples between the slip's onset and end
+    notched: np.ndarray           # (n,) [v0] the given wall velocity with that vibration notched (q = NOTCH_Q)
 
 
 def notched_refit(t, v, entry: dict, fit: BlockSliderFit, k: float, m_b: float,
@@ -313,11 +310,12 @@ def notched_refit(t, v, entry: dict, fit: BlockSliderFit, k: float, m_b: float,
     except ValueError:
         return None
     refit = fit_block_slider(t, notched, _fit_window(entry, int(idx[0]), int(idx[-1])), k, m_b, sigma)
-    return NotchedFit(refit, f_nat, t, v, notched, inside)
+    return NotchedFit(refit, f_nat, notched)
 
 
 def fit_slip_notched(reader: RunReader, entry: dict, fit: BlockSliderFit | None = None) -> NotchedFit | None:
-    """:func:`notched_refit` of one slip of a run (``fit``: its :func:`fit_slip`, if already made)."""
+    """:func:`notched_refit` of one slip of a run over its slip_window with NOTCH_PAD durations each
+    side (``fit``: its :func:`fit_slip`, if already made)."""
     info = reader.info
     fit = fit if fit is not None else fit_slip(reader, entry)
     _, _, j0, j1 = slip_window(reader, entry, pad=NOTCH_PAD)

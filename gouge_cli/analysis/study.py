@@ -155,7 +155,7 @@ def study_summary(rows: list[dict]) -> dict:
         "drained_frac_fit_ok": frac(drained, lambda r: r["drained_fit_ok"]),
         "drained_frac_r2_good": frac(drained, lambda r: r["drained_fit_ok"] and r["drained_fit_r2"] > GOOD_R2),
         "drained_frac_r2_good_notched": frac(drained, lambda r: r["drained_fit_ok"]
-                                             and r.get("drained_fit_r2_notched", _NAN) > GOOD_R2),
+                                             and r["drained_fit_r2_notched"] > GOOD_R2),
         "drained_frac_duration_within": frac(drained, lambda r: within[r["slip"]]),
         "drained_duration_median": med,
         "m_eff_over_m_b": _spread(r["m_eff_over_m_b"] for r in drained),
