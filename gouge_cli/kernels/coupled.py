@@ -35,6 +35,7 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     width = params[WIDTH]
     dt_f = interval * params[DT]
     half = 0.5 * params[DT]
+    serial = params[THREADS] <= 1.0          # (the deposit in plain loops)
     owed = False
     drifted = False
     for st in range(nsteps):
@@ -49,7 +50,7 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
         z_top = wall[W_Z]
         status = fluid_begin(x, z, vx, vz, radius, n, width, z_bottom, z_top, dt_f, fstate, s, s_old, ux, uz, work,
                              corners, partial, (owed, force_x, force_z, inv_mass, body, half, params[BG_DAMPING],
-                                                wall[W_VX], wall[W_VZ]))
+                                                wall[W_VX], wall[W_VZ]), serial)
         if status == 0:
             if close or n < 2:
                 status = fluid_solve(width, z_bottom, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm,

@@ -132,7 +132,7 @@ def corner_shares(area, i0, i1, j0, fx, fz, nz):
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
-            corners=None, partial=None, grain_kick=None):
+            corners=None, partial=None, grain_kick=None, serial=False):
     """Solid fraction, its kernel-consistent gradient and the grid-relative solid velocity.
 
     x, z, vx, vz, radius : float64[>= n] grain centres [d], velocities [v0], radii [d]
@@ -161,6 +161,8 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  each grain's velocity is taken after the second half kick it still owes
                  (kernels.step.closed_velocity): the same bits as closing the step first,
                  without a pass over the grains.
+    serial : (fast form only) plain loops instead of parallel ones (for one thread: a parallel
+                 region costs a few us even there); the same sums in the same order.
     """
     nx, nz = s.shape
     size = nx * nz
@@ -174,31 +176,27 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                    grad_s_x.reshape(size), grad_s_z.reshape(size))
         return
     _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
-                     corners, partial, grain_kick)
+                     corners, partial, grain_kick, serial)
 
 
-@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
-                     corners, partial, grain_kick):
-    """deposit's fast form: cells and moments in DEPOSIT_GROUPS fixed groups (in parallel), summed
-    in group order into partial[0], collected per cell."""
+                     corners, partial, grain_kick, serial):
+    """deposit's fast form: cells and moments in DEPOSIT_GROUPS fixed groups, summed in group order
+    into partial[0], collected per cell; the groups and the columns in parallel, or in plain
+    loops if serial."""
     nx, nz = s.shape
     size = nx * nz
-    for g in prange(DEPOSIT_GROUPS):
-        first = g * n // DEPOSIT_GROUPS
-        last = (g + 1) * n // DEPOSIT_GROUPS
-        _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
-        _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, partial[g], corners, nz, grain_kick)
+    if not serial:
+        _groups_parallel(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial,
+                         grain_kick)
+        _collect_parallel(partial, nx, nz)
+    else:
+        for g in range(DEPOSIT_GROUPS):
+            _group(g, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick)
+        for i in range(nx):
+            _collect_column(i, nz, partial)
     total = partial[0]
-    for i in prange(nx):                 # the groups' columns (a group's grains are nearby), in group order
-        head = i * nz
-        for g in range(1, DEPOSIT_GROUPS):
-            if partial[g, head, M_FLAG] == 0.0:
-                continue                 # all +0.0 there, and x + (+0.0) is x (sums are never -0.0)
-            total[head, M_FLAG] = 1.0
-            for c in range(head, head + nz):
-                for m in range(N_SUMMED):
-                    total[c, m] += partial[g, c, m]
     solid = s.reshape(size)
     momentum_x = ux.reshape(size)
     momentum_z = uz_rel.reshape(size)
@@ -206,6 +204,43 @@ def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s,
     slope_z = grad_s_z.reshape(size)
     _expand(total, nx, nz, nx / Lx, solid, momentum_x, momentum_z, slope_x, slope_z)
     _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x, slope_z)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _group(g, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick):
+    """Cells, areas and moments of the grains of group g into partial[g]."""
+    first = g * n // DEPOSIT_GROUPS
+    last = (g + 1) * n // DEPOSIT_GROUPS
+    _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
+    _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, partial[g], corners, nz, grain_kick)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _collect_column(i, nz, partial):
+    """Add the later groups' records of grid column i to partial[0], in group order (only the
+    groups that flagged the column: a group's grains are nearby)."""
+    total = partial[0]
+    head = i * nz
+    for g in range(1, DEPOSIT_GROUPS):
+        if partial[g, head, M_FLAG] == 0.0:
+            continue                 # all +0.0 there, and x + (+0.0) is x (sums are never -0.0)
+        total[head, M_FLAG] = 1.0
+        for c in range(head, head + nz):
+            for m in range(N_SUMMED):
+                total[c, m] += partial[g, c, m]
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
+def _collect_parallel(partial, nx, nz):
+    for i in prange(nx):
+        _collect_column(i, nz, partial)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
+def _groups_parallel(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick):
+    """_group for every group, the groups in parallel (no two write the same memory)."""
+    for g in prange(DEPOSIT_GROUPS):
+        _group(g, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")

@@ -18,6 +18,7 @@ from . import NUMBA_CACHE
 from .layout import CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11
 from .deposit import cell_weights, corner_shares, grain_area
 from .lanes import bilinear_pairs
+from .pressure import flat
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -29,20 +30,43 @@ def pressure_gradient(P, dx, dz, p_bot, p_top, gx, gz):
     values: sum_c gz dx dz = dx sum_i (p_top - p_bot), sum_c gx = 0.
     """
     nx, nz = P.shape
+    pf, fx, fz = flat(P), flat(gx), flat(gz)
+    size = np.uint64(pf.size)
+    unz = np.uint64(nz)
+    zero = np.uint64(0)
+    one = np.uint64(1)
+    last = size - unz
+    two_dx = 2.0 * dx
+    if nx == 1:
+        for c in range(zero, size):
+            fx[c] = (pf[c] - pf[c]) / two_dx
+    else:
+        for c in range(zero, unz):             # flat loops; the first and last columns wrap
+            fx[c] = (pf[c + unz] - pf[c + last]) / two_dx
+        for c in range(unz, last):
+            fx[c] = (pf[c + unz] - pf[c - unz]) / two_dx
+        for c in range(last, size):
+            fx[c] = (pf[c - last] - pf[c - unz]) / two_dx
+    for c in range(one, size - one):           # inner rows; the wall rows are redone below
+        fz[c] = 0.5 * ((pf[c] - pf[c - one]) / dz + (pf[c + one] - pf[c]) / dz)
     for i in range(nx):
-        ip = (i + 1) % nx
-        im = (i - 1) % nx
-        for j in range(nz):
-            gx[i, j] = (P[ip, j] - P[im, j]) / (2.0 * dx)
-            if j == 0:
-                below = (P[i, 0] - p_bot) / (0.5 * dz)
-            else:
-                below = (P[i, j] - P[i, j - 1]) / dz
-            if j == nz - 1:
-                above = (p_top - P[i, j]) / (0.5 * dz)
-            else:
-                above = (P[i, j + 1] - P[i, j]) / dz
-            gz[i, j] = 0.5 * (below + above)
+        for j in (0, nz - 1):
+            fz[i * nz + j] = _wall_row_gz(P, i, j, dz, p_bot, p_top)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _wall_row_gz(P, i, j, dz, p_bot, p_top):
+    """pressure_gradient's gz of cell (i, j) in a wall row (j = 0 or nz - 1)."""
+    nz = P.shape[1]
+    if j == 0:
+        below = (P[i, 0] - p_bot) / (0.5 * dz)
+    else:
+        below = (P[i, j] - P[i, j - 1]) / dz
+    if j == nz - 1:
+        above = (p_top - P[i, j]) / (0.5 * dz)
+    else:
+        above = (P[i, j + 1] - P[i, j]) / dz
+    return 0.5 * (below + above)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
@@ -67,11 +91,10 @@ def drag_density(gx, gz, s, fx, fz):
 def drag_density_pairs(gx, gz, s, pairs):
     """drag_density into interleaved pairs: pairs[2c], pairs[2c + 1] = fx, fz of flat cell c
     (float64[2 nx nz]), the layout grain_drag_at gathers from."""
-    nx, nz = s.shape
-    for i in range(nx):
-        for j in range(nz):
-            c = np.uint64(2 * (i * nz + j))
-            pairs[c], pairs[c + np.uint64(1)] = _density(gx[i, j], gz[i, j], s[i, j])
+    fx, fz, sf = flat(gx), flat(gz), flat(s)
+    for c in range(np.uint64(sf.size)):
+        k = np.uint64(2) * c
+        pairs[k], pairs[k + np.uint64(1)] = _density(fx[c], fz[c], sf[c])
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
@@ -112,7 +135,8 @@ def grain_drag(x, z, radius, n, Lx, z_bot, z_top, fx, fz, drag_x, drag_z):
 def grain_drag_at(corners, n, pairs, drag_x, drag_z):
     """grain_drag with the corner cells and areas the deposit stored (same positions) and the
     density as interleaved pairs (drag_density_pairs): the same values, without recomputing
-    areas and weights, x and z in the two lanes of one vector sum (kernels.lanes)."""
+    areas and weights, x and z in the two lanes of one vector sum (kernels.lanes). [A parallel
+    loop on one thread too: in a plain loop the per-grain reads cost reference counting, ~10x.]"""
     c00, c10 = corners[CR_00], corners[CR_10]
     for k in prange(n):
         if c00[k] < 0.0:

@@ -32,6 +32,7 @@ finite; drag is then set to zero). A status other than 0 should stop the run.
 
 import math
 
+import numpy as np
 from numba import njit
 
 from . import NUMBA_CACHE
@@ -41,18 +42,18 @@ from .layout import (G_CAPACITY, G_DIAG, G_FX, G_FZ, G_GX, G_GZ, G_Q, G_RHS, G_S
                      S_ITERATIONS, S_RESIDUAL, S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
 from .deposit import deposit
 from .drag import drag_density_pairs, grain_drag_at, pressure_gradient
-from .pressure import (conjugate_gradient, explicit_bound, explicit_diffusion, face_conductances,
-                       permeability_field, undrained_source)
+from .pressure import (conjugate_gradient, explicit_bound, explicit_diffusion, face_conductances, flat,
+                       implicit_system, permeability_field, undrained_source)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _all_finite(P):
-    nx, nz = P.shape
-    for i in range(nx):
-        for j in range(nz):
-            if not math.isfinite(P[i, j]):
-                return False
-    return True
+    """True if every cell of P is finite (one branch-free pass: it vectorises)."""
+    pf = flat(P)
+    bad = 0
+    for c in range(np.uint64(pf.size)):
+        bad += 0 if abs(pf[c]) < math.inf else 1
+    return bad == 0
 
 
 @njit(cache=NUMBA_CACHE, inline="always")
@@ -161,9 +162,10 @@ def _plane_velocities(state, z_bot, z_top, dt_f):
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old, ux, uz, work, corners, partial,
-                grain_kick):
+                grain_kick, serial=False):
     """First part of fluid_update (same arguments): s^n kept, deposit s^{n+1} and u_rel, the
-    only part that reads the grains' positions and velocities. Returns a status."""
+    only part that reads the grains' positions and velocities; serial: plain loops (one thread).
+    Returns a status."""
     if not (z_top - z_bot > 0.0 and dt_f > 0.0):
         return STATUS_SOLVER
     nx, nz = s.shape
@@ -172,7 +174,7 @@ def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old
         for j in range(nz):
             s_old[i, j] = s[i, j]
     deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[G_SX], work[G_SZ], corners, partial,
-            grain_kick)
+            grain_kick, serial)
     return STATUS_OK
 
 
@@ -212,16 +214,7 @@ def fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, perm
             explicit_diffusion(P, capacity, tx, tz, tb, dt_f / n_sub, n_sub, work[G_Q])
     else:
         diag = work[G_DIAG]
-        for i in range(nx):
-            im = (i - 1) % nx
-            for j in range(nz):
-                c = capacity[i, j] / dt_f
-                d = c + tx[i, j] + tx[im, j] + tb[i, j] + tz[i, j]
-                if j > 0:
-                    d += tz[i, j - 1]
-                diag[i, j] = d
-                P[i, j] = p_star[i, j]
-                p_star[i, j] *= c
+        implicit_system(capacity, tx, tz, tb, dt_f, p_star, P, diag)
         iterations, residual, converged = conjugate_gradient(
             P, p_star, diag, tx, tz, work, params[P_TOL], int(params[P_MAX_ITER]))
         state[S_ITERATIONS] = iterations

@@ -109,15 +109,17 @@ G_R = 6              # CG residual
 G_Z = 7              # preconditioned residual
 G_P = 8              # CG direction
 G_Q = 9              # operator times direction; explicit scratch
-G_CP = 10            # tridiagonal factor: modified upper coefficient
-G_DINV = 11          # tridiagonal factor: inverse pivot
+G_CP = 10            # tridiagonal factor: modified upper coefficient, transposed (nz, nx)
+G_DINV = 11          # tridiagonal factor: inverse pivot, transposed (nz, nx)
 G_GX = 12            # dP/dx at cell centres
 G_GZ = 13            # dP/dz at cell centres
 G_FX = 14            # drag per unit grain area -(grad P)/s: rows G_FX and G_FZ together hold the
 G_FZ = 15            # (x, z) pairs of every cell interleaved (kernels.drag.drag_density_pairs)
 G_SX = 16            # ds/dx consistent with the deposit
 G_SZ = 17            # ds/dz consistent with the deposit
-N_GRID_WORK = 18
+G_TZT = 18           # tz transposed (nz, nx), for the z-line solves (kernels.pressure)
+G_LINE = 19          # the z-line solves' right-hand side and solution, transposed (nz, nx)
+N_GRID_WORK = 20
 
 # the grid's arrays as kernels.coupled takes them, addressed by name (model.fluid.FluidGrid.record;
 # shapes: kernels.fluid_update's module doc)

@@ -48,7 +48,14 @@ import numpy as np
 from numba import njit
 
 from . import NUMBA_CACHE
-from .layout import G_CP, G_DINV, G_P, G_Q, G_R, G_Z
+from .layout import G_CP, G_DINV, G_LINE, G_P, G_Q, G_R, G_TZT, G_Z
+
+
+@njit(cache=NUMBA_CACHE, inline="always")
+def flat(a):
+    """The (nx * nz,) view of a C-contiguous grid array: loops over it vectorise (an inner loop
+    over nz ~ 20 cells runs in the scalar remainder of an 8-wide vector loop)."""
+    return a.reshape(a.size)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -62,16 +69,15 @@ def undrained_source(P, s, s_old, ux, uz_rel, grad_s_x, grad_s_z, dt_f, beta, s_
     div_u : out, solid volumetric strain rate -(s_e - s^n) / (dt_f (s_e + s^n)/2) [1/t0]
     s is clamped to [s_min, s_max] = [1 - phi_max, 1 - phi_min] in both formulas.
     """
-    nx, nz = P.shape
-    for i in range(nx):
-        for j in range(nz):
-            s_end = s[i, j] + dt_f * (ux[i, j] * grad_s_x[i, j] + uz_rel[i, j] * grad_s_z[i, j])
-            s_start = s_old[i, j]
-            s_end = min(max(s_end, s_min), s_max)
-            s_start = min(max(s_start, s_min), s_max)
-            p_star[i, j] = P[i, j] + (1.0 + beta * P[i, j]) * (s_end - s_start) / (
-                beta * s_start * (1.0 - s_end))
-            div_u[i, j] = -2.0 * (s_end - s_start) / ((s_end + s_start) * dt_f)
+    p, sn, so, u, w, gx, gz, out, div = (flat(P), flat(s), flat(s_old), flat(ux), flat(uz_rel), flat(grad_s_x),
+                                         flat(grad_s_z), flat(p_star), flat(div_u))
+    for c in range(np.uint64(p.size)):
+        s_end = sn[c] + dt_f * (u[c] * gx[c] + w[c] * gz[c])
+        s_start = so[c]
+        s_end = min(max(s_end, s_min), s_max)
+        s_start = min(max(s_start, s_min), s_max)
+        out[c] = p[c] + (1.0 + beta * p[c]) * (s_end - s_start) / (beta * s_start * (1.0 - s_end))
+        div[c] = -2.0 * (s_end - s_start) / ((s_end + s_start) * dt_f)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -81,12 +87,18 @@ def permeability_field(s, kappa_c, phi_min, phi_max, permeability, capacity, bet
     permeability : out, kappa_c phi^3 / (1 - phi)^2 [d^2];  capacity : out, beta phi [1/E]
     with phi = 1 - s clamped to [phi_min, phi_max].
     """
-    nx, nz = s.shape
-    for i in range(nx):
-        for j in range(nz):
-            phi = min(max(1.0 - s[i, j], phi_min), phi_max)
-            permeability[i, j] = kappa_c * phi * phi * phi / ((1.0 - phi) * (1.0 - phi))
-            capacity[i, j] = beta * phi
+    sf, kf, cf = flat(s), flat(permeability), flat(capacity)
+    for c in range(np.uint64(sf.size)):
+        phi = min(max(1.0 - sf[c], phi_min), phi_max)
+        kf[c] = kappa_c * phi * phi * phi / ((1.0 - phi) * (1.0 - phi))
+        cf[c] = beta * phi
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _face(p0, p1, k0, k1, half_beta, scale):
+    """Conductance of the face between two cells: (1 + beta mean P) x harmonic mean of kappa x scale."""
+    khar = 2.0 * k0 * k1 / (k0 + k1) if k0 + k1 > 0.0 else 0.0
+    return (1.0 + half_beta * (p0 + p1)) * khar * scale
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -97,27 +109,52 @@ def face_conductances(P, permeability, dx, dz, beta, eta, tx, tz, tb):
     tz[i, j]: face (i, j+1/2) for j < nz-1 (tz[:, nz-1] = 0);
     tb[i, j]: the wall face of a boundary cell, 1 + beta P taken as the mean of
     the cell value and 1 (P = 0 on the plane), distance dz/2; 0 for inner cells.
-    Units 1/(E t0).
+    Units 1/(E t0). Flat loops: the x neighbour of cell c is c + nz (the last column wraps
+    to the first); tz is computed across a column's top face too, then set to 0 there.
     """
     nx, nz = P.shape
     cx = 1.0 / (eta * dx * dx)
     cz = 1.0 / (eta * dz * dz)
+    half_beta = 0.5 * beta
+    p, k, fx, fz, fb = flat(P), flat(permeability), flat(tx), flat(tz), flat(tb)
+    size = np.uint64(p.size)
+    unz = np.uint64(nz)
+    one = np.uint64(1)
+    inner = size - unz
+    for c in range(np.uint64(0), inner):
+        fx[c] = _face(p[c], p[c + unz], k[c], k[c + unz], half_beta, cx)
+    for c in range(inner, size):
+        fx[c] = _face(p[c], p[c - inner], k[c], k[c - inner], half_beta, cx)
+    for c in range(np.uint64(0), size - one):
+        fz[c] = _face(p[c], p[c + one], k[c], k[c + one], half_beta, cz)
+        fb[c] = 0.0
+    fb[size - one] = 0.0
     for i in range(nx):
-        ip = (i + 1) % nx
-        for j in range(nz):
-            k0 = permeability[i, j]
-            k1 = permeability[ip, j]
-            khar = 2.0 * k0 * k1 / (k0 + k1) if k0 + k1 > 0.0 else 0.0
-            tx[i, j] = (1.0 + 0.5 * beta * (P[i, j] + P[ip, j])) * khar * cx
-            if j < nz - 1:
-                k1 = permeability[i, j + 1]
-                khar = 2.0 * k0 * k1 / (k0 + k1) if k0 + k1 > 0.0 else 0.0
-                tz[i, j] = (1.0 + 0.5 * beta * (P[i, j] + P[i, j + 1])) * khar * cz
-            else:
-                tz[i, j] = 0.0
-            tb[i, j] = 0.0
-        tb[i, 0] += (1.0 + 0.5 * beta * P[i, 0]) * permeability[i, 0] * 2.0 * cz
-        tb[i, nz - 1] += (1.0 + 0.5 * beta * P[i, nz - 1]) * permeability[i, nz - 1] * 2.0 * cz
+        top = i * nz + nz - 1
+        fz[top] = 0.0
+        fb[i * nz] += (1.0 + 0.5 * beta * p[i * nz]) * k[i * nz] * 2.0 * cz
+        fb[top] += (1.0 + 0.5 * beta * p[top]) * k[top] * 2.0 * cz
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def implicit_system(capacity, tx, tz, tb, dt_f, p_star, P, diag):
+    """Backward Euler system (C/dt_f + L) P = C P*/dt_f: diag = C/dt_f + the sum of the cell's
+    face conductances; P takes P* as the initial guess; p_star is scaled in place to the
+    right-hand side C P*/dt_f. Flat loops, the tz term below a column's first cell being a
+    zero face (tz = 0 on the top row of the previous column)."""
+    nx, nz = P.shape
+    cap, fx, fz, fb, rhs, pf, df = flat(capacity), flat(tx), flat(tz), flat(tb), flat(p_star), flat(P), flat(diag)
+    size = np.uint64(pf.size)
+    unz = np.uint64(nz)
+    last = size - unz
+    df[0] = cap[0] / dt_f + fx[0] + fx[last] + fb[0] + fz[0]
+    for c in range(np.uint64(1), unz):
+        df[c] = cap[c] / dt_f + fx[c] + fx[c + last] + fb[c] + fz[c] + fz[c - np.uint64(1)]
+    for c in range(unz, size):
+        df[c] = cap[c] / dt_f + fx[c] + fx[c - unz] + fb[c] + fz[c] + fz[c - np.uint64(1)]
+    for c in range(np.uint64(0), size):
+        pf[c] = rhs[c]
+        rhs[c] *= cap[c] / dt_f
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -146,47 +183,104 @@ def explicit_bound(capacity, tx, tz, tb):
     return 2.0 / lam_max
 
 
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _row(d, p, tx_east, p_east, tx_west, p_west, tz_up, p_up, tz_down, p_down):
+    """One row of the operator, in the order of the terms. Scalars only: a helper taking the
+    arrays costs reference counting per cell in a plain loop."""
+    return (d * p - tx_east * p_east - tx_west * p_west) - tz_up * p_up - tz_down * p_down
+
+
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _apply_operator(p, diag, tx, tz, q):
-    """q = (C/dt + L) p for the 5-point operator (diag holds C/dt + sum of face conductances)."""
+    """q = (C/dt + L) p for the 5-point operator (diag holds C/dt + sum of face conductances).
+    Flat loops (the middle columns vectorise): the x neighbours of cell c are c + nz and c - nz
+    (wrapping in the first and last columns); the z terms use tz = 0 across the walls (c + 1 and
+    c - 1 then lie in the next or previous column: their product is a zero and the difference
+    keeps the value). The first and last cells, whose z neighbour would fall outside the
+    arrays, take a zero term."""
     nx, nz = p.shape
-    for i in range(nx):
-        ip = (i + 1) % nx
-        im = (i - 1) % nx
-        for j in range(nz):
-            v = diag[i, j] * p[i, j] - tx[i, j] * p[ip, j] - tx[im, j] * p[im, j]
-            if j < nz - 1:
-                v -= tz[i, j] * p[i, j + 1]
-            if j > 0:
-                v -= tz[i, j - 1] * p[i, j - 1]
-            q[i, j] = v
+    pf, df, fx, fz, qf = flat(p), flat(diag), flat(tx), flat(tz), flat(q)
+    size = np.uint64(pf.size)             # (>= 2: nz >= 2)
+    unz = np.uint64(nz)
+    one = np.uint64(1)
+    end = size - one
+    last = size - unz                     # first cell of the last column (0 if nx = 1)
+    east = unz if nx > 1 else np.uint64(0)
+    qf[0] = _row(df[0], pf[0], fx[0], pf[east], fx[last], pf[last], fz[0], pf[1], 0.0, 0.0)
+    if nx == 1:                           # one column: it is its own x neighbour
+        for c in range(one, end):
+            qf[c] = _row(df[c], pf[c], fx[c], pf[c], fx[c], pf[c], fz[c], pf[c + one], fz[c - one], pf[c - one])
+    else:
+        for c in range(one, unz):
+            w = c + last
+            qf[c] = _row(df[c], pf[c], fx[c], pf[c + unz], fx[w], pf[w], fz[c], pf[c + one], fz[c - one], pf[c - one])
+        for c in range(unz, last):
+            w = c - unz
+            qf[c] = _row(df[c], pf[c], fx[c], pf[c + unz], fx[w], pf[w], fz[c], pf[c + one], fz[c - one], pf[c - one])
+        for c in range(last, end):
+            w = c - unz
+            e = c - last
+            qf[c] = _row(df[c], pf[c], fx[c], pf[e], fx[w], pf[w], fz[c], pf[c + one], fz[c - one], pf[c - one])
+    w = end - unz if nx > 1 else end
+    e = end - last
+    qf[end] = _row(df[end], pf[end], fx[end], pf[e], fx[w], pf[w], 0.0, 0.0, fz[end - one], pf[end - one])
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _factor_columns(diag, tz, cp, dinv):
-    """Thomas factorisation of the z-column tridiagonal blocks of the operator."""
+def _transpose(a, out):
+    """out (nz, nx) = a (nx, nz) transposed; both C-contiguous."""
+    nx, nz = a.shape
+    af, of = flat(a), flat(out)
+    unx, unz = np.uint64(nx), np.uint64(nz)
+    for j in range(np.uint64(0), unz):
+        for i in range(np.uint64(0), unx):
+            of[j * unx + i] = af[i * unz + j]
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _factor_columns(diag, tz, tzt, cp, dinv):
+    """Thomas factorisation of the z-column tridiagonal blocks of the operator, transposed:
+    tzt, cp, dinv are (nz, nx), so that the solves run along x, all columns at once
+    (vector loops over rows) with each column's own recurrence in z."""
     nx, nz = diag.shape
-    for i in range(nx):
-        dinv[i, 0] = 1.0 / diag[i, 0]
-        cp[i, 0] = -tz[i, 0] * dinv[i, 0]
-    for j in range(1, nz):
-        for i in range(nx):
-            dinv[i, j] = 1.0 / (diag[i, j] + tz[i, j - 1] * cp[i, j - 1])
-            cp[i, j] = -tz[i, j] * dinv[i, j]
+    _transpose(tz, tzt)
+    _transpose(diag, dinv)
+    for j in range(nz):
+        d, c, t = dinv[j], cp[j], tzt[j]
+        if j == 0:
+            for i in range(np.uint64(nx)):
+                d[i] = 1.0 / d[i]
+                c[i] = -t[i] * d[i]
+        else:
+            below_t, below_c = tzt[j - 1], cp[j - 1]
+            for i in range(np.uint64(nx)):
+                d[i] = 1.0 / (d[i] + below_t[i] * below_c[i])
+                c[i] = -t[i] * d[i]
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _solve_columns(r, tz, cp, dinv, out):
-    """out = B^-1 r with B the z-column tridiagonal part of the operator."""
+def _solve_columns(r, tzt, cp, dinv, line, out):
+    """out = B^-1 r with B the z-column tridiagonal part of the operator (factors from
+    _factor_columns), through line (nz, nx): r transposed, solved in place, transposed back."""
     nx, nz = r.shape
-    for i in range(nx):
-        out[i, 0] = r[i, 0] * dinv[i, 0]
+    _transpose(r, line)
+    unx = np.uint64(nx)
+    row, d = line[0], dinv[0]
+    for i in range(unx):
+        row[i] = row[i] * d[i]
     for j in range(1, nz):
-        for i in range(nx):
-            out[i, j] = (r[i, j] + tz[i, j - 1] * out[i, j - 1]) * dinv[i, j]
+        row, below, t, d = line[j], line[j - 1], tzt[j - 1], dinv[j]
+        for i in range(unx):
+            row[i] = (row[i] + t[i] * below[i]) * d[i]
     for j in range(nz - 2, -1, -1):
-        for i in range(nx):
-            out[i, j] -= cp[i, j] * out[i, j + 1]
+        row, above, c = line[j], line[j + 1], cp[j]
+        for i in range(unx):
+            row[i] -= c[i] * above[i]
+    of, lf = flat(out), flat(line)
+    unz = np.uint64(nz)
+    for i in range(np.uint64(0), unx):
+        for j in range(np.uint64(0), unz):
+            of[i * unz + j] = lf[j * unx + i]
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -227,34 +321,35 @@ def conjugate_gradient(solution, rhs, diag, tx, tz, work, tol, max_iter):
     """Solve (C/dt + L) solution = rhs by z-line preconditioned conjugate gradients.
 
     solution : float64[nx, nz] in: initial guess, out: solution
-    work : float64[N_GRID_WORK, nx, nz] scratch (G_R, G_Z, G_P, G_Q, G_CP, G_DINV used)
+    work : float64[N_GRID_WORK, nx, nz] scratch (G_R, G_Z, G_P, G_Q, G_CP, G_DINV, G_TZT, G_LINE used)
     Returns (iterations, ||r|| / ||rhs||, converged).
     """
     r = work[G_R]
     zv = work[G_Z]
     p = work[G_P]
     q = work[G_Q]
-    cp = work[G_CP]
-    dinv = work[G_DINV]
     nx, nz = rhs.shape
+    transposed = (nz, nx)
+    cp = work[G_CP].reshape(transposed)
+    dinv = work[G_DINV].reshape(transposed)
+    tzt = work[G_TZT].reshape(transposed)
+    line = work[G_LINE].reshape(transposed)
     rhs_norm = math.sqrt(_dot(rhs, rhs))
     if rhs_norm == 0.0:
-        for i in range(nx):
-            for j in range(nz):
-                solution[i, j] = 0.0
+        solution[:] = 0.0
         return 0, 0.0, True
-    _factor_columns(diag, tz, cp, dinv)
+    _factor_columns(diag, tz, tzt, cp, dinv)
     _apply_operator(solution, diag, tx, tz, q)
-    for i in range(nx):
-        for j in range(nz):
-            r[i, j] = rhs[i, j] - q[i, j]
+    rf, bf, qf = flat(r), flat(rhs), flat(q)
+    for c in range(np.uint64(rf.size)):
+        rf[c] = bf[c] - qf[c]
     res = math.sqrt(_dot(r, r)) / rhs_norm
     if res <= tol:
         return 0, res, True
-    _solve_columns(r, tz, cp, dinv, zv)
-    for i in range(nx):
-        for j in range(nz):
-            p[i, j] = zv[i, j]
+    _solve_columns(r, tzt, cp, dinv, line, zv)
+    pf, zf = flat(p), flat(zv)
+    for c in range(np.uint64(pf.size)):
+        pf[c] = zf[c]
     rz = _dot(r, zv)
     for it in range(1, max_iter + 1):
         _apply_operator(p, diag, tx, tz, q)
@@ -262,13 +357,12 @@ def conjugate_gradient(solution, rhs, diag, tx, tz, work, tol, max_iter):
         res = math.sqrt(_step_residual(alpha, p, q, solution, r)) / rhs_norm
         if res <= tol:
             return it, res, True
-        _solve_columns(r, tz, cp, dinv, zv)
+        _solve_columns(r, tzt, cp, dinv, line, zv)
         rz_new = _dot(r, zv)
         gamma = rz_new / rz
         rz = rz_new
-        for i in range(nx):
-            for j in range(nz):
-                p[i, j] = zv[i, j] + gamma * p[i, j]
+        for c in range(np.uint64(pf.size)):
+            pf[c] = zf[c] + gamma * pf[c]
     return max_iter, res, False
 
 
