@@ -36,8 +36,8 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_DFZ, DEPOSIT_GROUPS, M_FLAG, M_G, M_S, M_U, M_W,
-                     N_MOMENTS, N_SUMMED)
+from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_DFZ, CR_U, CR_W, DEPOSIT_GROUPS, M_FLAG, M_G,
+                     M_S, M_U, M_W, N_MOMENTS, N_SUMMED)
 from .lanes import add2, add4, add4_scaled
 from .step import closed_velocity
 
@@ -208,11 +208,12 @@ def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s,
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
 def _group(g, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick):
-    """Cells, areas and moments of the grains of group g into partial[g]."""
+    """Cells, areas, velocities and moments of the grains of group g into partial[g]."""
     first = g * n // DEPOSIT_GROUPS
     last = (g + 1) * n // DEPOSIT_GROUPS
     _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
-    _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, partial[g], corners, nz, grain_kick)
+    _velocity_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners, grain_kick)
+    _moments_range(first, last, partial[g], corners, nz)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
@@ -296,31 +297,50 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _moments_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz, grain_kick):
-    """moments (nx * nz, N_MOMENTS) of grains first:last from their corners, flagging (M_FLAG)
-    the grid columns they add to. Zeroes the columns flagged by the previous call first, so
-    the rest of moments must be zero on entry (a zeroed allocation keeps it so). grain_kick:
-    see deposit (velocities after the owed half kick when its first item is true)."""
+def _velocity_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners, grain_kick):
+    """corners rows CR_U, CR_W of grains first:last: the velocity each deposits, vx and vz - w(z)
+    (grid-relative), after the owed half kick if grain_kick says so (see deposit). A loop
+    without stores to shared places: it vectorises, which the scatter that follows cannot."""
     if grain_kick is None:                  # (the arrays after False are not read)
-        _moments_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz,
-                      (False, vx, vz, vx, vx, 0.0, 0.0, 0.0, 0.0))
+        _velocity_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners,
+                       (False, vx, vz, vx, vx, 0.0, 0.0, 0.0, 0.0))
     else:
-        _moments_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz, grain_kick)
+        _velocity_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners, grain_kick)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _moments_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, corners, nz, grain_kick):
-    """_moments_range with a grain_kick tuple."""
+def _velocity_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners, grain_kick):
+    """_velocity_range with a grain_kick tuple."""
     owed, force_x, force_z, inv_mass, body, half, damp, wall_vx, wall_vz = grain_kick
     grid_strain_rate = (w_top - w_bot) / (z_top - z_bot)
+    us, ws = corners[CR_U], corners[CR_W]
+    if owed:
+        for kk in range(first, last):
+            k = np.uint64(kk)
+            u, v = closed_velocity(body[k], vx[k], vz[k], force_x[k] * inv_mass[k], force_z[k] * inv_mass[k],
+                                   half, damp, wall_vx, wall_vz)
+            us[k] = u
+            ws[k] = v - (w_bot + (z[k] - z_bot) * grid_strain_rate)
+    else:
+        for kk in range(first, last):
+            k = np.uint64(kk)
+            us[k] = vx[k]
+            ws[k] = vz[k] - (w_bot + (z[k] - z_bot) * grid_strain_rate)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _moments_range(first, last, moments, corners, nz):
+    """moments (nx * nz, N_MOMENTS) of grains first:last from their corners and velocities,
+    flagging (M_FLAG) the grid columns they add to. Zeroes the columns flagged by the previous
+    call first, so the rest of moments must be zero on entry (a zeroed allocation keeps it so)."""
     for head in range(0, moments.shape[0], nz):
         if moments[head, M_FLAG] != 0.0:
             for c in range(head, head + nz):
                 for m in range(N_MOMENTS):
                     moments[c, m] = 0.0
     flat = moments.reshape(moments.size)
-    c00, a00s, a10s, a01s, a11s, dfz = (corners[CR_00], corners[CR_A00], corners[CR_A10], corners[CR_A01],
-                                         corners[CR_A11], corners[CR_DFZ])
+    c00, a00s, a10s, a01s, a11s, dfz, us, ws = (corners[CR_00], corners[CR_A00], corners[CR_A10], corners[CR_A01],
+                                                 corners[CR_A11], corners[CR_DFZ], corners[CR_U], corners[CR_W])
     inv_nz = 1.0 / nz
     column = np.uint64(nz) * np.uint64(N_MOMENTS)
     for kk in range(first, last):
@@ -332,16 +352,9 @@ def _moments_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, moments, c
         a10 = a10s[k]
         a01 = a01s[k]
         a11 = a11s[k]
-        if owed:
-            u, v = closed_velocity(body[k], vx[k], vz[k], force_x[k] * inv_mass[k], force_z[k] * inv_mass[k],
-                                   half, damp, wall_vx, wall_vz)
-        else:
-            u = vx[k]
-            v = vz[k]
-        w = v - (w_bot + (z[k] - z_bot) * grid_strain_rate)
         add4(flat, r + np.uint64(M_S), a00, a10, a01, a11)           # (4-lane vector adds: 2x faster, same bits)
-        add4_scaled(flat, r + np.uint64(M_U), a00, a10, a01, a11, u)
-        add4_scaled(flat, r + np.uint64(M_W), a00, a10, a01, a11, w)
+        add4_scaled(flat, r + np.uint64(M_U), a00, a10, a01, a11, us[k])
+        add4_scaled(flat, r + np.uint64(M_W), a00, a10, a01, a11, ws[k])
         add2(flat, r + np.uint64(M_G), (a00 + a01) * dfz[k], (a10 + a11) * dfz[k])
         # column of c00 = i nz + j (j < nz): floor((i nz + j) / nz) with 1/nz rounded is still i
         flat[np.uint64(math.floor(c00[k] * inv_nz)) * column + np.uint64(M_FLAG)] = 1.0
