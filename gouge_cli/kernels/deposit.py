@@ -331,8 +331,9 @@ def _velocity_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners, 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _moments_range(first, last, moments, corners, nz):
     """moments (nx * nz, N_MOMENTS) of grains first:last from their corners and velocities,
-    flagging (M_FLAG) the grid columns they add to. Zeroes the columns flagged by the previous
-    call first, so the rest of moments must be zero on entry (a zeroed allocation keeps it so)."""
+    flagging (M_FLAG) the grid columns they may add to (_flag_columns). Zeroes the columns
+    flagged by the previous call first, so the rest of moments must be zero on entry (a zeroed
+    allocation keeps it so)."""
     for head in range(0, moments.shape[0], nz):
         if moments[head, M_FLAG] != 0.0:
             for c in range(head, head + nz):
@@ -341,8 +342,6 @@ def _moments_range(first, last, moments, corners, nz):
     flat = moments.reshape(moments.size)
     c00, a00s, a10s, a01s, a11s, dfz, us, ws = (corners[CR_00], corners[CR_A00], corners[CR_A10], corners[CR_A01],
                                                  corners[CR_A11], corners[CR_DFZ], corners[CR_U], corners[CR_W])
-    inv_nz = 1.0 / nz
-    column = np.uint64(nz) * np.uint64(N_MOMENTS)
     for kk in range(first, last):
         k = np.uint64(kk)
         if c00[k] < 0.0:
@@ -356,8 +355,37 @@ def _moments_range(first, last, moments, corners, nz):
         add4_scaled(flat, r + np.uint64(M_U), a00, a10, a01, a11, us[k])
         add4_scaled(flat, r + np.uint64(M_W), a00, a10, a01, a11, ws[k])
         add2(flat, r + np.uint64(M_G), (a00 + a01) * dfz[k], (a10 + a11) * dfz[k])
-        # column of c00 = i nz + j (j < nz): floor((i nz + j) / nz) with 1/nz rounded is still i
-        flat[np.uint64(math.floor(c00[k] * inv_nz)) * column + np.uint64(M_FLAG)] = 1.0
+    _flag_columns(first, last, c00, moments, nz)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _flag_columns(first, last, c00, moments, nz):
+    """Flag (M_FLAG of a column's first record) an arc of grid columns that holds the column of
+    every grain first:last: offsets from the first grain's column, taken into (-nx/2, nx/2]
+    around it, and their least and greatest. The arc may hold columns no grain added to (they
+    stay zero); it is one vector pass (int32 columns, integer min and max), where a flag store per
+    grain cost ~10 us per update at 10,000 grains."""
+    nx = moments.shape[0] // nz
+    if last <= first:
+        return
+    inv_nz = 1.0 / nz
+    base = np.int32(max(c00[first], 0.0) * inv_nz)       # c00 = i nz + j: i (1/nz rounded: still i)
+    half = np.int32(nx // 2)
+    width = np.int32(nx)
+    lo = np.int32(0)
+    hi = np.int32(0)
+    for kk in range(first, last):
+        k = np.uint64(kk)
+        col = np.int32(c00[k] * inv_nz) if c00[k] >= 0.0 else base     # (c00 = -1: outside the layer)
+        d = col - base
+        d = d - width if d > half else d
+        d = d + width if d <= -half else d
+        lo = min(lo, d)
+        hi = max(hi, d)
+    column = nz * N_MOMENTS
+    flat = moments.reshape(moments.size)
+    for d in range(lo, hi + 1):
+        flat[((base + d) % nx) * column + M_FLAG] = 1.0
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
