@@ -37,7 +37,7 @@ from numba import njit, prange
 
 from . import NUMBA_CACHE
 from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_DFZ, CR_U, CR_W, DEPOSIT_GROUPS, M_FLAG, M_G,
-                     M_S, M_U, M_W, N_MOMENTS, N_SUMMED)
+                     M_S, M_U, M_W, N_MOMENTS)
 from .lanes import add2, add4, add4_scaled
 from .step import closed_velocity
 
@@ -220,15 +220,15 @@ def _group(g, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, c
 def _collect_column(i, nz, partial):
     """Add the later groups' records of grid column i to partial[0], in group order (only the
     groups that flagged the column: a group's grains are nearby)."""
-    total = partial[0]
-    head = i * nz
+    span = np.uint64(nz * N_MOMENTS)            # a column's records are contiguous: one vector loop
+    start = np.uint64(i) * span
+    total = partial[0].reshape(partial[0].size)
     for g in range(1, DEPOSIT_GROUPS):
-        if partial[g, head, M_FLAG] == 0.0:
+        if partial[g, i * nz, M_FLAG] == 0.0:
             continue                 # all +0.0 there, and x + (+0.0) is x (sums are never -0.0)
-        total[head, M_FLAG] = 1.0
-        for c in range(head, head + nz):
-            for m in range(N_SUMMED):
-                total[c, m] += partial[g, c, m]
+        part = partial[g].reshape(partial[g].size)
+        for c in range(start, start + span):   # (the flag and padding slots add too: still != 0 / 0)
+            total[c] += part[c]
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
@@ -334,12 +334,13 @@ def _moments_range(first, last, moments, corners, nz):
     flagging (M_FLAG) the grid columns they may add to (_flag_columns). Zeroes the columns
     flagged by the previous call first, so the rest of moments must be zero on entry (a zeroed
     allocation keeps it so)."""
+    flat = moments.reshape(moments.size)
+    span = np.uint64(nz * N_MOMENTS)
     for head in range(0, moments.shape[0], nz):
         if moments[head, M_FLAG] != 0.0:
-            for c in range(head, head + nz):
-                for m in range(N_MOMENTS):
-                    moments[c, m] = 0.0
-    flat = moments.reshape(moments.size)
+            start = np.uint64(head * N_MOMENTS)
+            for c in range(start, start + span):
+                flat[c] = 0.0
     c00, a00s, a10s, a01s, a11s, dfz, us, ws = (corners[CR_00], corners[CR_A00], corners[CR_A10], corners[CR_A01],
                                                  corners[CR_A11], corners[CR_DFZ], corners[CR_U], corners[CR_W])
     for kk in range(first, last):
