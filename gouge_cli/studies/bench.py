@@ -227,7 +227,8 @@ def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability
 def profile_fluid(n_grains: int, start: dict, dt: float, skin: float, permeability: float, threads: int,
                   calls: int = 30) -> dict:
     """Microseconds of one fluid update's parts on the undrained scene (kernels.fluid_update), best
-    of 3 x `calls`: the deposit (with the owed half kick, as in the running loop), the grid solve
+    of 3 x `calls`: the deposit (with the owed half kick and, on one thread, in plain loops, as in
+    the running loop), the grid solve
     (serial on any thread count; P and the fluid state restored before each call) and the drag."""
     from ..kernels import fluid_update as F
 
@@ -248,7 +249,7 @@ def profile_fluid(n_grains: int, start: dict, dt: float, skin: float, permeabili
 
     def begin():
         F.fluid_begin(s.x, s.z, s.vx, s.vz, s.radius, s.n, s.width, z_bot, z_top, dt_f, fl.state, fl.s, fl.s_old,
-                      fl.ux, fl.uz, fl.work, fl.corners, fl.partial, kick)
+                      fl.ux, fl.uz, fl.work, fl.corners, fl.partial, kick, threads <= 1)
 
     def solve():
         F.fluid_solve(s.width, z_bot, z_top, dt_f, fl.params, fl.state, fl.pressure, fl.s, fl.s_old, fl.ux, fl.uz,
