@@ -143,6 +143,8 @@ def grain_drag_at(corners, n, pairs, drag_x, drag_z):
             drag_x[k] = 0.0
             drag_z[k] = 0.0
             continue
-        drag_x[k], drag_z[k] = bilinear_pairs(pairs, np.uint64(c00[k]) * np.uint64(2), np.uint64(c10[k]) * np.uint64(2),
+        i00 = np.uint64(np.int64(c00[k]))   # (float -> int64 -> uint64: without AVX-512 a direct float -> uint64
+        i10 = np.uint64(np.int64(c10[k]))   # conversion is a dozen instructions)
+        drag_x[k], drag_z[k] = bilinear_pairs(pairs, i00 * np.uint64(2), i10 * np.uint64(2),
                                               corners[CR_A00, k], corners[CR_A10, k], corners[CR_A01, k],
                                               corners[CR_A11, k])
