@@ -240,38 +240,41 @@ def _transpose(a, out):
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _factor_columns(diag, tz, tzt, cp, dinv):
     """Thomas factorisation of the z-column tridiagonal blocks of the operator, transposed:
-    tzt, cp, dinv are (nz, nx), so that the solves run along x, all columns at once
-    (vector loops over rows, flat indices) with each column's own recurrence in z."""
+    tzt, cp, dinv are (nz, nx), so that the solves run along x, all columns at once (a vector
+    loop per row; rows as separate views, so the compiler sees the row before as another
+    array) with each column's own recurrence in z."""
     nx, nz = diag.shape
     _transpose(tz, tzt)
     _transpose(diag, dinv)
-    t, c, d = flat(tzt), flat(cp), flat(dinv)
-    unx = np.uint64(nx)
-    for i in range(np.uint64(0), unx):
+    d, c, t = dinv[0], cp[0], tzt[0]
+    for i in range(nx):
         d[i] = 1.0 / d[i]
         c[i] = -t[i] * d[i]
-    for k in range(unx, np.uint64(d.size)):          # row j >= 1, k = j nx + i; k - nx is row j - 1
-        d[k] = 1.0 / (d[k] + t[k - unx] * c[k - unx])
-        c[k] = -t[k] * d[k]
+    for j in range(1, nz):
+        d, c, t, below_t, below_c = dinv[j], cp[j], tzt[j], tzt[j - 1], cp[j - 1]
+        for i in range(nx):
+            d[i] = 1.0 / (d[i] + below_t[i] * below_c[i])
+            c[i] = -t[i] * d[i]
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _solve_columns(r, tzt, cp, dinv, line, out):
     """out = B^-1 r with B the z-column tridiagonal part of the operator (factors from
-    _factor_columns), through line (nz, nx): r transposed, solved in place, transposed back."""
+    _factor_columns), through line (nz, nx): r transposed, solved in place row by row (vector
+    loops), transposed back."""
     nx, nz = r.shape
     _transpose(r, line)
-    t, c, d, y = flat(tzt), flat(cp), flat(dinv), flat(line)
-    unx = np.uint64(nx)
-    size = np.uint64(y.size)
-    for i in range(np.uint64(0), unx):
-        y[i] = y[i] * d[i]
-    for j in range(np.uint64(1), np.uint64(nz)):      # forward, row by row (each row a vector loop)
-        for k in range(j * unx, j * unx + unx):
-            y[k] = (y[k] + t[k - unx] * y[k - unx]) * d[k]
-    for j in range(np.uint64(nz - 1), np.uint64(0), np.int64(-1)):   # back: rows nz-2 .. 0
-        for k in range(j * unx - unx, j * unx):
-            y[k] -= c[k] * y[k + unx]
+    row, d = line[0], dinv[0]
+    for i in range(nx):
+        row[i] = row[i] * d[i]
+    for j in range(1, nz):
+        row, below, t, d = line[j], line[j - 1], tzt[j - 1], dinv[j]
+        for i in range(nx):
+            row[i] = (row[i] + t[i] * below[i]) * d[i]
+    for j in range(nz - 2, -1, -1):
+        row, above, c = line[j], line[j + 1], cp[j]
+        for i in range(nx):
+            row[i] -= c[i] * above[i]
     _transpose_back(line, out)
 
 

@@ -99,7 +99,9 @@ def test_grouped_deposit_reuses_its_scratch_and_takes_owed_kicks():
     """partial is reused between calls (only the columns a group touched are cleared): a deposit
     after one from grains elsewhere gives the bits of a fresh scratch. With grain_kick, the
     velocities are the whole-step ones (closing half kick for free grains, the wall velocity
-    for top-wall grains, bottom-wall grains as stored): the bits of closing first."""
+    for top-wall grains, bottom-wall grains as stored): the bits of closing first. The serial
+    form (one thread: groups 1.. through one scratch buffer, added at once) gives the same bits
+    as the parallel one, whatever either left in the scratch."""
 
     width, z_bot, z_top = 12.0, 0.5, 10.5
     x, z, radius = _grains(seed=5, n=400)
@@ -111,17 +113,23 @@ def test_grouped_deposit_reuses_its_scratch_and_takes_owed_kicks():
     body[20:40] = L.BOTTOM
     half, damp, wall_v = 0.05, 0.3, (2e-3, -1e-3)
 
-    def run(partial, xs, grain_kick=None, u=vx, w=vz):
+    def run(partial, xs, grain_kick=None, u=vx, w=vz, serial=False):
         out = [np.empty((5, 4)) for _ in range(5)]
         corners = np.zeros((L.N_CORNERS, x.size))
         KD.deposit(xs, z, u, w, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial,
-                        grain_kick)
+                        grain_kick, serial)
         return b"".join(a.tobytes() for a in out)
 
     fresh = run(np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS)), x)
     reused = np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS))
-    run(reused, np.sort(x)[::-1] + 0.37 * width)           # groups in other columns first
+    elsewhere = np.sort(x)[::-1] + 0.37 * width            # groups in other columns first
+    run(reused, elsewhere)
     assert run(reused, x) == fresh
+    for first, then in ((True, True), (False, True), (True, False)):
+        run(reused, elsewhere, serial=first)
+        assert run(reused, x, serial=then) == fresh
+    banded = np.sort(x)                                     # groups in bands of columns, as in a run
+    assert run(reused, banded, serial=True) == run(np.zeros_like(reused), banded) != fresh
     closed_x, closed_z = vx.copy(), vz.copy()
     free = body == L.FREE
     closed_x[free] = vx[free] + half * (fx[free] * inv_mass[free] - damp * vx[free])
@@ -130,6 +138,7 @@ def test_grouped_deposit_reuses_its_scratch_and_takes_owed_kicks():
     partial = np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS))
     owed = run(partial, x, (True, fx, fz, inv_mass, body, half, damp, *wall_v))
     assert owed == run(partial, x, u=closed_x, w=closed_z) != fresh
+    assert run(partial, x, (True, fx, fz, inv_mass, body, half, damp, *wall_v), serial=True) == owed
     assert run(partial, x, (False, fx, fz, inv_mass, body, half, damp, *wall_v)) == fresh
 
 
