@@ -228,13 +228,13 @@ def _apply_operator(p, diag, tx, tz, q):
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _transpose(a, out):
-    """out (nz, nx) = a (nx, nz) transposed; both C-contiguous."""
-    nx, nz = a.shape
+    """out (m, n) = a (n, m) transposed, writing out in order; both C-contiguous."""
+    n, m = a.shape
     af, of = flat(a), flat(out)
-    unx, unz = np.uint64(nx), np.uint64(nz)
-    for j in range(np.uint64(0), unz):
-        for i in range(np.uint64(0), unx):
-            of[j * unx + i] = af[i * unz + j]
+    un, um = np.uint64(n), np.uint64(m)
+    for j in range(np.uint64(0), um):
+        for i in range(np.uint64(0), un):
+            of[j * un + i] = af[i * um + j]
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -275,18 +275,7 @@ def _solve_columns(r, tzt, cp, dinv, line, out):
         row, above, c = line[j], line[j + 1], cp[j]
         for i in range(nx):
             row[i] -= c[i] * above[i]
-    _transpose_back(line, out)
-
-
-@njit(cache=NUMBA_CACHE, error_model="numpy")
-def _transpose_back(line, out):
-    """out (nx, nz) = line (nz, nx) transposed."""
-    nx, nz = out.shape
-    of, lf = flat(out), flat(line)
-    unx, unz = np.uint64(nx), np.uint64(nz)
-    for i in range(np.uint64(0), unx):
-        for j in range(np.uint64(0), unz):
-            of[i * unz + j] = lf[j * unx + i]
+    _transpose(line, out)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
