@@ -146,11 +146,13 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  to first order (a rigid translation generates no source).
     corners : float64[N_CORNERS, >= n] out (rows C_*), per grain: flat indices c00, c10 of its
                  corner cells, the areas a00, a10, a01, a11 they receive (c00 = -1 for a
-                 grain outside the layer) and d fz/dz; reused by grain_drag_at for the drag.
+                 grain outside the layer) and d fz/dz, reused by grain_drag_at for the drag;
+                 and the velocity it deposits (rows CR_U, CR_W), scratch.
     partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS] scratch. With corners and partial,
-                 the fast form: a vectorised pass for the cells and areas (_corners_range),
-                 then each grain adds 14 moments to the record of its cell c00
-                 (_moments_range), in DEPOSIT_GROUPS fixed groups of grains (in parallel)
+                 the fast form: vectorised passes for the cells and areas (_corners_range)
+                 and the velocities (_velocity_range), then each grain adds 14 moments to the
+                 record of its cell c00 (_moments_range), in DEPOSIT_GROUPS fixed groups of
+                 grains (in parallel)
                  summed in group order, and one pass over the cells collects the four shares
                  (_expand): the same sums regrouped (equal to round-off), the same bits for
                  any thread count. Without partial, the direct serial form, the definition:
@@ -161,8 +163,8 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  each grain's velocity is taken after the second half kick it still owes
                  (kernels.step.closed_velocity): the same bits as closing the step first,
                  without a pass over the grains.
-    serial : (fast form only) plain loops instead of parallel ones (for one thread: a parallel
-                 region costs a few us even there); the same sums in the same order.
+    serial : (fast form only) for one thread: plain loops, the groups after the first through one
+                 scratch buffer (see _deposit_grouped); the same sums in the same order.
     """
     nx, nz = s.shape
     size = nx * nz
