@@ -279,6 +279,9 @@ def test_from_config_and_kernel_args():
     assert (thin.nx, thin.nz) == (1, 2)
     explicit = FluidGrid.from_config(FluidConfig(solver="explicit"), 20.0, 0.0, 10.0, 4)
     assert explicit.params[L.P_SOLVER] == L.SOLVER_EXPLICIT
+    for g in (grid, thin):                      # the moment records start on cache lines, zeroed
+        assert g.partial.ctypes.data % 64 == 0 and g.partial.flags.c_contiguous and not g.partial.any()
+        assert g.partial.shape == (L.DEPOSIT_GROUPS, g.nx * g.nz, L.N_MOMENTS)
 
 
 def test_status_codes():
