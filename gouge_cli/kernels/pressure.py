@@ -185,8 +185,8 @@ def explicit_bound(capacity, tx, tz, tb):
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
 def _row(d, p, tx_east, p_east, tx_west, p_west, tz_up, p_up, tz_down, p_down):
-    """One row of the operator, in the order of the terms. Scalars only: a helper taking the
-    arrays costs reference counting per cell in a plain loop."""
+    """One row of the operator, in the order of the terms. Scalars only: numba may reference-count
+    the arrays of an inlined helper at every call of a plain loop (measured ~10x on the drag)."""
     return (d * p - tx_east * p_east - tx_west * p_west) - tz_up * p_up - tz_down * p_down
 
 
