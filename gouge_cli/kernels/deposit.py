@@ -222,41 +222,45 @@ def _group(g, b, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _collect_column(i, nz, partial):
-    """Add the later groups' records of grid column i to partial[0], in group order (only the
-    groups that flagged the column: a group's grains are nearby)."""
-    span = np.uint64(nz * N_MOMENTS)            # a column's records are contiguous: one vector loop
+def _add_column(records, i, g, group, span, clear):
+    """records: partial as one flat array, group = nx * nz * N_MOMENTS its group stride, span =
+    nz * N_MOMENTS a column's. partial[0] += partial[g] over grid column i if group g flagged it
+    (a column's records are contiguous: one vector loop; the flag and padding slots add too and
+    stay != 0 / 0), zeroing those records of partial[g] as it goes if clear. Unflagged: all +0.0
+    there, and x + (+0.0) is x (sums are never -0.0)."""
     start = np.uint64(i) * span
-    total = partial[0].reshape(partial[0].size)
-    for g in range(1, DEPOSIT_GROUPS):
-        if partial[g, i * nz, M_FLAG] == 0.0:
-            continue                 # all +0.0 there, and x + (+0.0) is x (sums are never -0.0)
-        part = partial[g].reshape(partial[g].size)
-        for c in range(start, start + span):   # (the flag and padding slots add too: still != 0 / 0)
-            total[c] += part[c]
+    source = np.uint64(g) * group + start
+    if records[source + np.uint64(M_FLAG)] == 0.0:
+        return
+    if clear:                                  # (one pass: each record is read once)
+        for c in range(np.uint64(0), span):
+            records[start + c] += records[source + c]
+            records[source + c] = 0.0
+    else:
+        for c in range(np.uint64(0), span):
+            records[start + c] += records[source + c]
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _add_and_clear(partial, nx, nz):
-    """partial[0] += partial[1] over the columns partial[1] flagged, which are then zeroed, flag
-    included (the next group's _moments_range would zero them anyway; here they are in cache):
-    the serial deposit's collect of one group."""
+    """The serial deposit's collect of one group: partial[0] += partial[1] over the columns it
+    flagged, which are then zeroed (the next group's _moments_range would zero them anyway;
+    here they are in cache)."""
+    records = partial.reshape(partial.size)
     span = np.uint64(nz * N_MOMENTS)
-    total = partial[0].reshape(partial[0].size)
-    part = partial[1].reshape(partial[1].size)
     for i in range(nx):
-        if partial[1, i * nz, M_FLAG] == 0.0:
-            continue
-        start = np.uint64(i) * span
-        for c in range(start, start + span):
-            total[c] += part[c]
-            part[c] = 0.0
+        _add_column(records, i, 1, np.uint64(nx) * span, span, True)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
 def _collect_parallel(partial, nx, nz):
+    """The later groups' records added to partial[0], column by column in parallel, each column
+    in group order (only the groups that flagged it: a group's grains are nearby)."""
+    records = partial.reshape(partial.size)
+    span = np.uint64(nz * N_MOMENTS)
     for i in prange(nx):
-        _collect_column(i, nz, partial)
+        for g in range(1, DEPOSIT_GROUPS):
+            _add_column(records, i, g, np.uint64(nx) * span, span, False)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)

@@ -147,14 +147,16 @@ def implicit_system(capacity, tx, tz, tb, dt_f, p_star, P, diag):
     size = np.uint64(pf.size)
     unz = np.uint64(nz)
     last = size - unz
-    df[0] = cap[0] / dt_f + fx[0] + fx[last] + fb[0] + fz[0]
-    for c in range(np.uint64(1), unz):
-        df[c] = cap[c] / dt_f + fx[c] + fx[c + last] + fb[c] + fz[c] + fz[c - np.uint64(1)]
-    for c in range(unz, size):
-        df[c] = cap[c] / dt_f + fx[c] + fx[c - unz] + fb[c] + fz[c] + fz[c - np.uint64(1)]
-    for c in range(np.uint64(0), size):
+    one = np.uint64(1)
+    for c in range(np.uint64(0), size):                # C/dt_f once per cell, kept in diag
+        df[c] = cap[c] / dt_f
         pf[c] = rhs[c]
-        rhs[c] *= cap[c] / dt_f
+        rhs[c] *= df[c]
+    df[0] = df[0] + fx[0] + fx[last] + fb[0] + fz[0]
+    for c in range(one, unz):
+        df[c] = df[c] + fx[c] + fx[c + last] + fb[c] + fz[c] + fz[c - one]
+    for c in range(unz, size):
+        df[c] = df[c] + fx[c] + fx[c - unz] + fb[c] + fz[c] + fz[c - one]
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
