@@ -214,7 +214,11 @@ class FluidConfig(_Section):
     compressibility: Compressibility = Field(36.0, gt=0, description="beta [1/E] (4.5e-10 1/Pa)")
     viscosity: Viscosity = Field(1.43e-7, gt=0, description="eta [E t0] (1e-3 Pa s)")
     cell_size: float = Field(2.5, ge=0.5, le=20, description="target grid cell size [d]")
-    solver: Literal["implicit", "explicit"] = Field("implicit", description="pressure time stepping")
+    solver: Literal["auto", "implicit", "explicit"] = Field(
+        "auto", description="pressure time stepping: implicit (backward Euler, conjugate gradients), explicit "
+                            "(forward Euler, sub-stepped to explicit_safety x the FTCS bound), or auto: one "
+                            "explicit step while dt_f <= 0.1 x the FTCS bound (where both schemes' errors are "
+                            "equal to leading order), implicit otherwise")
     step: Time = Field(
         0.25, gt=0, le=1000,
         description="fluid update period dt_f, rounded to whole DEM steps [t0]; the drag is lagged by up to "

@@ -3,7 +3,8 @@
 
     NUMBA_NUM_THREADS=1 .venv/bin/python scripts/state_hashes.py   (T=2 for two threads)
 
-Expected since main 3548805 (1 or 2 threads): dry e9db53e39dbb39ad, undrained ecf1238ba035ffc2.
+Expected since main 3548805 (1 or 2 threads): dry e9db53e39dbb39ad, undrained with the implicit solver
+ecf1238ba035ffc2; undrained with the default solver (auto, since stop 31): see the README.
 """
 
 import os
@@ -14,10 +15,10 @@ from gouge_cli.driver.simulation import Simulation
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}, "compaction": {"min_time": 200.0, "max_time": 600.0},
          "loading": {"spring_constant": 2e-4, "velocity": 4e-3}, "numerics": {"sort_every": 1}, "seed": 2}
-for kind in ("dry", "undrained"):
+for kind in ("dry", "undrained", "undrained-implicit"):
     data = dict(SCENE)
-    if kind == "undrained":
-        data["fluid"] = {"permeability": 1e-5}
+    if kind != "dry":
+        data["fluid"] = {"permeability": 1e-5, "solver": "auto" if kind == "undrained" else "implicit"}
     sim = Simulation(build_config(data))
     sim.threads = int(os.environ.get("T", "1"))
     sim.compact()

@@ -36,8 +36,8 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_DFZ, CR_U, CR_W, DEPOSIT_GROUPS, M_FLAG, M_G,
-                     M_S, M_U, M_W, N_MOMENTS)
+from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_AREA, CR_DFZ, CR_KB, CR_KR, CR_KZ, CR_U, CR_W,
+                     DEPOSIT_GROUPS, M_FLAG, M_G, M_S, M_U, M_W, N_MOMENTS)
 from .lanes import add2, add4, add4_scaled
 from .step import closed_velocity
 
@@ -154,7 +154,7 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  record of its cell c00 (_moments_range), in DEPOSIT_GROUPS fixed groups of
                  grains (in parallel)
                  summed in group order, and one pass over the cells collects the four shares
-                 (_expand): the same sums regrouped (equal to round-off), the same bits for
+                 (_expand_column): the same sums regrouped (equal to round-off), the same bits for
                  any thread count. Without partial, the direct serial form, the definition:
                  every grain adds to its four cells (the tests' reference).
     grain_kick : (fast form only) None, or (owed, force_x, force_z, inv_mass, body, half, damp,
@@ -207,8 +207,12 @@ def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s,
     momentum_z = uz_rel.reshape(size)
     slope_x = grad_s_x.reshape(size)
     slope_z = grad_s_z.reshape(size)
-    _expand(total, nx, nz, nx / Lx, solid, momentum_x, momentum_z, slope_x, slope_z)
-    _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x, slope_z)
+    inv_area = nx / Lx * nz / (z_top - z_bot)
+    if serial:
+        for i in range(nx):
+            _expand_column(total, i, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
+    else:
+        _expand_parallel(total, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
@@ -275,7 +279,11 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
     """corners[:, first:last]: grain_area, cell_weights and corner_shares, the same values.
     A loop without calls or branches (SIMD) for grains clear of both planes with x in
     [dx/2 - Lx, Lx + dx/2) (one periodic wrap at most); it marks the others (d fz/dz = -1),
-    which then take the scalar path."""
+    which then take the scalar path. There a grain clear of the top plane reuses the area it
+    got last time (rows CR_AREA, CR_KZ, CR_KR, CR_KB) if its z, R and z_bot are the same bits:
+    grain_area is then the same function of the same inputs (the bottom wall's grains, fixed,
+    every update: ~5 us of ~11 for the 400 wall grains at 10,000 grains). A re-numbering or a
+    restart only misses it once."""
     inv_dx = nx / Lx
     inv_dz = nz / (z_top - z_bot)
     fnx = float(nx)
@@ -309,10 +317,20 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
         a11[k] = a1 * fx
         odd = (zk - z_bot < r) | (z_top - zk < r) | (fi < 0.0) | (fi != fi) | (fi >= fnx)   # (a NaN x is odd)
         dfz[k] = -1.0 if odd else (inv_dz if inside else 0.0)
+    cached, key_z, key_r, key_b = corners[CR_AREA], corners[CR_KZ], corners[CR_KR], corners[CR_KB]
     for k in range(first, last):
         if dfz[k] >= 0.0:
             continue
-        area = grain_area(z[k], radius[k], z_bot, z_top)
+        zk = z[k]
+        r = radius[k]
+        if z_top - zk >= r:                  # (the area depends on zk, r and z_bot alone)
+            if zk == key_z[k] and r == key_r[k] and z_bot == key_b[k]:
+                area = cached[k]
+            else:
+                area = grain_area(zk, r, z_bot, z_top)
+                cached[k], key_z[k], key_r[k], key_b[k] = area, zk, r, z_bot
+        else:
+            area = grain_area(zk, r, z_bot, z_top)
         if area <= 0.0:
             c00[k] = -1.0
             dfz[k] = 0.0
@@ -415,34 +433,38 @@ def _flag_columns(first, last, c00, moments, nz):
         flat[((base + d) % nx) * column + M_FLAG] = 1.0
 
 
-@njit(cache=NUMBA_CACHE, error_model="numpy")
-def _expand(moments, nx, nz, inv_dx, solid, momentum_x, momentum_z, slope_x, slope_z):
-    """Raw sums per cell (as _deposit_range leaves them) from the moment records of the grains
-    whose cell c00 is this one (share 00), the one to its left (10), below (01), left-below (11)."""
-    for i in range(nx):
-        il = i - 1 if i > 0 else nx - 1
-        for j in range(nz):
-            c = i * nz + j
-            own = moments[c]
-            left = moments[il * nz + j]
-            a = own[M_S] + left[M_S + 1]
-            b = own[M_U] + left[M_U + 1]
-            e = own[M_W] + left[M_W + 1]
-            gx = (own[M_S] + own[M_S + 1]) - (left[M_S] + left[M_S + 1])
-            gz = own[M_G] + left[M_G + 1]
-            if j > 0:
-                below = moments[c - 1]
-                corner = moments[il * nz + j - 1]
-                a += below[M_S + 2] + corner[M_S + 3]
-                b += below[M_U + 2] + corner[M_U + 3]
-                e += below[M_W + 2] + corner[M_W + 3]
-                gx += (below[M_S + 2] + below[M_S + 3]) - (corner[M_S + 2] + corner[M_S + 3])
-                gz -= below[M_G] + corner[M_G + 1]
-            solid[c] = a
-            momentum_x[c] = b
-            momentum_z[c] = e
-            slope_x[c] = gx * inv_dx
-            slope_z[c] = gz
+@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
+def _expand_parallel(moments, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
+    """_expand_column for every grid column, the columns in parallel (each writes its own cells)."""
+    for i in prange(nx):
+        _expand_column(moments, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _expand_column(moments, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
+    """s, mean velocities and slopes of grid column i (as _deposit_range then _normalise leave them)
+    from the moment records of the grains whose cell c00 is this one (share 00), the one to its
+    left (10), below (01), left-below (11)."""
+    il = i - 1 if i > 0 else nx - 1
+    for j in range(nz):
+        c = i * nz + j
+        own = moments[c]
+        left = moments[il * nz + j]
+        a = own[M_S] + left[M_S + 1]
+        b = own[M_U] + left[M_U + 1]
+        e = own[M_W] + left[M_W + 1]
+        gx = (own[M_S] + own[M_S + 1]) - (left[M_S] + left[M_S + 1])
+        gz = own[M_G] + left[M_G + 1]
+        if j > 0:
+            below = moments[c - 1]
+            corner = moments[il * nz + j - 1]
+            a += below[M_S + 2] + corner[M_S + 3]
+            b += below[M_U + 2] + corner[M_U + 3]
+            e += below[M_W + 2] + corner[M_W + 3]
+            gx += (below[M_S + 2] + below[M_S + 3]) - (corner[M_S + 2] + corner[M_S + 3])
+            gz -= below[M_G] + corner[M_G + 1]
+        solid[c], momentum_x[c], momentum_z[c], slope_x[c], slope_z[c] = _normalised(
+            a, b, e, gx * inv_dx, gz, inv_area)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -506,15 +528,20 @@ def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w
         slope_z[c11] -= gz1
 
 
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _normalised(solid, momentum_x, momentum_z, slope_x, slope_z, inv_area):
+    """One cell's raw sums -> (s, mean vx, mean vz - w, ds/dx, ds/dz) (see deposit)."""
+    if solid > 0.0:
+        momentum_x /= solid
+        momentum_z /= solid
+    return solid * inv_area, momentum_x, momentum_z, slope_x * inv_area, slope_z * inv_area
+
+
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _normalise(nx, nz, Lx, z_bot, z_top, solid, momentum_x, momentum_z, slope_x, slope_z):
     """Raw sums -> s, mean velocities and slopes (see deposit)."""
     inv_area = nx / Lx * nz / (z_top - z_bot)
     for c in range(nx * nz):
-        if solid[c] > 0.0:
-            momentum_x[c] /= solid[c]
-            momentum_z[c] /= solid[c]
-        solid[c] *= inv_area
-        slope_x[c] *= inv_area
-        slope_z[c] *= inv_area
+        solid[c], momentum_x[c], momentum_z[c], slope_x[c], slope_z[c] = _normalised(
+            solid[c], momentum_x[c], momentum_z[c], slope_x[c], slope_z[c], inv_area)
 

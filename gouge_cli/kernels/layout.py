@@ -78,7 +78,7 @@ PAIR_BUF = 256
 P_KAPPA_C = 0        # Carman-Kozeny prefactor kappa_c [d^2]
 P_BETA = 1           # fluid compressibility beta [1/E]
 P_ETA = 2            # fluid viscosity eta [E t0]
-P_SOLVER = 3         # SOLVER_IMPLICIT or SOLVER_EXPLICIT
+P_SOLVER = 3         # SOLVER_IMPLICIT, SOLVER_EXPLICIT or SOLVER_AUTO
 P_SAFETY = 4         # fraction of the FTCS bound per explicit sub-step [-]
 P_TOL = 5            # CG relative residual tolerance [-]
 P_MAX_ITER = 6       # CG iteration limit
@@ -89,6 +89,8 @@ N_FLUID_PARAMS = 10
 
 SOLVER_IMPLICIT = 0
 SOLVER_EXPLICIT = 1
+SOLVER_AUTO = 2       # one explicit step while dt_f <= AUTO_EXPLICIT x the FTCS bound, else implicit
+AUTO_EXPLICIT = 0.1   # (dt_f lambda <= 0.2 for every mode: both schemes' errors equal to leading order)
 
 S_Z_BOT = 0          # bottom plane at the last update [d]
 S_Z_TOP = 1          # top plane at the last update [d]
@@ -97,6 +99,7 @@ S_RESIDUAL = 3       # final relative residual of the last CG solve
 S_SUBSTEPS = 4       # explicit sub-steps of the last update
 S_DT_MAX = 5         # explicit stability bound of the last update [t0]
 S_UPDATES = 6        # number of fluid updates since fluid_init
+S_EXPLICIT_UPDATES = 7   # of them, those the explicit (FTCS) scheme did (solver explicit, or auto)
 N_FLUID_STATE = 8
 
 G_TX = 0             # conductance of face (i+1/2, j)
@@ -132,9 +135,11 @@ STATUS_NONFINITE = 2
 
 DEPOSIT_GROUPS = 4     # grains deposit in this many fixed groups, summed in group order
 # corners rows: flat indices of a grain's cells (i0, j0) and (i1, j0), the areas its four cells
-# receive, and d fz / dz (see cell_weights); then the velocity it deposits, vx and vz - w(z)
-CR_00, CR_10, CR_A00, CR_A10, CR_A01, CR_A11, CR_DFZ, CR_U, CR_W = range(9)
-N_CORNERS = 9
+# receive, and d fz / dz (see cell_weights); then the velocity it deposits, vx and vz - w(z);
+# then, for grains cut by the bottom plane only (the bottom wall's), the exact in-domain area
+# and its inputs z, R and z_bot (kernels.deposit._corners_range: reused while they are the same)
+CR_00, CR_10, CR_A00, CR_A10, CR_A01, CR_A11, CR_DFZ, CR_U, CR_W, CR_AREA, CR_KZ, CR_KR, CR_KB = range(13)
+N_CORNERS = 13
 # moments a grain adds to the record of its cell c00: its four shares a00, a10, a01, a11, the
 # same times vx and times vz - w(z), and the z-slope terms (a00 + a01) dfz, (a10 + a11) dfz
 M_S, M_U, M_W, M_G = 0, 4, 8, 12

@@ -30,6 +30,9 @@ def aligned_zeros(shape: tuple, align: int = 64) -> np.ndarray:
     return buffer[start:start + size].reshape(shape)
 
 
+SOLVERS = {"implicit": L.SOLVER_IMPLICIT, "explicit": L.SOLVER_EXPLICIT, "auto": L.SOLVER_AUTO}
+
+
 class FluidGrid:
     """Pressure grid between the wall planes, periodic in x, stretching with the layer.
 
@@ -49,15 +52,15 @@ class FluidGrid:
 
     def __init__(self, nx: int, nz: int, Lx: float, z_bot: float, z_top: float, n_grains: int,
                  permeability: float, compressibility: float, viscosity: float,
-                 solver: str = "implicit", explicit_safety: float = 0.5, tolerance: float = 1e-10,
+                 solver: str = "auto", explicit_safety: float = 0.5, tolerance: float = 1e-10,
                  max_iterations: int = 1000, max_substeps: int = 100_000,
                  porosity_min: float = 0.05, porosity_max: float = 0.9):
         if nx < 1 or nz < 2:
             raise ValueError(f"grid needs nx >= 1 and nz >= 2, got nx={nx}, nz={nz}")
         if not z_top > z_bot:
             raise ValueError(f"z_top ({z_top}) must be above z_bot ({z_bot})")
-        if solver not in ("implicit", "explicit"):
-            raise ValueError(f"solver must be 'implicit' or 'explicit', got {solver!r}")
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {', '.join(map(repr, SOLVERS))}, got {solver!r}")
         self.nx = int(nx)
         self.nz = int(nz)
         self.Lx = float(Lx)
@@ -67,7 +70,7 @@ class FluidGrid:
         params[L.P_KAPPA_C] = permeability
         params[L.P_BETA] = compressibility
         params[L.P_ETA] = viscosity
-        params[L.P_SOLVER] = L.SOLVER_IMPLICIT if solver == "implicit" else L.SOLVER_EXPLICIT
+        params[L.P_SOLVER] = SOLVERS[solver]
         params[L.P_SAFETY] = explicit_safety
         params[L.P_TOL] = tolerance
         params[L.P_MAX_ITER] = max_iterations

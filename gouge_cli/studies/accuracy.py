@@ -17,7 +17,7 @@ Ladders (the last value is the reference):
   every level is sampled at the same times, a whole number of its steps apart);
 * ``fluid.cell_size`` 4, 3, 2.5 -> 2 [d];
 * ``fluid.step`` 2, 1, 0.5, 0.25 -> 0.125 [t0];
-* ``fluid.solver`` explicit and implicit at the scene's fluid.step, against the
+* ``fluid.solver`` implicit, explicit and auto at the scene's fluid.step, against the
   fluid.step reference (implicit).
 
 The fluid ladders run at dt = 0.125 / ceil(0.125 / dt_scene) so that every fluid step is a
@@ -202,7 +202,7 @@ def scene_ladders(config: Config, quick: bool = False, fluid: bool = True) -> li
     levels += [Level("fluid.step", f"fluid.step={v:g}", v, {**common, "fluid.step": v, "fluid.solver": "implicit"},
                      reference=(v == steps[-1])) for v in steps]
     levels += [Level("fluid.solver", f"solver={s}", base_step,
-                     {**common, "fluid.step": base_step, "fluid.solver": s}) for s in ("implicit", "explicit")]
+                     {**common, "fluid.step": base_step, "fluid.solver": s}) for s in ("implicit", "explicit", "auto")]
     return levels
 
 

@@ -62,8 +62,8 @@ class BenchRow:
     identical_to_1_thread: bool | None = None
 
 
-def bench_config(n_grains: int, dt: float, skin: float, permeability: float | None = None):
-    fluid = {"permeability": permeability} if permeability else None
+def bench_config(n_grains: int, dt: float, skin: float, permeability: float | None = None, solver: str = "auto"):
+    fluid = {"permeability": permeability, "solver": solver} if permeability else None
     return build_config({
         "fluid": fluid,
         "name": f"bench{n_grains}",
@@ -196,13 +196,14 @@ def time_lammps(n_grains: int, ranks: int, steps: int, dt: float, skin: float, s
 
 
 def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability: float, threads: int,
-                steps: int, repeats: int) -> dict:
-    """Undrained (implicit fluid, kappa_c = permeability) vs dry from the same state: rates and the
+                steps: int, repeats: int, solver: str = "auto") -> dict:
+    """Undrained (fluid.solver `solver`, kappa_c = permeability) vs dry from the same state: rates and the
     fluid share of a step, 1 - rate_undrained / rate_dry: paired (fluid_share_paired, the median
     over repeats of the share within each repeat, where the two runs are back to back, so that a
     slow stretch of a shared machine falls on both), from the medians of each (fluid_share) and
-    from the fastest of each (fluid_share_best)."""
-    wet = Simulation(bench_config(n_grains, dt, skin, permeability), arrays=start)
+    from the fastest of each (fluid_share_best); explicit_fraction: the share of the last repeat's
+    updates that took the explicit step (kernels.pressure: auto)."""
+    wet = Simulation(bench_config(n_grains, dt, skin, permeability, solver), arrays=start)
     dry = Simulation(bench_config(n_grains, dt, skin), arrays=start)
     wet_start = (wet.state.arrays(), wet.fluid.arrays())
     wet.threads = dry.threads = threads
@@ -217,7 +218,10 @@ def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability
             sim.advance(steps)
             rates[name].append(steps * sim.state.n / (time.perf_counter() - t0))
     dry_rate, wet_rate = float(np.median(rates["dry"])), float(np.median(rates["undrained"]))
-    return {"n_grains": n_grains, "threads": threads, "permeability": permeability, "dt": dt,
+    updates = wet.fluid.state[L.S_UPDATES] - wet_start[1]["state"][L.S_UPDATES]
+    explicit = wet.fluid.state[L.S_EXPLICIT_UPDATES] - wet_start[1]["state"][L.S_EXPLICIT_UPDATES]
+    return {"n_grains": n_grains, "threads": threads, "permeability": permeability, "dt": dt, "solver": solver,
+            "explicit_fraction": float(explicit / updates) if updates > 0 else 0.0,
             "fluid_interval_steps": wet.fluid_interval, "grid": list(wet.fluid.pressure.shape),
             "rate_dry": dry_rate, "rate_undrained": wet_rate, "fluid_share": 1.0 - wet_rate / dry_rate,
             "fluid_share_best": 1.0 - max(rates["undrained"]) / max(rates["dry"]),
@@ -259,7 +263,9 @@ def profile_fluid(n_grains: int, start: dict, dt: float, skin: float, permeabili
            "deposit": best_seconds(begin, calls, 3) * 1e6,          # (reads neither P nor the solver state)
            "solve": best_seconds(solve, calls, 3, reset) * 1e6,
            "drag": best_seconds(lambda: F.fluid_drag(s.n, fl.work, fl.corners, *sim.drag, 0), calls, 3) * 1e6,
-           "cg_iterations": float(fl.state[L.S_ITERATIONS])}
+           "cg_iterations": float(fl.state[L.S_ITERATIONS]),
+           "explicit": bool(fl.state[L.S_EXPLICIT_UPDATES] > fstate[L.S_EXPLICIT_UPDATES]),
+           "solver": sim.config.fluid.solver}
     out["update"] = out["deposit"] + out["solve"] + out["drag"]
     return out
 
@@ -448,9 +454,10 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
         sim, start = prepare(n, dt, skin, cache)
         n_steps = max(min(steps, 500), steps * 10000 // max(n, 10000))      # about the same time per repeat
         if permeability and (n == 10000 or len(sizes) == 1):
-            for step in (dt, run24_dt):
-                for t in threads:
-                    fluid.append(fluid_share(n, start, step, skin, permeability, t, steps, repeats))
+            for step, solvers in ((dt, ("auto",)), (run24_dt, ("auto", "implicit"))):
+                for solver in solvers:
+                    for t in threads:
+                        fluid.append(fluid_share(n, start, step, skin, permeability, t, steps, repeats, solver))
             if profile:
                 fluid_parts = [profile_fluid(n, start, run24_dt, skin, permeability, t) for t in threads]
         n_bytes = state_bytes(sim)

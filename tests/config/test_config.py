@@ -148,7 +148,7 @@ def test_fluid_none(value):
 
 def test_fluid_section_defaults():
     cfg = build_config({"fluid": {}})
-    assert cfg.fluid.permeability == 1e-5 and cfg.fluid.solver == "implicit"
+    assert cfg.fluid.permeability == 1e-5 and cfg.fluid.solver == "auto"
 
 
 def test_load_config(tmp_path):

@@ -240,13 +240,80 @@ def test_explicit_diffusion_matches_implicit_for_small_steps():
     bound = KP.explicit_bound(capacity, tx, tz, tb)
     total = 20 * bound
     explicit = pressure.copy()
-    KP.explicit_diffusion(explicit, capacity, tx, tz, tb, total / 4000, 4000, np.empty_like(pressure))
+    KP.explicit_diffusion(explicit, capacity, tx, tz, tb, total / 4000, 4000, np.empty_like(pressure),
+                          np.empty_like(pressure))
     matrix = _sparse_operator(capacity / total * 0, tx, tz, tb).toarray()
     from scipy.linalg import expm
 
     c_inv = np.diag(1.0 / capacity.ravel())
     exact = (expm(-total * c_inv @ matrix) @ pressure.ravel()).reshape(pressure.shape)
     np.testing.assert_allclose(explicit, exact, atol=1e-3 * np.abs(pressure).max())
+
+
+def _one_step_errors(ratio, seed):
+    """Forward Euler (explicit_diffusion, one step), backward Euler (CG to 1e-13) and the exact
+    exp(-dt C^-1 L) P over one step of dt = ratio x the FTCS bound, on a random system; returns the
+    L2 errors of the two schemes and dt lambda_max."""
+    from scipy.linalg import expm
+
+    pressure, capacity, tx, tz, tb = _random_system(seed=seed)
+    dt = ratio * KP.explicit_bound(capacity, tx, tz, tb)
+    forward = pressure.copy()
+    KP.explicit_diffusion(forward, capacity, tx, tz, tb, dt, 1, np.empty_like(pressure), np.empty_like(pressure))
+    backward = pressure.copy()
+    rhs = capacity / dt * pressure
+    diag = _sparse_operator(capacity / dt, tx, tz, tb).diagonal().reshape(pressure.shape).copy()
+    work = np.zeros((L.N_GRID_WORK,) + pressure.shape)
+    assert KP.conjugate_gradient(backward, rhs, diag, tx, tz, work, 1e-13, 500)[2]
+    c_inv_l = np.diag(1.0 / capacity.ravel()) @ _sparse_operator(0 * capacity, tx, tz, tb).toarray()
+    exact = (expm(-dt * c_inv_l) @ pressure.ravel()).reshape(pressure.shape)
+    lam = np.linalg.eigvals(c_inv_l).real.max()
+    return np.linalg.norm(forward - exact), np.linalg.norm(backward - exact), dt * lam
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_auto_threshold_explicit_step_as_accurate_as_backward_euler(seed):
+    """The auto solver's explicit step (dt_f <= AUTO_EXPLICIT x the FTCS bound) errs as backward
+    Euler does: at the threshold dt lambda_max <= 0.2 and the forward error is within 1.5x the
+    backward one (per mode 0.0187 / 0.0146 = 1.28 at dt lambda = 0.2); at a twentieth of the
+    threshold the two agree to 10 %. At twice the FTCS bound
+    forward Euler is unstable and far worse, so the test can tell the schemes apart."""
+    forward, backward, x = _one_step_errors(L.AUTO_EXPLICIT, seed)
+    assert 0.02 < x <= 0.2 + 1e-12
+    assert backward > 0 and forward <= 1.5 * backward
+    forward, backward, _ = _one_step_errors(L.AUTO_EXPLICIT / 20, seed)
+    assert forward == pytest.approx(backward, rel=0.1)
+    forward, backward, _ = _one_step_errors(2.0, seed)
+    assert forward > 3 * backward
+
+
+def test_auto_solver_picks_explicit_only_within_threshold():
+    """fluid_update with solver auto: one explicit step (no CG iteration, S_EXPLICIT_UPDATES
+    counts it) where dt_f <= AUTO_EXPLICIT x the FTCS bound, backward Euler (CG iterations) above
+    it; the pressures agree with the implicit solver's to the schemes' shared error."""
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains()
+    rng = np.random.default_rng(4)
+    vz = rng.normal(0.0, 1e-3, x.size)
+    v = np.zeros_like(x)
+    for kappa, dt_f, explicit in ((1e-6, 0.25, True), (1e-3, 0.25, False)):
+        results = {}
+        for solver in ("auto", "implicit"):
+            grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, kappa, 36.0, 1.43e-7, solver=solver)
+            assert grid.init(x, z, v, v, radius, z_bot, z_top) == L.STATUS_OK
+            z1 = z + vz * dt_f
+            assert grid.update(x, z1, v, vz, radius, z_bot, z_top, dt_f) == L.STATUS_OK
+            results[solver] = grid.pressure.copy()
+            if solver == "auto":
+                assert (dt_f <= L.AUTO_EXPLICIT * grid.state[L.S_DT_MAX]) == explicit
+                assert grid.state[L.S_EXPLICIT_UPDATES] == (1.0 if explicit else 0.0)
+                assert (grid.state[L.S_ITERATIONS] == 0) == explicit
+        scale = np.abs(results["implicit"]).max()
+        assert scale > 0
+        if explicit:
+            np.testing.assert_allclose(results["auto"], results["implicit"], atol=1e-2 * scale)
+        else:
+            assert np.array_equal(results["auto"], results["implicit"])
 
 
 def test_explicit_bound_equals_ftcs_formula_for_uniform_diffusivity():
@@ -273,7 +340,7 @@ def test_from_config_and_kernel_args():
     assert (grid.nx, grid.nz) == (80, 20)
     assert grid.pressure.shape == (80, 20) and grid.drag_x.shape == (10_000,)
     assert grid.params[L.P_KAPPA_C] == 1e-5
-    assert grid.params[L.P_SOLVER] == L.SOLVER_IMPLICIT
+    assert grid.params[L.P_SOLVER] == L.SOLVER_AUTO
     assert len(grid.kernel_args()) == 14
     thin = FluidGrid.from_config(FluidConfig(cell_size=20.0), 5.0, 0.0, 3.0, 4)
     assert (thin.nx, thin.nz) == (1, 2)
@@ -373,3 +440,38 @@ def test_observe_snapshot_and_failure_messages():
     for status in (1, 2, 7):
         cause, fix = grid.failure(status)
         assert cause and fix
+
+
+def test_bottom_wall_area_cache_gives_the_bits_of_a_fresh_scratch():
+    """The scalar path keeps the exact area of a grain cut by the bottom plane only, with its z, R and
+    z_bot, and reuses it while those are the same bits: deposits with a reused corners array give the
+    bits of a fresh one when the top plane moves, after a re-numbering (the cache then belongs to
+    other grains), and after a bottom grain moves (it is recomputed). A cache that ignored the key
+    would give the moved grain its old area, which the last comparison catches."""
+    width, z_bot, z_top = 12.0, 0.5, 10.5
+    x, z, radius = _grains(seed=7, n=300)
+    z[:40] = z_bot + np.linspace(-0.3, 0.3, 40)              # cut by the bottom plane
+    z[40:60] = z_top + np.linspace(-0.3, 0.3, 20)            # cut by the top plane
+    v = np.zeros_like(x)
+
+    def run(corners, xs, zs, rs, top):
+        out = [np.empty((5, 4)) for _ in range(5)]
+        KD.deposit(xs, zs, v, v, rs, x.size, width, z_bot, top, 0.0, 0.0, *out, corners,
+                   np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS)), None, True)
+        return b"".join(a.tobytes() for a in out)
+
+    def fresh(*args):
+        return run(np.zeros((L.N_CORNERS, x.size)), *args)
+
+    kept = np.zeros((L.N_CORNERS, x.size))
+    assert run(kept, x, z, radius, z_top) == fresh(x, z, radius, z_top)
+    cached = kept[L.CR_KR] > 0
+    assert cached[:40].all() and not cached[40:60].any()    # bottom cuts only (the top plane moves)
+    assert np.array_equal(kept[L.CR_AREA, :40], [KD.grain_area(z[k], radius[k], z_bot, z_top) for k in range(40)])
+    assert run(kept, x, z, radius, z_top + 1e-9) == fresh(x, z, radius, z_top + 1e-9)
+    order = np.random.default_rng(8).permutation(x.size)    # a re-numbering
+    assert run(kept, x[order], z[order], radius[order], z_top) == fresh(x[order], z[order], radius[order], z_top)
+    assert run(kept, x, z, radius, z_top) == fresh(x, z, radius, z_top)
+    moved = z.copy()
+    moved[5] += 0.05
+    assert run(kept, x, moved, radius, z_top) == fresh(x, moved, radius, z_top) != fresh(x, z, radius, z_top)

@@ -35,13 +35,15 @@ def test_benchmark_runs_on_a_tiny_scene():
         assert sorted(s["machine_stream_ratio"]) == threads[1:] and all(v > 0 for v in s["machine_stream_ratio"].values())
         assert abs(s["probe_bytes"] - 600 * rows[0]["bytes_per_grain"]) < 1e-6 * s["probe_bytes"]
     shares = results["fluid"]
-    assert len(shares) == 2 * len(threads)                    # bench dt and Run 24 dt, each thread count
+    assert len(shares) == 3 * len(threads)      # bench dt (auto) and Run 24 dt (auto, implicit), each thread count
+    assert [s["solver"] for s in shares] == ["auto"] * 2 * len(threads) + ["implicit"] * len(threads)
+    assert all(s["explicit_fraction"] == 0.0 for s in shares if s["solver"] == "implicit")
     assert all(0.0 < s["rate_undrained"] for s in shares)
     # one repeat: the paired share (median of 1 - undrained/dry within repeats) is the share of the medians
     assert all(abs(s["fluid_share_paired"] - s["fluid_share"]) < 1e-12 for s in shares)
     assert {s["fluid_interval_steps"] for s in shares} == {1, 3}
     parts = results["fluid_profile_us"]                       # one update's parts at the thesis dt
-    assert [f["threads"] for f in parts] == threads and all(f["cg_iterations"] >= 1 for f in parts)
+    assert [f["threads"] for f in parts] == threads and all(f["explicit"] or f["cg_iterations"] >= 1 for f in parts)
     assert all(f["deposit"] > 0 and f["solve"] > 0 and f["drag"] > 0 for f in parts)
     assert all(abs(f["update"] - f["deposit"] - f["solve"] - f["drag"]) < 1e-9 for f in parts)
     assert [a["per_step"] for a in results["allocations"]] == [0.0] * len(threads)   # none in the step loop
