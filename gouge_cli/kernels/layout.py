@@ -89,8 +89,8 @@ N_FLUID_PARAMS = 10
 
 SOLVER_IMPLICIT = 0
 SOLVER_EXPLICIT = 1
-SOLVER_AUTO = 2       # one explicit step while dt_f <= AUTO_EXPLICIT x the FTCS bound, else implicit
-AUTO_EXPLICIT = 0.1   # (dt_f lambda <= 0.2 for every mode: both schemes' errors equal to leading order)
+SOLVER_AUTO = 2       # one explicit (Heun) step while dt_f <= AUTO_EXPLICIT x the FTCS bound, else implicit
+AUTO_EXPLICIT = 0.25  # (dt_f lambda <= 0.5 for every mode: Heun's error <= 1/3 of backward Euler's)
 
 S_Z_BOT = 0          # bottom plane at the last update [d]
 S_Z_TOP = 1          # top plane at the last update [d]
@@ -99,7 +99,7 @@ S_RESIDUAL = 3       # final relative residual of the last CG solve
 S_SUBSTEPS = 4       # explicit sub-steps of the last update
 S_DT_MAX = 5         # explicit stability bound of the last update [t0]
 S_UPDATES = 6        # number of fluid updates since fluid_init
-S_EXPLICIT_UPDATES = 7   # of them, those the explicit (FTCS) scheme did (solver explicit, or auto)
+S_EXPLICIT_UPDATES = 7   # of them, those an explicit scheme did (solver explicit: FTCS; auto: Heun)
 N_FLUID_STATE = 8
 
 G_TX = 0             # conductance of face (i+1/2, j)
