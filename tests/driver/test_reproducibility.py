@@ -39,7 +39,8 @@ sim.start_fluid()
 sim.advance(1500)
 print(json.dumps({"hash": sim_hash(sim), "mass": sim.state.mass.tobytes().hex()[:64], "dt": sim.dt,
                   "numba_target": __import__("numba").config.CPU_NAME or "host",
-                  "fluid": sim.fluid is not None}))
+                  "fluid": sim.fluid is not None,
+                  "explicit_updates": 0.0 if sim.fluid is None else float(sim.fluid.state[7])}))  # (7: S_EXPLICIT_UPDATES)
 """
 
 
@@ -66,13 +67,17 @@ def _run(scene: dict, threads: int, baseline: bool) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.parametrize("kind", ["dry", "undrained"])
+@pytest.mark.parametrize("kind", ["dry", "undrained", "undrained-heun"])
 def test_same_bits_on_every_code_generation_target_and_thread_count(kind):
+    """undrained: kappa_c = 1e-5, where the porous wall cells make the auto solver take backward Euler
+    (CG); undrained-heun: kappa_c = 1e-6, where it takes the explicit Heun step every update."""
     scene = dict(SCENE, seed=2 + int(os.environ.get("GOUGE_TEST_SEED_OFFSET", "0")))
-    if kind == "undrained":
-        scene["fluid"] = {"permeability": 1e-5}
+    if kind != "dry":
+        scene["fluid"] = {"permeability": 1e-5 if kind == "undrained" else 1e-6}
     host1 = _run(scene, 1, baseline=False)
-    assert host1["fluid"] == (kind == "undrained")
+    assert host1["fluid"] == (kind != "dry")
+    if kind == "undrained-heun":
+        assert host1["explicit_updates"] > 0
     runs = {"host, 2 threads": _run(scene, 2, baseline=False)}
     if platform.machine() in ("x86_64", "AMD64"):
         runs["generic + numpy without SIMD dispatch, 1 thread"] = _run(scene, 1, baseline=True)
