@@ -76,6 +76,7 @@ def run_terzaghi(nz, solver, ratio=0.5, thickness=10.0, p0=1e-6):
         if step in steps_per_target:
             profile = grid.pressure[0] / p0
             out[steps_per_target[step]] = (profile.mean(), 0.5 * (profile[nz // 2 - 1] + profile[nz // 2]))
+    out["explicit_updates"] = grid.state[L.S_EXPLICIT_UPDATES] / grid.state[L.S_UPDATES]
     return out
 
 
@@ -85,12 +86,15 @@ def test_terzaghi_series_matches_table():
         assert terzaghi_profile(T, 0.5) == pytest.approx(mid, abs=6e-4)
 
 
-@pytest.mark.parametrize("solver", ["implicit", "explicit"])
-def test_terzaghi_consolidation(solver):
+@pytest.mark.parametrize("solver, ratio", [("implicit", 0.5), ("explicit", 0.5), ("auto", 0.05)])
+def test_terzaghi_consolidation(solver, ratio):
+    """Fluid steps of 2x the FTCS bound (implicit; explicit sub-steps itself) and, for auto, of 0.2x
+    the bound, where it takes the Heun step every update."""
     errors = {}
     results = {}
     for nz in (20, 40, 80):
-        results[nz] = run_terzaghi(nz, solver)
+        results[nz] = run_terzaghi(nz, solver, ratio)
+        assert results[nz]["explicit_updates"] == {"implicit": 0.0, "explicit": 1.0, "auto": 1.0}[solver]
         errors[nz] = max(
             max(abs(results[nz][T][0] - terzaghi_mean(T)), abs(results[nz][T][1] - terzaghi_profile(T, 0.5)))
             for T in TERZAGHI_T
