@@ -285,28 +285,37 @@ def _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_ine
               double, dt, width, damp, reach2):
     """Half kick of grain i if it is free (two in a row if double: the previous step's second
     and this step's first, same bits as two passes), then its drift, x periodic. Returns 1 if
-    it then lies farther than sqrt(reach2) from its position at the last list build."""
+    it then lies farther than sqrt(reach2) from its position at the last list build. The kick
+    is computed for every grain and selected (a wall grain stores its velocity back unchanged):
+    a store under a branch needs masked stores to vectorise, which AVX-512 has and AVX2 code
+    generation declined (kick pass ~48 against ~28 us per step at 10,000 grains)."""
     half = 0.5 * dt
-    if body[i] == 0:
-        ax = force_x[i] * inv_mass[i]
-        az = force_z[i] * inv_mass[i]
-        aw = torque[i] * inv_inertia[i]
-        u = _half_kick(vx[i], ax, half, damp)
-        v = _half_kick(vz[i], az, half, damp)
-        w = _half_kick(spin[i], aw, half, damp)
-        if double:
-            u = _half_kick(u, ax, half, damp)
-            v = _half_kick(v, az, half, damp)
-            w = _half_kick(w, aw, half, damp)
-        vx[i] = u
-        vz[i] = v
-        spin[i] = w
-    xn = x[i] + dt * vx[i]
+    free = body[i] == 0
+    u0 = vx[i]
+    v0 = vz[i]
+    w0 = spin[i]
+    ax = force_x[i] * inv_mass[i]
+    az = force_z[i] * inv_mass[i]
+    aw = torque[i] * inv_inertia[i]
+    u = _half_kick(u0, ax, half, damp)
+    v = _half_kick(v0, az, half, damp)
+    w = _half_kick(w0, aw, half, damp)
+    if double:
+        u = _half_kick(u, ax, half, damp)
+        v = _half_kick(v, az, half, damp)
+        w = _half_kick(w, aw, half, damp)
+    u = u if free else u0
+    v = v if free else v0
+    w = w if free else w0
+    vx[i] = u
+    vz[i] = v
+    spin[i] = w
+    xn = x[i] + dt * u
     if xn >= width:
         xn -= width
     elif xn < 0.0:
         xn += width
-    zn = z[i] + dt * vz[i]
+    zn = z[i] + dt * v
     x[i] = xn
     z[i] = zn
     dx = minimum_image(xn - x_build[i], width)
