@@ -157,17 +157,23 @@ def implicit_system(capacity, tx, tz, tb, dt_f, p_star, P, diag):
     _add_face_sums(tx, tz, tb, diag)
 
 
+@njit(cache=NUMBA_CACHE, inline="always")
+def _flat_columns(a):
+    """(size, nz, size - nz, 1) as uint64 for the flat loops over a grid array a (nx, nz): cell
+    c's x neighbours are c + nz and c - nz, wrapping through size - nz in the first and last
+    columns."""
+    size = np.uint64(a.size)
+    unz = np.uint64(a.shape[1])
+    return size, unz, size - unz, np.uint64(1)
+
+
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _add_face_sums(tx, tz, tb, diag):
     """diag += the sum of each cell's face conductances (the diagonal of L). Flat loops, the tz
     term below a column's first cell being a zero face (tz = 0 on the top row of the previous
     column)."""
-    nx, nz = tx.shape
     fx, fz, fb, df = flat(tx), flat(tz), flat(tb), flat(diag)
-    size = np.uint64(df.size)
-    unz = np.uint64(nz)
-    last = size - unz
-    one = np.uint64(1)
+    size, unz, last, one = _flat_columns(tx)
     df[0] = df[0] + fx[0] + fx[last] + fb[0] + fz[0]
     for c in range(one, unz):
         df[c] = df[c] + fx[c] + fx[c + last] + fb[c] + fz[c] + fz[c - one]
@@ -185,12 +191,8 @@ def explicit_bound(capacity, tx, tz, tb):
     half a cell away, conducts twice as much but has no off-diagonal), so the step is exactly
     1 / (2 D (1/dx^2 + 1/dz^2)). Returns inf when there is no diffusion.
     """
-    nx, nz = capacity.shape
     fx, fz, fb, cap = flat(tx), flat(tz), flat(tb), flat(capacity)
-    size = np.uint64(cap.size)
-    unz = np.uint64(nz)
-    last = size - unz
-    one = np.uint64(1)
+    size, unz, last, one = _flat_columns(capacity)
     lam_max = (2.0 * (fx[0] + fx[last] + fz[0]) + fb[0]) / cap[0]
     for c in range(one, unz):                        # (flat, as _add_face_sums; max is exact)
         lam_max = max(lam_max, (2.0 * (fx[c] + fx[c + last] + fz[c] + fz[c - one]) + fb[c]) / cap[c])
