@@ -24,6 +24,7 @@ class ProgressReport:
         self._t0 = time.perf_counter()
         self._last_print = self._t0
         self._step0 = None
+        self._first = None
         self._progress = None
         if self.live:
             self._progress = Progress(
@@ -36,20 +37,35 @@ class ProgressReport:
             self._task = self._progress.add_task(label, total=total_time, rate="", info="")
 
     def update(self, elapsed_sim: float, step: int, info: str = ""):
+        """Rate and ETA count from the first update on: the interval before it holds the one-off
+        numba compile (tens of seconds on a fresh machine), which made the first ETAs hours long."""
         now = time.perf_counter()
         if self._step0 is None:
             self._step0 = step
-        wall = max(now - self._t0, 1e-9)
-        rate = (step - self._step0) * self.n / wall
+            self._first = (now, elapsed_sim, step)
+        t1, _, step1 = self._first
+        if now > t1 and step > step1:
+            rate = (step - step1) * self.n / (now - t1)
+        else:
+            rate = (step - self._step0) * self.n / max(now - self._t0, 1e-9)
         rate_text = f"{rate / 1e6:.2f} M grain-steps/s"
         if self._progress is not None:
             self._progress.update(self._task, completed=min(elapsed_sim, self.total), rate=rate_text, info=info)
         elif now - self._last_print >= self.every_s:
             self._last_print = now
             frac = elapsed_sim / self.total if self.total else 1.0
-            eta = wall * (1.0 - frac) / frac if frac > 0 else float("nan")
             print(f"{self.label}: t = {elapsed_sim:.6g} / {self.total:.6g} t0 ({100 * frac:.1f}%), "
-                  f"{rate_text}, ETA {eta:.0f} s {info}", file=sys.stderr, flush=True)
+                  f"{rate_text}, ETA {format_eta(self.eta_seconds(now, elapsed_sim))} {info}", file=sys.stderr,
+                  flush=True)
+
+    def eta_seconds(self, now: float, elapsed_sim: float) -> float:
+        """Wall seconds to the end at the speed since the first update; inf before it is known."""
+        t1, sim1, _ = self._first
+        if elapsed_sim >= self.total:
+            return 0.0
+        if not (now > t1 and elapsed_sim > sim1):
+            return math.inf
+        return (self.total - elapsed_sim) * (now - t1) / (elapsed_sim - sim1)
 
     def close(self):
         if self._progress is not None:

@@ -122,3 +122,21 @@ def test_compaction_resumed_on_a_check_ends_where_it_would_have(single_thread):
                     start=saved["start"])
     assert again == checks[1:] and resumed.compaction_settled
     assert sim_hash(resumed) == sim_hash(plain)
+
+
+def test_run_progress_eta_leaves_out_the_compile(monkeypatch, capsys):
+    """The plain progress line's rate and ETA count from the first update: a first interval of 30 s
+    (numba compiling) followed by 1 s per 1 % of the run gives an ETA of ~98 s at 2 %, not the
+    ~1,500 s that the time since the start would give."""
+    from gouge_cli.driver import progress as P
+
+    clock = iter([0.0, 30.0, 31.0, 32.0])
+    monkeypatch.setattr(P.time, "perf_counter", lambda: next(clock))
+    report = P.ProgressReport("loading", 100.0, 1000, live=False, every_s=0.0)
+    report.update(0.0, 10)                   # 30 s: the compile
+    report.update(1.0, 20)                   # 1 s for 1 % (10 steps of 1,000 grains)
+    report.update(2.0, 30)
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[0].endswith("ETA ? ") and "0.00 M grain-steps/s" in lines[0]
+    assert "0.01 M grain-steps/s" in lines[1] and "ETA 0:01:39" in lines[1]
+    assert "ETA 0:01:38" in lines[2]
