@@ -78,6 +78,8 @@ SERIES = {
     "pressure_min": ("E", "smallest pore pressure perturbation"),
     "pressure_max": ("E", "largest pore pressure perturbation"),
     "deborah": ("-", "Deborah number l u0 / D of the fluid"),
+    "fluid_updates": ("-", "pore-pressure updates of the grid so far (cumulative)"),
+    "explicit_updates": ("-", "of them, those that took the explicit step (fluid.solver auto: Heun; explicit: FTCS)"),
     # stick scaling (driver.stick_scaling), only in runs with numerics.stick_scaling > 1
     "stick_scaling": ("-", "inertia scaling lambda in force at this row (1: true inertia)"),
     "inertial_number": ("-", "I = (|v_wall| / H) d_mean sqrt(lambda rho / sigma) of the layer"),

@@ -150,14 +150,18 @@ class FluidGrid:
         return {"pressure": self.pressure.copy(), "porosity": self.porosity}
 
     def observe(self) -> dict:
-        """Time-series values: pressure mean/min/max [E] and the Deborah number.
+        """Time-series values: pressure mean/min/max [E], the Deborah number, and the counts of
+        updates so far and of those taken explicitly (fluid.solver auto: where the Heun step was
+        within its threshold).
 
         De = l u0 / D with l half the layer thickness (distance to the drained
         walls), u0 the largest deposited solid speed and D the mean diffusivity.
         """
         speed = float(np.sqrt(self.solid_velocity_x**2 + self.solid_velocity_z**2).max())
         return {"pressure_mean": self.mean_pressure(), "pressure_min": self.min_pressure(),
-                "pressure_max": self.max_pressure(), "deborah": self.deborah(0.5 * self.dz * self.nz, speed)}
+                "pressure_max": self.max_pressure(), "deborah": self.deborah(0.5 * self.dz * self.nz, speed),
+                "fluid_updates": float(self.state[L.S_UPDATES]),
+                "explicit_updates": float(self.state[L.S_EXPLICIT_UPDATES])}
 
     def failure(self, status: int) -> tuple[str, str]:
         """(cause, fix) for a non-zero status of fluid_update, worded for the user."""

@@ -434,7 +434,8 @@ def test_observe_snapshot_and_failure_messages():
     grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-5, 36.0, 1.43e-7)
     grid.init(x, z, vx, 0 * vx, radius, z_bot, z_top)
     row = grid.observe()
-    assert set(row) == {"pressure_mean", "pressure_min", "pressure_max", "deborah"}
+    assert set(row) == {"pressure_mean", "pressure_min", "pressure_max", "deborah", "fluid_updates", "explicit_updates"}
+    assert row["fluid_updates"] == row["explicit_updates"] == 0.0
     assert row["deborah"] == pytest.approx(5.0 * 2e-3 / grid.mean_diffusivity())
     fields = grid.snapshot_fields()
     assert fields["pressure"].shape == fields["porosity"].shape == (5, 4)
