@@ -17,7 +17,8 @@ from gouge_cli.driver.simulation import Simulation
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}, "compaction": {"min_time": 200.0, "max_time": 600.0},
          "loading": {"spring_constant": 2e-4, "velocity": 4e-3}, "numerics": {"sort_every": 1}, "seed": 2}
-KINDS = {"dry": None, "undrained": {"permeability": 1e-5}, "undrained-implicit": {"permeability": 1e-5, "solver": "implicit"},
+KINDS = {"dry": None, "undrained": {"permeability": 1e-5},
+         "undrained-implicit": {"permeability": 1e-5, "solver": "implicit"},
          "undrained-heun": {"permeability": 1e-6, "solver": "auto"}}
 for kind, fluid in KINDS.items():
     data = dict(SCENE)

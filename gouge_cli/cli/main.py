@@ -273,8 +273,8 @@ def bench(
                   f"{f['solve']:.0f} us (solver {f['solver']}: {solve_kind(f)}; serial), drag {f['drag']:.0f} us, "
                   f"together {f['update']:.0f} us", highlight=False)
     for f in results["fluid"]:
-        out.print(f"undrained (kappa_c {f['permeability']:g}, solver {f['solver']}, {100 * f['explicit_fraction']:.0f} % "
-                  f"explicit steps, grid {f['grid'][0]}x{f['grid'][1]}, dt {f['dt']:.3g}, "
+        out.print(f"undrained (kappa_c {f['permeability']:g}, solver {f['solver']}, "
+                  f"{100 * f['explicit_fraction']:.0f} % explicit steps, grid {f['grid'][0]}x{f['grid'][1]}, dt {f['dt']:.3g}, "
                   f"fluid update every {f['fluid_interval_steps']} steps), N {f['n_grains']}, {f['threads']} "
                   f"thread(s): {f['rate_undrained']:.3g} vs dry {f['rate_dry']:.3g} grain-steps/s, fluid share of a "
                   f"step {100 * f['fluid_share_paired']:.1f} % (median of the shares within each repeat, the two runs "

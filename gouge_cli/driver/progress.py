@@ -54,9 +54,9 @@ class ProgressReport:
         elif now - self._last_print >= self.every_s:
             self._last_print = now
             frac = elapsed_sim / self.total if self.total else 1.0
+            eta = format_eta(self.eta_seconds(now, elapsed_sim))
             print(f"{self.label}: t = {elapsed_sim:.6g} / {self.total:.6g} t0 ({100 * frac:.1f}%), "
-                  f"{rate_text}, ETA {format_eta(self.eta_seconds(now, elapsed_sim))} {info}", file=sys.stderr,
-                  flush=True)
+                  f"{rate_text}, ETA {eta} {info}", file=sys.stderr, flush=True)
 
     def eta_seconds(self, now: float, elapsed_sim: float) -> float:
         """Wall seconds to the end at the speed since the first update; inf before it is known."""

@@ -37,8 +37,8 @@ from numba import njit
 
 from . import NUMBA_CACHE
 from .layout import (AUTO_EXPLICIT, G_CAPACITY, G_DIAG, G_FX, G_FZ, G_GX, G_GZ, G_P, G_Q, G_RHS, G_SX, G_SZ,
-                     G_TB, G_TX, G_TZ, G_Z, P_BETA, P_ETA, P_KAPPA_C, P_MAX_ITER, P_MAX_SUBSTEPS, P_PHI_MAX, P_PHI_MIN, P_SAFETY, P_SOLVER,
-                     P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT, STATUS_NONFINITE, STATUS_OK, STATUS_SOLVER, S_DT_MAX,
+                     G_TB, G_TX, G_TZ, G_Z, P_BETA, P_ETA, P_KAPPA_C, P_MAX_ITER, P_MAX_SUBSTEPS, P_PHI_MAX,
+                     P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT, STATUS_NONFINITE, STATUS_OK, STATUS_SOLVER, S_DT_MAX,
                      S_EXPLICIT_UPDATES, S_ITERATIONS, S_RESIDUAL, S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
 from .deposit import deposit
 from .drag import drag_density_pairs, grain_drag_at, pressure_gradient
@@ -142,8 +142,8 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
     Order: deposit s^{n+1} and u_rel (keeping each grain's corner cells and areas in
     corners); exact undrained source -> P*; Carman-Kozeny permeability from s^{n+1};
     conductances with (1 + beta P^n); implicit or explicit diffusion over dt_f (auto: one
-    explicit (Heun) step while dt_f <= AUTO_EXPLICIT times the FTCS bound, kernels.pressure); grad P and
-    drag. Returns a status (module doc). In three parts, fluid_begin (reads the grains),
+    explicit (Heun) step while dt_f <= AUTO_EXPLICIT times the FTCS bound, kernels.pressure);
+    grad P and drag. Returns a status (module doc). In three parts, fluid_begin (reads the grains),
     fluid_solve (the grid only) and fluid_drag, so that a caller can move the grains while
     the grid is solved.
     """

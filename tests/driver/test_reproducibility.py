@@ -40,7 +40,7 @@ sim.advance(1500)
 print(json.dumps({"hash": sim_hash(sim), "mass": sim.state.mass.tobytes().hex()[:64], "dt": sim.dt,
                   "numba_target": __import__("numba").config.CPU_NAME or "host",
                   "fluid": sim.fluid is not None,
-                  "explicit_updates": 0.0 if sim.fluid is None else float(sim.fluid.state[7])}))  # (7: S_EXPLICIT_UPDATES)
+                  "explicit_updates": 0.0 if sim.fluid is None else float(sim.fluid.state[7])}))  # (S_EXPLICIT_UPDATES)
 """
 
 
