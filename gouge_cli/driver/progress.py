@@ -23,8 +23,7 @@ class ProgressReport:
         self.every_s = every_s
         self._t0 = time.perf_counter()
         self._last_print = self._t0
-        self._step0 = None
-        self._first = None
+        self._first = None               # (wall time, simulated time, step) at the first update
         self._progress = None
         if self.live:
             self._progress = Progress(
@@ -40,14 +39,10 @@ class ProgressReport:
         """Rate and ETA count from the first update on: the interval before it holds the one-off
         numba compile (tens of seconds on a fresh machine), which made the first ETAs hours long."""
         now = time.perf_counter()
-        if self._step0 is None:
-            self._step0 = step
+        if self._first is None:
             self._first = (now, elapsed_sim, step)
         t1, _, step1 = self._first
-        if now > t1 and step > step1:
-            rate = (step - step1) * self.n / (now - t1)
-        else:
-            rate = (step - self._step0) * self.n / max(now - self._t0, 1e-9)
+        rate = (step - step1) * self.n / (now - t1) if now > t1 else 0.0
         rate_text = f"{rate / 1e6:.2f} M grain-steps/s"
         if self._progress is not None:
             self._progress.update(self._task, completed=min(elapsed_sim, self.total), rate=rate_text, info=info)

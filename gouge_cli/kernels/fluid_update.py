@@ -38,8 +38,8 @@ from numba import njit
 from . import NUMBA_CACHE
 from .layout import (AUTO_EXPLICIT, G_CAPACITY, G_DIAG, G_FX, G_FZ, G_GX, G_GZ, G_P, G_Q, G_RHS, G_SX, G_SZ,
                      G_TB, G_TX, G_TZ, G_Z, P_BETA, P_ETA, P_KAPPA_C, P_MAX_ITER, P_MAX_SUBSTEPS, P_PHI_MAX,
-                     P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT, STATUS_NONFINITE, STATUS_OK, STATUS_SOLVER, S_DT_MAX,
-                     S_EXPLICIT_UPDATES, S_ITERATIONS, S_RESIDUAL, S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
+                     P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT, STATUS_NONFINITE,
+                     STATUS_OK, STATUS_SOLVER, S_DT_MAX, S_EXPLICIT_UPDATES, S_ITERATIONS, S_RESIDUAL, S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
 from .deposit import deposit
 from .drag import drag_density_pairs, grain_drag_at, pressure_gradient
 from .pressure import (conjugate_gradient, explicit_bound, explicit_diffusion, face_conductances, flat,
@@ -203,27 +203,23 @@ def fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, perm
     state[S_DT_MAX] = dt_max
     status = STATUS_OK
     solver = params[P_SOLVER]
-    if solver == SOLVER_AUTO and dt_f <= AUTO_EXPLICIT * dt_max:
+    heun = solver == SOLVER_AUTO and dt_f <= AUTO_EXPLICIT * dt_max
+    if heun or solver == SOLVER_EXPLICIT:
+        substeps = 1.0 if heun else max(1.0, math.ceil(dt_f / (params[P_SAFETY] * dt_max)))
         pf, rf = flat(P), flat(p_star)
         for c in range(np.uint64(pf.size)):
             pf[c] = rf[c]
-        heun_diffusion(P, capacity, tx, tz, tb, dt_f, work[G_DIAG], work[G_Q], work[G_P], work[G_Z])
         state[S_ITERATIONS] = 0.0
         state[S_RESIDUAL] = 0.0
-        state[S_SUBSTEPS] = 1.0
-        state[S_EXPLICIT_UPDATES] += 1.0
-    elif solver == SOLVER_EXPLICIT:
-        substeps = max(1.0, math.ceil(dt_f / (params[P_SAFETY] * dt_max)))
-        for i in range(nx):
-            for j in range(nz):
-                P[i, j] = p_star[i, j]
-        state[S_ITERATIONS] = 0.0
         state[S_SUBSTEPS] = substeps
         if not substeps <= params[P_MAX_SUBSTEPS]:
             status = STATUS_SOLVER
         else:
-            n_sub = int(substeps)
-            explicit_diffusion(P, capacity, tx, tz, tb, dt_f / n_sub, n_sub, work[G_DIAG], work[G_Q])
+            if heun:
+                heun_diffusion(P, capacity, tx, tz, tb, dt_f, work[G_DIAG], work[G_Q], work[G_P], work[G_Z])
+            else:
+                n_sub = int(substeps)
+                explicit_diffusion(P, capacity, tx, tz, tb, dt_f / n_sub, n_sub, work[G_DIAG], work[G_Q])
             state[S_EXPLICIT_UPDATES] += 1.0
     else:
         diag = work[G_DIAG]

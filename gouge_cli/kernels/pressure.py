@@ -386,17 +386,13 @@ def heun_diffusion(P, capacity, tx, tz, tb, dt, diag, slope, predictor, slope_2)
     """One Heun (explicit trapezoidal, second-order) step of C dP/dt = -L P with P = 0 on the
     planes: P~ = P - dt (L P) / C, then P <- P - dt/2 (L P + L P~) / C. diag (out): the sum of
     each cell's face conductances; slope, predictor, slope_2 (nx, nz): scratch. Flat loops."""
-    df, pf, q1, pp, q2, cap = flat(diag), flat(P), flat(slope), flat(predictor), flat(slope_2), flat(capacity)
-    size = np.uint64(pf.size)
-    for c in range(size):
-        df[c] = 0.0
-    _add_face_sums(tx, tz, tb, diag)
+    pf, q1, q2, cap = flat(P), flat(slope), flat(slope_2), flat(capacity)
+    _face_diagonal(tx, tz, tb, diag)
     _apply_operator(P, diag, tx, tz, slope)
-    for c in range(size):
-        pp[c] = pf[c] - dt * q1[c] / cap[c]
+    _forward_euler(P, slope, capacity, dt, predictor)
     _apply_operator(predictor, diag, tx, tz, slope_2)
     half = 0.5 * dt
-    for c in range(size):
+    for c in range(np.uint64(pf.size)):
         pf[c] -= half * (q1[c] + q2[c]) / cap[c]
 
 
@@ -405,12 +401,24 @@ def explicit_diffusion(P, capacity, tx, tz, tb, dt_sub, n_sub, diag, scratch):
     """n_sub forward-Euler (FTCS) steps of C dP/dt = -L P with P = 0 on the planes:
     P <- P - dt_sub (L P) / C, L P by _apply_operator with diag (out) = the sum of each cell's
     face conductances; scratch (nx, nz) holds L P. Flat loops."""
-    df, pf, qf, cap = flat(diag), flat(P), flat(scratch), flat(capacity)
-    size = np.uint64(pf.size)
-    for c in range(size):
-        df[c] = 0.0
-    _add_face_sums(tx, tz, tb, diag)
+    _face_diagonal(tx, tz, tb, diag)
     for _ in range(n_sub):
         _apply_operator(P, diag, tx, tz, scratch)
-        for c in range(size):
-            pf[c] -= dt_sub * qf[c] / cap[c]
+        _forward_euler(P, scratch, capacity, dt_sub, P)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _face_diagonal(tx, tz, tb, diag):
+    """diag = the sum of each cell's face conductances (the diagonal of L alone)."""
+    df = flat(diag)
+    for c in range(np.uint64(df.size)):
+        df[c] = 0.0
+    _add_face_sums(tx, tz, tb, diag)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _forward_euler(P, slope, capacity, dt, out):
+    """out = P - dt slope / C (slope = L P); out may be P itself."""
+    pf, qf, cap, of = flat(P), flat(slope), flat(capacity), flat(out)
+    for c in range(np.uint64(pf.size)):
+        of[c] = pf[c] - dt * qf[c] / cap[c]
