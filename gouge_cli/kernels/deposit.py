@@ -36,10 +36,23 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_AREA, CR_DFZ, CR_KB, CR_KR, CR_KZ, CR_U, CR_W,
+from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_DFZ, CR_U, CR_W,
                      DEPOSIT_GROUPS, M_FLAG, M_G, M_S, M_U, M_W, N_MOMENTS)
 from .lanes import add2, add4, add4_scaled
 from .step import closed_velocity
+
+
+NEAR_PLANE = 1e-8      # |h| <= NEAR_PLANE R: a disc centred on a plane (in_domain_area, _near_side)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _near_side(h, radius):
+    """Area [d^2] of a disc on its centre's side of a line at signed distance h, for |h| <=
+    NEAR_PLANE radius: R (pi R/2 + 2h), the series of R^2 (pi - acos u + u sqrt(1 - u^2)), u = h/R,
+    to first order; the next term, R^2 u^3/3, is below 4e-25 R^2, far below round-off. Without
+    calls, branches or a division, so that the vector loop of _corners_range takes the wall
+    grains (centred on their plane to round-off: |h| ~ 1e-13 R) with in_domain_area's bits."""
+    return radius * (0.5 * math.pi * radius + 2.0 * h)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -68,13 +81,20 @@ def in_domain_area(z, radius, z_bot, z_top):
     """Area [d^2] of a disc (centre height z) between the planes z_bot and z_top.
 
     The area above z_bot minus the area above z_top, each from the small
-    segment side so that a nearly tangent plane loses no precision.
+    segment side so that a nearly tangent plane loses no precision, or for a
+    plane through the centre to within NEAR_PLANE R (a wall grain) by _near_side.
     """
     full = math.pi * radius * radius
     h = z - z_bot
-    above_bot = full - segment_area(h, radius) if h >= 0.0 else segment_area(-h, radius)
+    if abs(h) <= NEAR_PLANE * radius:
+        above_bot = _near_side(h, radius)
+    else:
+        above_bot = full - segment_area(h, radius) if h >= 0.0 else segment_area(-h, radius)
     h = z_top - z
-    above_top = segment_area(h, radius) if h >= 0.0 else full - segment_area(-h, radius)
+    if abs(h) <= NEAR_PLANE * radius:
+        above_top = _near_side(-h, radius)
+    else:
+        above_top = segment_area(h, radius) if h >= 0.0 else full - segment_area(-h, radius)
     area = above_bot - above_top
     if area < 0.0:
         return 0.0
@@ -277,31 +297,33 @@ def _groups_parallel(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners):
     """corners[:, first:last]: grain_area, cell_weights and corner_shares, the same values.
-    A loop without calls or branches (SIMD) for grains clear of both planes with x in
-    [dx/2 - Lx, Lx + dx/2) (one periodic wrap at most); it marks the others (d fz/dz = -1),
-    which then take the scalar path. There a grain clear of the top plane reuses the area it
-    got last time (rows CR_AREA, CR_KZ, CR_KR, CR_KB) if its z, R and z_bot are the same bits:
-    grain_area is then the same function of the same inputs (the bottom wall's grains, fixed,
-    every update: ~5 us of ~11 for the 400 wall grains at 10,000 grains). A re-numbering or a
-    restart only misses it once."""
+    A loop without calls or branches (SIMD) for grains with x in [dx/2 - Lx, Lx + dx/2) (one
+    periodic wrap at most) that are, for each plane, clear of it or centred on it to within
+    NEAR_PLANE R (the wall grains: in_domain_area with _near_side); it marks the
+    others (d fz/dz = -1), which then take the scalar path (grain_area, cell_weights), and
+    skips that path when there are none."""
     inv_dx = nx / Lx
     inv_dz = nz / (z_top - z_bot)
     fnx = float(nx)
     fnz = float(nz)
     c00, c10, a00, a10, a01, a11, dfz = (corners[CR_00], corners[CR_10], corners[CR_A00], corners[CR_A10],
                                          corners[CR_A01], corners[CR_A11], corners[CR_DFZ])
+    odd_count = 0
     for kk in range(first, last):
         k = np.uint64(kk)
         zk = z[k]
         r = radius[k]
-        area = math.pi * r * r
+        full = math.pi * r * r
+        hb = zk - z_bot
+        ht = z_top - zk
+        area = (full if hb >= r else _near_side(hb, r)) - (0.0 if ht >= r else _near_side(-ht, r))
         xi = x[k] * inv_dx - 0.5
         fi = np.floor(xi)        # (a float: math.floor returns an int, a conversion AVX2 cannot vectorise)
         fx = xi - fi
         fi = fi + fnx if fi < 0.0 else fi
         f1 = fi + 1.0
         f1 = 0.0 if f1 == fnx else f1
-        zeta = (zk - z_bot) * inv_dz - 0.5
+        zeta = hb * inv_dz - 0.5
         fj = np.floor(zeta)
         inside = (fj >= 0.0) & (fj < fnz - 1.0)
         top = fj >= fnz - 1.0
@@ -315,22 +337,16 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
         a10[k] = a0 * fx
         a01[k] = a1 * (1.0 - fx)
         a11[k] = a1 * fx
-        odd = (zk - z_bot < r) | (z_top - zk < r) | (fi < 0.0) | (fi != fi) | (fi >= fnx)   # (a NaN x is odd)
+        cut = ((hb < r) & (abs(hb) > NEAR_PLANE * r)) | ((ht < r) & (abs(ht) > NEAR_PLANE * r))
+        odd = cut | (area <= 0.0) | (fi < 0.0) | (fi != fi) | (fi >= fnx)   # (a NaN x is odd)
         dfz[k] = -1.0 if odd else (inv_dz if inside else 0.0)
-    cached, key_z, key_r, key_b = corners[CR_AREA], corners[CR_KZ], corners[CR_KR], corners[CR_KB]
+        odd_count += 1 if odd else 0
+    if odd_count == 0:
+        return
     for k in range(first, last):
         if dfz[k] >= 0.0:
             continue
-        zk = z[k]
-        r = radius[k]
-        if z_top - zk >= r:                  # (the area depends on zk, r and z_bot alone)
-            if zk == key_z[k] and r == key_r[k] and z_bot == key_b[k]:
-                area = cached[k]
-            else:
-                area = grain_area(zk, r, z_bot, z_top)
-                cached[k], key_z[k], key_r[k], key_b[k] = area, zk, r, z_bot
-        else:
-            area = grain_area(zk, r, z_bot, z_top)
+        area = grain_area(z[k], radius[k], z_bot, z_top)
         if area <= 0.0:
             c00[k] = -1.0
             dfz[k] = 0.0

@@ -444,36 +444,54 @@ def test_observe_snapshot_and_failure_messages():
         assert cause and fix
 
 
-def test_bottom_wall_area_cache_gives_the_bits_of_a_fresh_scratch():
-    """The scalar path keeps the exact area of a grain cut by the bottom plane only, with its z, R and
-    z_bot, and reuses it while those are the same bits: deposits with a reused corners array give the
-    bits of a fresh one when the top plane moves, after a re-numbering (the cache then belongs to
-    other grains), and after a bottom grain moves (it is recomputed). A cache that ignored the key
-    would give the moved grain its old area, which the last comparison catches."""
+def test_near_plane_area_matches_the_closed_form():
+    """A disc centred on a plane to within NEAR_PLANE R (a wall grain) gets R (pi R/2 + 2h) on its
+    centre's side: against R^2 (pi - acos u + u sqrt(1 - u^2)) (no cancellation there, so the closed
+    form is good to ~1 ulp) within 3 ulp of R^2 pi/2, for either plane; across the threshold the
+    near form and the closed one (atan2, sin) agree as closely."""
+    r, z_bot, z_top = 0.47, 0.5, 10.5
+    ulp = np.spacing(0.5 * math.pi * r * r)
+    def side(u):                   # the closed form
+        return r * r * (math.pi - math.acos(u) + u * math.sqrt(1.0 - u * u))
+
+    for u in (0.0, 1e-14, -6e-14, 3e-10, -2.5e-9, 1e-8, -1e-8):
+        z = z_bot + u * r
+        assert abs(KD.in_domain_area(z, r, z_bot, z_top) - side((z - z_bot) / r)) <= 3 * ulp, u
+        z = z_top - u * r
+        assert abs(KD.in_domain_area(z, r, z_bot, z_top) - side((z_top - z) / r)) <= 3 * ulp, u
+    limit = KD.NEAR_PLANE * r
+    beyond = np.nextafter(limit, 1.0)
+    assert abs(limit) <= KD.NEAR_PLANE * r < abs(beyond)
+    near, closed = KD.in_domain_area(z_bot + limit, r, z_bot, z_top), KD.in_domain_area(z_bot + beyond, r, z_bot, z_top)
+    assert abs(near - closed) <= 3 * ulp
+
+
+def test_wall_grains_take_the_vector_path_with_the_bits_of_grain_area():
+    """Grains centred on a plane to within NEAR_PLANE R (the wall grains) and grains cutting a plane
+    elsewhere: the corners (cells, areas, slopes) of the fast deposit equal grain_area,
+    cell_weights and corner_shares bit for bit, so the drag from them equals grain_drag's bits."""
     width, z_bot, z_top = 12.0, 0.5, 10.5
     x, z, radius = _grains(seed=7, n=300)
-    z[:40] = z_bot + np.linspace(-0.3, 0.3, 40)              # cut by the bottom plane
-    z[40:60] = z_top + np.linspace(-0.3, 0.3, 20)            # cut by the top plane
+    z[:40] = z_bot + radius[:40] * np.linspace(-1e-8, 1e-8, 40)     # on the bottom plane (+-NEAR_PLANE R)
+    z[40:60] = z_top + radius[40:60] * np.r_[np.linspace(-1e-8, 1e-8, 10), np.linspace(-0.5, 0.5, 10)]
+    z[60:70] = z_bot + np.linspace(-0.3, 0.3, 10)                      # cutting it off-centre: scalar path
     v = np.zeros_like(x)
-
-    def run(corners, xs, zs, rs, top):
-        out = [np.empty((5, 4)) for _ in range(5)]
-        KD.deposit(xs, zs, v, v, rs, x.size, width, z_bot, top, 0.0, 0.0, *out, corners,
-                   np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS)), None, True)
-        return b"".join(a.tobytes() for a in out)
-
-    def fresh(*args):
-        return run(np.zeros((L.N_CORNERS, x.size)), *args)
-
-    kept = np.zeros((L.N_CORNERS, x.size))
-    assert run(kept, x, z, radius, z_top) == fresh(x, z, radius, z_top)
-    cached = kept[L.CR_KR] > 0
-    assert cached[:40].all() and not cached[40:60].any()    # bottom cuts only (the top plane moves)
-    assert np.array_equal(kept[L.CR_AREA, :40], [KD.grain_area(z[k], radius[k], z_bot, z_top) for k in range(40)])
-    assert run(kept, x, z, radius, z_top + 1e-9) == fresh(x, z, radius, z_top + 1e-9)
-    order = np.random.default_rng(8).permutation(x.size)    # a re-numbering
-    assert run(kept, x[order], z[order], radius[order], z_top) == fresh(x[order], z[order], radius[order], z_top)
-    assert run(kept, x, z, radius, z_top) == fresh(x, z, radius, z_top)
-    moved = z.copy()
-    moved[5] += 0.05
-    assert run(kept, x, moved, radius, z_top) == fresh(x, moved, radius, z_top) != fresh(x, z, radius, z_top)
+    corners = np.zeros((L.N_CORNERS, x.size))
+    out = [np.empty((5, 4)) for _ in range(5)]
+    KD.deposit(x, z, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, *out, corners,
+               np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS)), None, True)
+    for k in range(70):
+        area = KD.grain_area(z[k], radius[k], z_bot, z_top)
+        i0, i1, j0, fx, fz, slope = KD.cell_weights(x[k], z[k], 5 / width, 4 / (z_top - z_bot), z_bot, 5, 4)
+        c00, c10, _, _, *shares = KD.corner_shares(area, i0, i1, j0, fx, fz, 4)
+        assert list(corners[[L.CR_00, L.CR_10, L.CR_A00, L.CR_A10, L.CR_A01, L.CR_A11, L.CR_DFZ], k]) == \
+            [c00, c10, *shares, slope], k
+    u = (z[0] - z_bot) / radius[0]                                 # -1e-8: a little less than half inside
+    assert KD.grain_area(z[0], radius[0], z_bot, z_top) == pytest.approx(radius[0] ** 2 * (0.5 * math.pi + 2 * u),
+                                                                        rel=1e-15)
+    pairs = np.random.default_rng(9).normal(size=2 * 20)
+    expected, cached = np.zeros((2, x.size)), np.zeros((2, x.size))
+    KG.grain_drag(x, z, radius, x.size, width, z_bot, z_top, pairs[0::2].reshape(5, 4).copy(),
+                  pairs[1::2].reshape(5, 4).copy(), expected[0], expected[1])
+    KG.grain_drag_at(corners, x.size, pairs, cached[0], cached[1])
+    assert expected.tobytes() == cached.tobytes()
