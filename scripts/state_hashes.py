@@ -3,8 +3,8 @@
 
     NUMBA_NUM_THREADS=1 .venv/bin/python scripts/state_hashes.py   (T=2 for two threads)
 
-Expected since main 3548805 (1 or 2 threads): dry e9db53e39dbb39ad, undrained with the implicit solver
-ecf1238ba035ffc2 (the default solver, auto, takes the implicit step there: the porous cells at the walls
+Expected (1 or 2 threads): dry e9db53e39dbb39ad (since main 3548805), undrained with the implicit solver
+79034979a2618553 (since efb21c5; the default solver, auto, takes the implicit step there: the porous cells at the walls
 put dt_f above 0.25 x the FTCS bound); undrained with kappa_c = 1e-6, where auto takes the explicit (Heun)
 step: see the README.
 """
