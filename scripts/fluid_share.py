@@ -1,17 +1,20 @@
 """The undrained fluid share of a step at the thesis step, steadier than the bench's paired share.
 
     .venv/bin/python scripts/fluid_share.py THREADS [REPEATS STEPS COPIES] [SOLVER ...]
-    e.g. scripts/fluid_share.py 1 10 1500 3 implicit auto
+    e.g. scripts/fluid_share.py 1 30 300 4 implicit auto
+    (GOUGE_SHARE_VERBOSE=1 also prints each copy's fastest repeat)
 
 The bench's 10,000-grain sheared layer (runs/bench/cache) at the dt of thesis Run 24 (0.09 t0, a
 fluid update every 3 steps, kappa_c 1e-5): one dry Simulation and one undrained per fluid.solver,
 each in COPIES separate copies (their own arrays: a copy's memory placement moves its speed by a
 few per cent), take turns for REPEATS repeats of STEPS steps from the same state. Per copy the
-fastest repeat counts (a shared VM slows a core for seconds at a time); the median over copies is
+fastest repeat counts (a shared VM slows a core for seconds at a time: many short repeats find its
+quiet stretches); the median over copies is
 reported, as us per step, share = 1 - dry / undrained and the cost of one update beyond the dry
 steps [us].
 """
 
+import os
 import sys
 import time
 
@@ -21,7 +24,7 @@ from gouge_cli.driver.simulation import Simulation
 from gouge_cli.studies import bench as B
 
 threads = int(sys.argv[1])
-repeats, steps, copies = (int(a) for a in (sys.argv[2:5] + ["10", "1500", "3"][len(sys.argv[2:5]):]))
+repeats, steps, copies = (int(a) for a in (sys.argv[2:5] + ["30", "300", "4"][len(sys.argv[2:5]):]))
 solvers = sys.argv[5:] or ["implicit", "auto"]
 _, start = B.prepare(10000, 0.89, 0.2, B.Path("runs/bench/cache"))
 dt = B.choose_dt(B.run24_config())
@@ -45,6 +48,8 @@ for r in range(repeats + 1):                       # (the first round warms up)
         if r:
             times[key].append((time.perf_counter() - t0) / steps * 1e6)
 fastest = {key: min(v) for key, v in times.items()}
+if "GOUGE_SHARE_VERBOSE" in os.environ:
+    print({f"{k[0]}{k[1]}": round(v, 1) for k, v in fastest.items()})
 dry = float(np.median([fastest[("dry", k)] for k in range(copies)]))
 print(f"{threads} thread(s), {copies} copies x {repeats} repeats of {steps} steps: dry {dry:.1f} us/step")
 for solver in solvers:
