@@ -264,6 +264,7 @@ def bench(
         per = "unavailable" if a["per_step"] is None else f"{a['per_step']:g}"
         out.print(f"numba runtime allocations per step, N {a['n_grains']}, {a['threads']} thread(s): {per}",
                   highlight=False)
+
     def solve_kind(f):
         return "one explicit step" if f["explicit"] else f"{f['cg_iterations']:.0f} CG iterations"
 
@@ -274,7 +275,8 @@ def bench(
                   f"together {f['update']:.0f} us", highlight=False)
     for f in results["fluid"]:
         out.print(f"undrained (kappa_c {f['permeability']:g}, solver {f['solver']}, "
-                  f"{100 * f['explicit_fraction']:.0f} % explicit steps, grid {f['grid'][0]}x{f['grid'][1]}, dt {f['dt']:.3g}, "
+                  f"{100 * f['explicit_fraction']:.0f} % explicit steps, grid {f['grid'][0]}x{f['grid'][1]}, "
+                  f"dt {f['dt']:.3g}, "
                   f"fluid update every {f['fluid_interval_steps']} steps), N {f['n_grains']}, {f['threads']} "
                   f"thread(s): {f['rate_undrained']:.3g} vs dry {f['rate_dry']:.3g} grain-steps/s, fluid share of a "
                   f"step {100 * f['fluid_share_paired']:.1f} % (median of the shares within each repeat, the two runs "

@@ -18,7 +18,7 @@ from . import NUMBA_CACHE
 from .layout import CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11
 from .deposit import cell_weights, corner_shares, grain_area
 from .lanes import bilinear_pairs
-from .pressure import flat
+from .pressure import flat, flat_columns
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -31,11 +31,8 @@ def pressure_gradient(P, dx, dz, p_bot, p_top, gx, gz):
     """
     nx, nz = P.shape
     pf, fx, fz = flat(P), flat(gx), flat(gz)
-    size = np.uint64(pf.size)
-    unz = np.uint64(nz)
+    size, unz, last, one = flat_columns(P)
     zero = np.uint64(0)
-    one = np.uint64(1)
-    last = size - unz
     two_dx = 2.0 * dx
     if nx == 1:
         for c in range(zero, size):

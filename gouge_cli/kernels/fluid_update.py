@@ -39,7 +39,8 @@ from . import NUMBA_CACHE
 from .layout import (AUTO_EXPLICIT, G_CAPACITY, G_DIAG, G_FX, G_FZ, G_GX, G_GZ, G_P, G_Q, G_RHS, G_SX, G_SZ,
                      G_TB, G_TX, G_TZ, G_Z, P_BETA, P_ETA, P_KAPPA_C, P_MAX_ITER, P_MAX_SUBSTEPS, P_PHI_MAX,
                      P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT, STATUS_NONFINITE,
-                     STATUS_OK, STATUS_SOLVER, S_DT_MAX, S_EXPLICIT_UPDATES, S_ITERATIONS, S_RESIDUAL, S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
+                     STATUS_OK, STATUS_SOLVER, S_DT_MAX, S_EXPLICIT_UPDATES, S_ITERATIONS, S_RESIDUAL,
+                     S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
 from .deposit import deposit
 from .drag import drag_density_pairs, grain_drag_at, pressure_gradient
 from .pressure import (conjugate_gradient, explicit_bound, explicit_diffusion, face_conductances, flat,

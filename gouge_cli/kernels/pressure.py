@@ -125,10 +125,7 @@ def face_conductances(P, permeability, dx, dz, beta, eta, tx, tz, tb):
     cz = 1.0 / (eta * dz * dz)
     half_beta = 0.5 * beta
     p, k, fx, fz, fb = flat(P), flat(permeability), flat(tx), flat(tz), flat(tb)
-    size = np.uint64(p.size)
-    unz = np.uint64(nz)
-    one = np.uint64(1)
-    inner = size - unz
+    size, unz, inner, one = flat_columns(P)
     for c in range(np.uint64(0), inner):
         fx[c] = _face(p[c], p[c + unz], k[c], k[c + unz], half_beta, cx)
     for c in range(inner, size):
@@ -158,7 +155,7 @@ def implicit_system(capacity, tx, tz, tb, dt_f, p_star, P, diag):
 
 
 @njit(cache=NUMBA_CACHE, inline="always")
-def _flat_columns(a):
+def flat_columns(a):
     """(size, nz, size - nz, 1) as uint64 for the flat loops over a grid array a (nx, nz): cell
     c's x neighbours are c + nz and c - nz, wrapping through size - nz in the first and last
     columns."""
@@ -173,7 +170,7 @@ def _add_face_sums(tx, tz, tb, diag):
     term below a column's first cell being a zero face (tz = 0 on the top row of the previous
     column)."""
     fx, fz, fb, df = flat(tx), flat(tz), flat(tb), flat(diag)
-    size, unz, last, one = _flat_columns(tx)
+    size, unz, last, one = flat_columns(tx)
     df[0] = df[0] + fx[0] + fx[last] + fb[0] + fz[0]
     for c in range(one, unz):
         df[c] = df[c] + fx[c] + fx[c + last] + fb[c] + fz[c] + fz[c - one]
@@ -192,7 +189,7 @@ def explicit_bound(capacity, tx, tz, tb):
     1 / (2 D (1/dx^2 + 1/dz^2)). Returns inf when there is no diffusion.
     """
     fx, fz, fb, cap = flat(tx), flat(tz), flat(tb), flat(capacity)
-    size, unz, last, one = _flat_columns(capacity)
+    size, unz, last, one = flat_columns(capacity)
     lam_max = (2.0 * (fx[0] + fx[last] + fz[0]) + fb[0]) / cap[0]
     for c in range(one, unz):                        # (flat, as _add_face_sums; max is exact)
         lam_max = max(lam_max, (2.0 * (fx[c] + fx[c + last] + fz[c] + fz[c - one]) + fb[c]) / cap[c])
@@ -220,11 +217,8 @@ def _apply_operator(p, diag, tx, tz, q):
     arrays, take a zero term."""
     nx, nz = p.shape
     pf, df, fx, fz, qf = flat(p), flat(diag), flat(tx), flat(tz), flat(q)
-    size = np.uint64(pf.size)             # (>= 2: nz >= 2)
-    unz = np.uint64(nz)
-    one = np.uint64(1)
+    size, unz, last, one = flat_columns(p)   # (size >= 2: nz >= 2; last = 0 if nx = 1)
     end = size - one
-    last = size - unz                     # first cell of the last column (0 if nx = 1)
     east = unz if nx > 1 else np.uint64(0)
     qf[0] = _row(df[0], pf[0], fx[0], pf[east], fx[last], pf[last], fz[0], pf[1], 0.0, 0.0)
     if nx == 1:                           # one column: it is its own x neighbour

@@ -30,6 +30,7 @@ import json, sys
 from gouge_cli.config import build_config
 from gouge_cli.io.provenance import sim_hash
 from gouge_cli.driver.simulation import Simulation
+from gouge_cli.kernels.layout import S_EXPLICIT_UPDATES
 data = json.loads(sys.argv[1])
 threads = int(sys.argv[2])
 sim = Simulation(build_config(data))
@@ -40,7 +41,7 @@ sim.advance(1500)
 print(json.dumps({"hash": sim_hash(sim), "mass": sim.state.mass.tobytes().hex()[:64], "dt": sim.dt,
                   "numba_target": __import__("numba").config.CPU_NAME or "host",
                   "fluid": sim.fluid is not None,
-                  "explicit_updates": 0.0 if sim.fluid is None else float(sim.fluid.state[7])}))  # (S_EXPLICIT_UPDATES)
+                  "explicit_updates": 0.0 if sim.fluid is None else float(sim.fluid.state[S_EXPLICIT_UPDATES])}))
 """
 
 

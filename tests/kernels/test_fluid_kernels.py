@@ -451,6 +451,7 @@ def test_near_plane_area_matches_the_closed_form():
     near form and the closed one (atan2, sin) agree as closely."""
     r, z_bot, z_top = 0.47, 0.5, 10.5
     ulp = np.spacing(0.5 * math.pi * r * r)
+
     def side(u):                   # the closed form
         return r * r * (math.pi - math.acos(u) + u * math.sqrt(1.0 - u * u))
 
