@@ -25,7 +25,7 @@ Grains = namedtuple("Grains", ("x", "z", "vx", "vz", "spin", "radius", "mass", "
 # (N + 1,) int64 / rev_slot (capacity,) int32 (kernels.step.reverse_list), x_build/z_build (N,)
 # positions at the last build, new_* the rebuild's second buffers, layout int64 (N_LAYOUT,),
 # cell_of/order (N,) and cell_count (2N + 64,) int64 (cell_of between rebuilds: the per-grain
-# flags of the skin check)
+# flags of the skin check; cell_count: scratch, also of kernels.coupled's solve-and-drift tasks)
 Lists = namedtuple("Lists", ("start", "index", "shear", "rev_start", "rev_slot", "x_build", "z_build",
                              "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count"))
 # the force pass's per-pair data: results pair_fx, pair_fz (force on j), pair_ti, pair_tj (torques)
