@@ -152,7 +152,7 @@ def corner_shares(area, i0, i1, j0, fx, fz, nz):
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
-            corners=None, partial=None, grain_kick=None, serial=False):
+            corners=None, partial=None, grain_kick=None, serial=False, finish=True):
     """Solid fraction, its kernel-consistent gradient and the grid-relative solid velocity.
 
     x, z, vx, vz, radius : float64[>= n] grain centres [d], velocities [v0], radii [d]
@@ -185,6 +185,9 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  without a pass over the grains.
     serial : (fast form only) for one thread: plain loops, the groups after the first through one
                  scratch buffer (see _deposit_grouped); the same sums in the same order.
+    finish : (fast form, not serial) False: stop after the groups' moments, leaving s, ux, uz_rel,
+                 grad_s_x, grad_s_z to a later deposit_finish (on one thread, while others do
+                 something else: kernels.coupled); the same bits.
     """
     nx, nz = s.shape
     size = nx * nz
@@ -198,30 +201,29 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                    grad_s_x.reshape(size), grad_s_z.reshape(size))
         return
     _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
-                     corners, partial, grain_kick, serial)
+                     corners, partial, grain_kick, serial, finish)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
-                     corners, partial, grain_kick, serial):
-    """deposit's fast form: cells and moments in DEPOSIT_GROUPS fixed groups, summed in group order
-    into partial[0], collected per cell. In parallel: group g into partial[g], then the columns.
-    If serial: in plain loops, groups 1, 2, ... one after the other into partial[1], each added
-    to partial[0] (and cleared) at once, so half the scratch is touched and it is still in cache
-    when added. The same sums in the same order either way."""
+def deposit_finish(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial):
+    """The rest of a parallel fast deposit stopped with finish=False, on this thread: the groups'
+    records collected column by column in group order (as _collect_parallel) and expanded into
+    s, ux, uz_rel, grad_s_x, grad_s_z (arguments as deposit's)."""
+    nx, nz = s.shape
+    records = partial.reshape(partial.size)
+    span = np.uint64(nz * N_MOMENTS)
+    for i in range(nx):
+        for g in range(1, DEPOSIT_GROUPS):
+            _add_column(records, i, g, np.uint64(nx) * span, span, False)
+    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial[0], True)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, total, serial):
+    """s, ux, uz_rel, grad_s_x, grad_s_z from the collected records (total: partial[0]), the
+    columns in a plain loop if serial, else in parallel."""
     nx, nz = s.shape
     size = nx * nz
-    if not serial:
-        _groups_parallel(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial,
-                         grain_kick)
-        _collect_parallel(partial, nx, nz)
-    else:
-        for g in range(DEPOSIT_GROUPS):
-            _group(g, min(g, 1), x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial,
-                   grain_kick)
-            if g > 0:
-                _add_and_clear(partial, nx, nz)
-    total = partial[0]
     solid = s.reshape(size)
     momentum_x = ux.reshape(size)
     momentum_z = uz_rel.reshape(size)
@@ -233,6 +235,30 @@ def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s,
             _expand_column(total, i, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
     else:
         _expand_parallel(total, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
+                     corners, partial, grain_kick, serial, finish):
+    """deposit's fast form: cells and moments in DEPOSIT_GROUPS fixed groups, summed in group order
+    into partial[0], collected per cell. In parallel: group g into partial[g], then the columns.
+    If serial: in plain loops, groups 1, 2, ... one after the other into partial[1], each added
+    to partial[0] (and cleared) at once, so half the scratch is touched and it is still in cache
+    when added. The same sums in the same order either way."""
+    nx, nz = s.shape
+    if not serial:
+        _groups_parallel(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial,
+                         grain_kick)
+        if not finish:
+            return
+        _collect_parallel(partial, nx, nz)
+    else:
+        for g in range(DEPOSIT_GROUPS):
+            _group(g, min(g, 1), x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial,
+                   grain_kick)
+            if g > 0:
+                _add_and_clear(partial, nx, nz)
+    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial[0], serial)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")

@@ -41,7 +41,7 @@ from .layout import (AUTO_EXPLICIT, G_CAPACITY, G_DIAG, G_FX, G_FZ, G_GX, G_GZ, 
                      P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT, STATUS_NONFINITE,
                      STATUS_OK, STATUS_SOLVER, S_DT_MAX, S_EXPLICIT_UPDATES, S_ITERATIONS, S_RESIDUAL,
                      S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
-from .deposit import deposit
+from .deposit import deposit, deposit_finish
 from .drag import drag_density_pairs, grain_drag_at, pressure_gradient
 from .pressure import (conjugate_gradient, explicit_bound, explicit_diffusion, face_conductances, flat,
                        heun_diffusion, implicit_system, permeability_field, undrained_source)
@@ -165,10 +165,11 @@ def _plane_velocities(state, z_bot, z_top, dt_f):
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old, ux, uz, work, corners, partial,
-                grain_kick, serial=False):
+                grain_kick, serial=False, finish=True):
     """First part of fluid_update (same arguments): s^n kept, deposit s^{n+1} and u_rel, the
     only part that reads the grains' positions and velocities; serial: plain loops (one thread).
-    Returns a status."""
+    finish False (not serial): the deposit stops after the grains' moments; fluid_finish_deposit
+    must then run before fluid_solve. Returns a status."""
     if not (z_top - z_bot > 0.0 and dt_f > 0.0):
         return STATUS_SOLVER
     nx, nz = s.shape
@@ -177,8 +178,14 @@ def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old
         for j in range(nz):
             s_old[i, j] = s[i, j]
     deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[G_SX], work[G_SZ], corners, partial,
-            grain_kick, serial)
+            grain_kick, serial, finish)
     return STATUS_OK
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def fluid_finish_deposit(Lx, z_bot, z_top, s, ux, uz, work, partial):
+    """The deposit's last part after fluid_begin(finish=False), on this thread (grid only)."""
+    deposit_finish(Lx, z_bot, z_top, s, ux, uz, work[G_SX], work[G_SZ], partial)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")

@@ -56,7 +56,9 @@ def _grains(seed=0, n=130, width=12.0, z_bot=0.5, z_top=10.5):
 
 def test_grouped_deposit_and_cached_drag():
     """The grouped (parallel) deposit equals the serial pass to round-off and gives the same bits
-    for 1 and 2 threads; the drag from the cached corner cells equals grain_drag bit for bit."""
+    for 1 and 2 threads, and stopped after the groups (finish=False) then finished by
+    deposit_finish on one thread; the drag from the cached corner cells equals grain_drag bit
+    for bit."""
     import numba
 
     width, z_bot, z_top = 12.0, 0.5, 10.5
@@ -74,9 +76,16 @@ def test_grouped_deposit_and_cached_drag():
         partial = np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS))
         KD.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial)
         grouped.append(out)
+        later = [np.full((5, 4), np.nan) for _ in range(5)]
+        KD.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *later, corners, partial,
+                   None, False, False)
+        assert all(np.isnan(a).all() for a in later)          # nothing expanded yet
+        KD.deposit_finish(width, z_bot, z_top, *later, partial)
+        grouped.append(later)
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-    for a, b in zip(grouped[0], grouped[1]):
-        assert a.tobytes() == b.tobytes()
+    for other in grouped[1:]:
+        for a, b in zip(grouped[0], other):
+            assert a.tobytes() == b.tobytes()
     for a, b in zip(serial, grouped[0]):
         assert np.allclose(a, b, rtol=1e-13, atol=1e-15 * np.abs(a).max())
     assert np.sum(corners[0] < 0) == np.sum([KD.in_domain_area(zk, rk, z_bot, z_top) <= 0
