@@ -207,7 +207,7 @@ def fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, perm
     tz = work[G_TZ]
     tb = work[G_TB]
     face_conductances(P, permeability, dx, dz, beta, params[P_ETA], tx, tz, tb)
-    dt_max = explicit_bound(capacity, tx, tz, tb)
+    dt_max = explicit_bound(capacity, tx, tz, tb, work[G_DIAG])      # (diag: scratch until the solver sets it)
     state[S_DT_MAX] = dt_max
     status = STATUS_OK
     solver = params[P_SOLVER]

@@ -179,7 +179,7 @@ def _add_face_sums(tx, tz, tb, diag):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def explicit_bound(capacity, tx, tz, tb):
+def explicit_bound(capacity, tx, tz, tb, rates=None):
     """Largest stable FTCS step [t0]: 2 / (Gershgorin bound on the eigenvalues of C^-1 L).
 
     Row c of C^-1 L gives lambda <= (sum of all face conductances + sum of the
@@ -187,14 +187,26 @@ def explicit_bound(capacity, tx, tz, tb):
     4 D (1/dx^2 + 1/dz^2) in every cell (boundary cells included: the wall face,
     half a cell away, conducts twice as much but has no off-diagonal), so the step is exactly
     1 / (2 D (1/dx^2 + 1/dz^2)). Returns inf when there is no diffusion.
+    rates : (nx, nz) scratch (allocated if None) for the cells' bounds. Their largest is found as
+    the largest int64 of their bit patterns, which orders non-negative doubles as their values
+    (an integer reduction vectorises; a float max does not): the exact maximum when any bound
+    is positive, and a value <= 0 (so inf) when none is, as a float max would give.
     """
-    fx, fz, fb, cap = flat(tx), flat(tz), flat(tb), flat(capacity)
+    if rates is None:
+        rates = np.empty_like(capacity)
+    fx, fz, fb, cap, rf = flat(tx), flat(tz), flat(tb), flat(capacity), flat(rates)
     size, unz, last, one = flat_columns(capacity)
-    lam_max = (2.0 * (fx[0] + fx[last] + fz[0]) + fb[0]) / cap[0]
-    for c in range(one, unz):                        # (flat, as _add_face_sums; max is exact)
-        lam_max = max(lam_max, (2.0 * (fx[c] + fx[c + last] + fz[c] + fz[c - one]) + fb[c]) / cap[c])
+    rf[0] = (2.0 * (fx[0] + fx[last] + fz[0]) + fb[0]) / cap[0]
+    for c in range(one, unz):                        # (flat, as _add_face_sums)
+        rf[c] = (2.0 * (fx[c] + fx[c + last] + fz[c] + fz[c - one]) + fb[c]) / cap[c]
     for c in range(unz, size):
-        lam_max = max(lam_max, (2.0 * (fx[c] + fx[c - unz] + fz[c] + fz[c - one]) + fb[c]) / cap[c])
+        rf[c] = (2.0 * (fx[c] + fx[c - unz] + fz[c] + fz[c - one]) + fb[c]) / cap[c]
+    bits = rf.view(np.int64)
+    top = bits[0]
+    for c in range(one, size):
+        top = max(top, bits[c])
+    bits[0] = top
+    lam_max = rf[0]
     if lam_max <= 0.0:
         return math.inf
     return 2.0 / lam_max

@@ -326,6 +326,39 @@ def test_auto_solver_picks_explicit_only_within_threshold():
             assert np.array_equal(results["auto"], results["implicit"])
 
 
+def test_explicit_bound_is_the_exact_largest_cell_bound():
+    """The largest cell bound, found through the integer order of the bits, is the float maximum
+    exactly: with every bound positive, with some negative (1 + beta P < 0 on a face), and with
+    none positive (no diffusion: inf)."""
+    nx, nz = 7, 5
+    rng = np.random.default_rng(12)
+    capacity = rng.uniform(0.5, 2.0, (nx, nz))
+    tx, tz, tb = rng.uniform(0.0, 1e3, (3, nx, nz))
+    tz[:, -1] = 0.0
+
+    def bounds():
+        rates = np.empty(nx * nz)
+        for c in range(nx * nz):
+            i, j = divmod(c, nz)
+            faces = tx[i, j] + tx[i - 1, j] + tz[i, j] + (tz[i, j - 1] if j > 0 else 0.0)
+            rates[c] = (2.0 * faces + tb[i, j]) / capacity[i, j]
+        return rates
+
+    for case in ("positive", "mixed", "none"):
+        if case == "mixed":
+            tb[2, 0] = -1e6
+            tb[4, 4] = -3e5
+        if case == "none":
+            tx[:], tz[:], tb[:] = 0.0, 0.0, -1.0
+        rates = bounds()
+        scratch = np.empty((nx, nz))
+        got = KP.explicit_bound(capacity, tx, tz, tb, scratch)
+        assert got == (2.0 / rates.max() if rates.max() > 0 else math.inf), case
+        assert KP.explicit_bound(capacity, tx, tz, tb) == got
+        if case == "mixed":
+            assert rates.min() < 0 < rates.max()
+
+
 def test_explicit_bound_equals_ftcs_formula_for_uniform_diffusivity():
     nx, nz, dx, dz = 6, 5, 2.0, 1.5
     beta, eta, kappa_c, phi = 36.0, 1.43e-7, 1e-5, 0.15
