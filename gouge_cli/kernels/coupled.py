@@ -84,17 +84,17 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
                      owed, params, width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work,
                      partial, pending, out):
     """fluid_solve (serial, grid only) while the threads run step 2 of the next step, the grains'
-    kicks and drift (move_range), each grain on its own: the bits of one after the other. The
-    threads 1.. first move their own parts of the grains (kernels.step.kick_drift's: the parts
-    they hold in cache), thread 0 solves (after finishing the deposit if pending: its collect
-    and expansion, ~10 us at 10,000 grains on one thread, cost less here than as two parallel
-    regions before); then every thread, as it gets free, takes chunks of
+    kicks and drift (move_range), each grain on its own: the bits of one after the other.
+    Thread 0 solves, first finishing the deposit if pending (deposit_finish: its collect and
+    expansion, ~10 us at 10,000 grains, cheaper here than as two parallel regions before the
+    solve); threads 1.. first move their own parts of the grains (kernels.step.kick_drift's:
+    the grains they hold in cache); then every thread, as it gets free, takes chunks of
     DRIFT_CHUNK grains of thread 0's part (fetch_add on a shared counter). On one thread: solve,
     then move every grain. Returns how many grains are now past skin/2; out: int64 scratch
     (>= threads + 2: the lists' cell_count), out[0] = fluid_solve's status.
-    [A fixed split (the solve's thread idle after it, or the grains of another thread's part
-    moved by one thread: ~3x slower per grain, they come from the other core's cache) took
-    30 us in the loop at 10,000 grains on two threads; this takes 24.
+    [One thread moving all the other threads' grains, ~3x slower per grain (they come from the
+    other core's cache), took 27-30 us in the loop at 10,000 grains on two threads: this region,
+    without the deposit's finish, 30-34 -> 24-26 us (README stop 33).
     Arrays, not the grains/lists records: unpacked from tuples inside this parallel function,
     the two tasks ran ~1.7x slower than one after the other.]"""
     n = x.shape[0]
