@@ -207,14 +207,12 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def deposit_finish(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial):
     """The rest of a parallel fast deposit stopped with finish=False, on this thread: the groups'
-    records collected column by column in group order (as _collect_parallel) and expanded into
+    records collected column by column in group order (_collect_column) and expanded into
     s, ux, uz_rel, grad_s_x, grad_s_z (arguments as deposit's)."""
     nx, nz = s.shape
     records = partial.reshape(partial.size)
-    span = np.uint64(nz * N_MOMENTS)
     for i in range(nx):
-        for g in range(1, DEPOSIT_GROUPS):
-            _add_column(records, i, g, np.uint64(nx) * span, span, False)
+        _collect_column(records, i, nx, nz)
     _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial[0], True)
 
 
@@ -307,10 +305,17 @@ def _collect_parallel(partial, nx, nz):
     """The later groups' records added to partial[0], column by column in parallel, each column
     in group order (only the groups that flagged it: a group's grains are nearby)."""
     records = partial.reshape(partial.size)
-    span = np.uint64(nz * N_MOMENTS)
     for i in prange(nx):
-        for g in range(1, DEPOSIT_GROUPS):
-            _add_column(records, i, g, np.uint64(nx) * span, span, False)
+        _collect_column(records, i, nx, nz)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _collect_column(records, i, nx, nz):
+    """partial[0] += partial[g] over grid column i for g = 1, 2, ... in order (the groups that
+    flagged it); records: partial as one flat array."""
+    span = np.uint64(nz * N_MOMENTS)
+    for g in range(1, DEPOSIT_GROUPS):
+        _add_column(records, i, g, np.uint64(nx) * span, span, False)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
