@@ -213,13 +213,13 @@ def deposit_finish(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial)
     records = partial.reshape(partial.size)
     for i in range(nx):
         _collect_column(records, i, nx, nz)
-    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial[0], True)
+    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, True, True)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, total, serial):
-    """s, ux, uz_rel, grad_s_x, grad_s_z from the collected records (total: partial[0]), the
-    columns in a plain loop if serial, else in parallel."""
+def _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, serial, scattered):
+    """s, ux, uz_rel, grad_s_x, grad_s_z from the collected records (partial[0], or if scattered
+    each column's from _source), the columns in a plain loop if serial, else in parallel."""
     nx, nz = s.shape
     size = nx * nz
     solid = s.reshape(size)
@@ -230,9 +230,11 @@ def _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, total, serial):
     inv_area = nx / Lx * nz / (z_top - z_bot)
     if serial:
         for i in range(nx):
-            _expand_column(total, i, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
+            _expand_column(partial, scattered, i, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x,
+                           slope_z)
     else:
-        _expand_parallel(total, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
+        _expand_parallel(partial, scattered, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x,
+                         slope_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -256,7 +258,7 @@ def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s,
                    grain_kick)
             if g > 0:
                 _add_and_clear(partial, nx, nz)
-    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial[0], serial)
+    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, serial, not serial)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
@@ -302,8 +304,7 @@ def _add_and_clear(partial, nx, nz):
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
 def _collect_parallel(partial, nx, nz):
-    """The later groups' records added to partial[0], column by column in parallel, each column
-    in group order (only the groups that flagged it: a group's grains are nearby)."""
+    """_collect_column for every grid column, the columns in parallel."""
     records = partial.reshape(partial.size)
     for i in prange(nx):
         _collect_column(records, i, nx, nz)
@@ -312,10 +313,31 @@ def _collect_parallel(partial, nx, nz):
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
 def _collect_column(records, i, nx, nz):
     """partial[0] += partial[g] over grid column i for g = 1, 2, ... in order (the groups that
-    flagged it); records: partial as one flat array."""
+    flagged it), if two groups or more flagged it; records: partial as one flat array. A column
+    only one group flagged is left in that group's records (_source: a group's grains are
+    nearby, so most columns are; 0 + x is x, so the sums are the same)."""
     span = np.uint64(nz * N_MOMENTS)
+    group = np.uint64(nx) * span
+    flags = 0
+    for g in range(DEPOSIT_GROUPS):
+        flags += 1 if records[np.uint64(g) * group + np.uint64(i) * span + np.uint64(M_FLAG)] != 0.0 else 0
+    if flags < 2:
+        return
     for g in range(1, DEPOSIT_GROUPS):
-        _add_column(records, i, g, np.uint64(nx) * span, span, False)
+        _add_column(records, i, g, group, span, False)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _source(partial, i, nz):
+    """The group whose records hold grid column i's totals after _collect_column: the one group
+    that flagged it, else 0 (none: zeros; two or more: collected into partial[0])."""
+    flagged = 0
+    source = 0
+    for g in range(DEPOSIT_GROUPS):
+        if partial[g, i * nz, M_FLAG] != 0.0:
+            flagged += 1
+            source = g
+    return source if flagged == 1 else 0
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
@@ -481,30 +503,35 @@ def _flag_columns(first, last, c00, moments, nz):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
-def _expand_parallel(moments, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
+def _expand_parallel(partial, scattered, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
     """_expand_column for every grid column, the columns in parallel (each writes its own cells)."""
     for i in prange(nx):
-        _expand_column(moments, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
+        _expand_column(partial, scattered, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x,
+                       slope_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _expand_column(moments, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
+def _expand_column(partial, scattered, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x,
+                   slope_z):
     """s, mean velocities and slopes of grid column i (as _deposit_range then _normalise leave them)
     from the moment records of the grains whose cell c00 is this one (share 00), the one to its
-    left (10), below (01), left-below (11)."""
+    left (10), below (01), left-below (11): the collected records, partial[0], or if scattered
+    (a parallel deposit: _collect_column) each column's _source."""
     il = i - 1 if i > 0 else nx - 1
+    column = partial[_source(partial, i, nz) if scattered else 0]
+    column_left = partial[_source(partial, il, nz) if scattered else 0]
     for j in range(nz):
         c = i * nz + j
-        own = moments[c]
-        left = moments[il * nz + j]
+        own = column[c]
+        left = column_left[il * nz + j]
         a = own[M_S] + left[M_S + 1]
         b = own[M_U] + left[M_U + 1]
         e = own[M_W] + left[M_W + 1]
         gx = (own[M_S] + own[M_S + 1]) - (left[M_S] + left[M_S + 1])
         gz = own[M_G] + left[M_G + 1]
         if j > 0:
-            below = moments[c - 1]
-            corner = moments[il * nz + j - 1]
+            below = column[c - 1]
+            corner = column_left[il * nz + j - 1]
             a += below[M_S + 2] + corner[M_S + 3]
             b += below[M_U + 2] + corner[M_U + 3]
             e += below[M_W + 2] + corner[M_W + 3]
