@@ -76,47 +76,47 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     return OK, nsteps
 
 
-DRIFT_CHUNK = 256          # grains per chunk of the shared part in _solve_and_drift
-
-
 @njit(parallel=True, cache=NUMBA_CACHE)
 def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, x_build, z_build,
                      owed, params, width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work,
                      partial, pending, out):
     """fluid_solve (serial, grid only) while the threads run step 2 of the next step, the grains'
     kicks and drift (move_range), each grain on its own: the bits of one after the other.
-    Thread 0 solves, first finishing the deposit if pending (deposit_finish: its collect and
-    expansion, ~10 us at 10,000 grains, cheaper here than as two parallel regions before the
-    solve); threads 1.. first move their own parts of the grains (kernels.step.kick_drift's:
-    the grains they hold in cache); then every thread, as it gets free, takes chunks of
-    DRIFT_CHUNK grains of thread 0's part (fetch_add on a shared counter). On one thread: solve,
-    then move every grain. Returns how many grains are now past skin/2; out: int64 scratch
-    (>= threads + 2: the lists' cell_count), out[0] = fluid_solve's status.
-    [One thread moving all the other threads' grains, ~3x slower per grain (they come from the
-    other core's cache), took 27-30 us in the loop at 10,000 grains on two threads: this region,
-    without the deposit's finish, 30-34 -> 24-26 us (README stop 33).
-    Arrays, not the grains/lists records: unpacked from tuples inside this parallel function,
-    the two tasks ran ~1.7x slower than one after the other.]"""
+    Every thread moves its own part of the grains (kernels.step.kick_drift's: the ones it holds
+    in cache). If pending, the deposit's finish (deposit_finish: collect and expansion, ~10 us
+    at 10,000 grains) must precede the solve: thread 1 takes it (fetch_add on a claim counter)
+    before its own part, while thread 0 moves its own; thread 0 then waits for it (or, if no
+    other thread claimed it yet, does it itself: no thread ever waits on one that has not
+    started) and solves. On one thread: solve, then move every grain. Returns how many
+    grains are now past skin/2; out: int64 scratch (>= threads + 3: the lists' cell_count),
+    out[0] = fluid_solve's status.
+    [The path of thread 0 is then its own part (~9 us), the wait and the solve (~13.5 us): this
+    region at 10,000 grains on two threads ~24 us, where thread 0 finishing and solving while
+    the others moved its grains (~3x slower per grain from the other core's cache) took 29-30
+    (README stop 34). Arrays, not the grains/lists records: unpacked from tuples inside this
+    parallel function, the two tasks ran ~1.7x slower than one after the other.]"""
     n = x.shape[0]
     tasks = max(min(int(params[THREADS]), n), 1)
-    shared = n // tasks                      # thread 0's part, [0, shared)
-    counter = tasks + 1
-    out[counter] = 0
+    claim = tasks + 1
+    done = tasks + 2
+    out[claim] = 0
+    out[done] = 0
     for t in prange(tasks):
-        late = 0
-        if t == 0:
-            if pending:
-                fluid_finish_deposit(width, z_bot, z_top, s, ux, uz, work, partial)
+        if t != 0 and pending and fetch_add(out, claim, 1) == 0:
+            fluid_finish_deposit(width, z_bot, z_top, s, ux, uz, work, partial)
+            fetch_add(out, done, 1)
+        if tasks == 1:                          # (one thread: the grid while the deposit's data is warm)
             out[0] = fluid_solve(width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work)
-        else:
-            late += move_range(t * n // tasks, (t + 1) * n // tasks, x, z, vx, vz, spin, force_x, force_z, torque,
-                               inv_mass, inv_inertia, body, x_build, z_build, owed, params)
-        while True:
-            first = fetch_add(out, counter, 1) * DRIFT_CHUNK
-            if first >= shared:
-                break
-            late += move_range(first, min(first + DRIFT_CHUNK, shared), x, z, vx, vz, spin, force_x, force_z,
-                               torque, inv_mass, inv_inertia, body, x_build, z_build, owed, params)
+        late = move_range(t * n // tasks, (t + 1) * n // tasks, x, z, vx, vz, spin, force_x, force_z, torque,
+                          inv_mass, inv_inertia, body, x_build, z_build, owed, params)
+        if t == 0 and tasks > 1:
+            if pending:
+                if fetch_add(out, claim, 1) == 0:
+                    fluid_finish_deposit(width, z_bot, z_top, s, ux, uz, work, partial)
+                else:
+                    while fetch_add(out, done, 0) == 0:     # (an atomic read: the claimant is running)
+                        pass
+            out[0] = fluid_solve(width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work)
         out[t + 1] = late
     total = 0
     for t in range(tasks):

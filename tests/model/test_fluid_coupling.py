@@ -12,7 +12,8 @@ import pytest
 from gouge_cli.io.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.config import build_config
 from gouge_cli.workflows.fork import branch_config
-from gouge_cli.kernels.layout import K_REBUILDS
+from gouge_cli.kernels.layout import K_REBUILDS, THREADS
+from gouge_cli.model.params import numba_threads
 from gouge_cli.driver.simulation import Simulation
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}, "seed": 3,
@@ -104,7 +105,9 @@ def test_fluid_bits_do_not_depend_on_advance_calls(sheared):
     deposit takes the owed kick), and the next step's drift runs while the grid is solved, except
     at the end of a call; cutting 600 steps into calls of 1, 2, 4, 5, 88 and 500 steps (off the
     update rhythm) gives the same bits as one call, with list rebuilds on the way (skin 0.001 d),
-    and so do one call on 2 threads (drift and grid solve concurrent) and 600 calls of one step."""
+    and so do one call on 2 threads (drift and grid solve concurrent), 600 calls of one step, and
+    one call of 2 tasks on one numba thread (the tasks one after the other: thread 0 finds the
+    deposit's finish unclaimed and does it itself, or task 1 runs first; no wait either way)."""
     config, arrays = sheared
     wet = branch_config(config, 1e-5)
     dt = Simulation(wet, arrays=arrays).dt
@@ -129,7 +132,11 @@ def test_fluid_bits_do_not_depend_on_advance_calls(sheared):
     steps = Simulation(wet, arrays=arrays)       # one step per call: no overlapped drift at all
     for _ in range(600):
         steps.advance(1)
-    for other in (two, steps):
+    lone = Simulation(two.config, arrays=arrays)
+    lone.params[THREADS] = 2
+    with numba_threads(1):
+        lone._advance(600)
+    for other in (two, steps, lone):
         for name, values in one.state.arrays().items():
             assert values.tobytes() == other.state.arrays()[name].tobytes(), name
         for name, values in one.fluid.arrays().items():
