@@ -172,10 +172,10 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  the fast form: vectorised passes for the cells and areas (_corners_range)
                  and the velocities (_velocity_range), then each grain adds 14 moments to the
                  record of its cell c00 (_moments_range), in DEPOSIT_GROUPS fixed groups of
-                 grains (in parallel)
-                 summed in group order, and one pass over the cells collects the four shares
-                 (_expand_column): the same sums regrouped (equal to round-off), the same bits for
-                 any thread count. Without partial, the direct serial form, the definition:
+                 grains (in parallel), each group into its own partial[g]; the columns two
+                 groups or more added to are summed in group order (_collect_column), and one
+                 pass over the cells collects the four shares (_expand_column): the same sums
+                 regrouped (equal to round-off), the same bits for any thread count. Without partial, the direct serial form, the definition:
                  every grain adds to its four cells (the tests' reference).
     grain_kick : (fast form only) None, or (owed, force_x, force_z, inv_mass, body, half, damp,
                  wall_vx, wall_vz): grain forces, inverse masses and kinds, half a time step,
@@ -183,8 +183,7 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  each grain's velocity is taken after the second half kick it still owes
                  (kernels.step.closed_velocity): the same bits as closing the step first,
                  without a pass over the grains.
-    serial : (fast form only) for one thread: plain loops, the groups after the first through one
-                 scratch buffer (see _deposit_grouped); the same sums in the same order.
+    serial : (fast form only) for one thread: plain loops; the same sums in the same order.
     finish : (fast form, not serial) False: stop after the groups' moments, leaving s, ux, uz_rel,
                  grad_s_x, grad_s_z to a later deposit_finish (on one thread, while others do
                  something else: kernels.coupled); the same bits.
@@ -210,16 +209,14 @@ def deposit_finish(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial)
     records collected column by column in group order (_collect_column) and expanded into
     s, ux, uz_rel, grad_s_x, grad_s_z (arguments as deposit's)."""
     nx, nz = s.shape
-    records = partial.reshape(partial.size)
-    for i in range(nx):
-        _collect_column(records, i, nx, nz)
-    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, True, True)
+    _collect(partial, nx, nz, True)
+    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, True)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, serial, scattered):
-    """s, ux, uz_rel, grad_s_x, grad_s_z from the collected records (partial[0], or if scattered
-    each column's from _source), the columns in a plain loop if serial, else in parallel."""
+def _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, serial):
+    """s, ux, uz_rel, grad_s_x, grad_s_z from the collected records (each column's in partial[g],
+    g its _source), the columns in a plain loop if serial, else in parallel."""
     nx, nz = s.shape
     size = nx * nz
     solid = s.reshape(size)
@@ -230,76 +227,66 @@ def _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, serial
     inv_area = nx / Lx * nz / (z_top - z_bot)
     if serial:
         for i in range(nx):
-            _expand_column(partial, scattered, i, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x,
-                           slope_z)
+            _expand_column(partial, i, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
     else:
-        _expand_parallel(partial, scattered, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x,
-                         slope_z)
+        _expand_parallel(partial, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
                      corners, partial, grain_kick, serial, finish):
-    """deposit's fast form: cells and moments in DEPOSIT_GROUPS fixed groups, summed in group order
-    into partial[0], collected per cell. In parallel: group g into partial[g], then the columns.
-    If serial: in plain loops, groups 1, 2, ... one after the other into partial[1], each added
-    to partial[0] (and cleared) at once, so half the scratch is touched and it is still in cache
-    when added. The same sums in the same order either way."""
+    """deposit's fast form: cells and moments in DEPOSIT_GROUPS fixed groups, group g into
+    partial[g] (in parallel unless serial), the shared columns summed in group order, then
+    expanded per cell. The same sums in the same order either way.
+    [One thread: the groups through one scratch buffer, each added to partial[0] at once (to
+    touch half the scratch), cost 61-62 us at 10,000 grains; a buffer per group and only the
+    shared columns added, 59 (AMD EPYC Zen 4).]"""
     nx, nz = s.shape
-    if not serial:
+    if serial:
+        for g in range(DEPOSIT_GROUPS):
+            _group(g, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick)
+    else:
         _groups_parallel(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial,
                          grain_kick)
         if not finish:
             return
-        _collect_parallel(partial, nx, nz)
-    else:
-        for g in range(DEPOSIT_GROUPS):
-            _group(g, min(g, 1), x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial,
-                   grain_kick)
-            if g > 0:
-                _add_and_clear(partial, nx, nz)
-    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, serial, not serial)
+    _collect(partial, nx, nz, serial)
+    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, serial)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _group(g, b, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick):
-    """Cells, areas, velocities and moments of the grains of group g into partial[b]."""
+def _group(g, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick):
+    """Cells, areas, velocities and moments of the grains of group g into partial[g]."""
     first = g * n // DEPOSIT_GROUPS
     last = (g + 1) * n // DEPOSIT_GROUPS
     _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
     _velocity_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners, grain_kick)
-    _moments_range(first, last, partial[b], corners, nz)
+    _moments_range(first, last, partial[g], corners, nz)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _add_column(records, i, g, group, span, clear):
+def _add_column(records, i, g, group, span):
     """records: partial as one flat array, group = nx * nz * N_MOMENTS its group stride, span =
     nz * N_MOMENTS a column's. partial[0] += partial[g] over grid column i if group g flagged it
     (a column's records are contiguous: one vector loop; the flag and padding slots add too and
-    stay != 0 / 0), zeroing those records of partial[g] as it goes if clear. Unflagged: all +0.0
-    there, and x + (+0.0) is x (sums are never -0.0)."""
+    stay != 0 / 0). Unflagged: all +0.0 there, and x + (+0.0) is x (sums are never -0.0)."""
     start = np.uint64(i) * span
     source = np.uint64(g) * group + start
     if records[source + np.uint64(M_FLAG)] == 0.0:
         return
-    if clear:                                  # (one pass: each record is read once)
-        for c in range(np.uint64(0), span):
-            records[start + c] += records[source + c]
-            records[source + c] = 0.0
+    for c in range(np.uint64(0), span):
+        records[start + c] += records[source + c]
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _collect(partial, nx, nz, serial):
+    """_collect_column for every grid column, in a plain loop if serial, else in parallel."""
+    if serial:
+        records = partial.reshape(partial.size)
+        for i in range(nx):
+            _collect_column(records, i, nx, nz)
     else:
-        for c in range(np.uint64(0), span):
-            records[start + c] += records[source + c]
-
-
-@njit(cache=NUMBA_CACHE, error_model="numpy")
-def _add_and_clear(partial, nx, nz):
-    """The serial deposit's collect of one group: partial[0] += partial[1] over the columns it
-    flagged, which are then zeroed (the next group's _moments_range would zero them anyway;
-    here they are in cache)."""
-    records = partial.reshape(partial.size)
-    span = np.uint64(nz * N_MOMENTS)
-    for i in range(nx):
-        _add_column(records, i, 1, np.uint64(nx) * span, span, True)
+        _collect_parallel(partial, nx, nz)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
@@ -324,7 +311,7 @@ def _collect_column(records, i, nx, nz):
     if flags < 2:
         return
     for g in range(1, DEPOSIT_GROUPS):
-        _add_column(records, i, g, group, span, False)
+        _add_column(records, i, g, group, span)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
@@ -344,7 +331,7 @@ def _source(partial, i, nz):
 def _groups_parallel(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick):
     """_group for every group, the groups in parallel (no two write the same memory)."""
     for g in prange(DEPOSIT_GROUPS):
-        _group(g, g, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick)
+        _group(g, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, corners, partial, grain_kick)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -503,23 +490,20 @@ def _flag_columns(first, last, c00, moments, nz):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
-def _expand_parallel(partial, scattered, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
+def _expand_parallel(partial, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
     """_expand_column for every grid column, the columns in parallel (each writes its own cells)."""
     for i in prange(nx):
-        _expand_column(partial, scattered, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x,
-                       slope_z)
+        _expand_column(partial, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _expand_column(partial, scattered, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x,
-                   slope_z):
+def _expand_column(partial, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
     """s, mean velocities and slopes of grid column i (as _deposit_range then _normalise leave them)
     from the moment records of the grains whose cell c00 is this one (share 00), the one to its
-    left (10), below (01), left-below (11): the collected records, partial[0], or if scattered
-    (a parallel deposit: _collect_column) each column's _source."""
+    left (10), below (01), left-below (11), each column's in partial[_source] after _collect."""
     il = i - 1 if i > 0 else nx - 1
-    column = partial[_source(partial, i, nz) if scattered else 0]
-    column_left = partial[_source(partial, il, nz) if scattered else 0]
+    column = partial[_source(partial, i, nz)]
+    column_left = partial[_source(partial, il, nz)]
     for j in range(nz):
         c = i * nz + j
         own = column[c]

@@ -109,7 +109,7 @@ def test_grouped_deposit_reuses_its_scratch_and_takes_owed_kicks():
     after one from grains elsewhere gives the bits of a fresh scratch. With grain_kick, the
     velocities are the whole-step ones (closing half kick for free grains, the wall velocity
     for top-wall grains, bottom-wall grains as stored): the bits of closing first. The serial
-    form (one thread: groups 1.. through one scratch buffer, added at once) gives the same bits
+    form (one thread: plain loops) gives the same bits
     as the parallel one, whatever either left in the scratch."""
 
     width, z_bot, z_top = 12.0, 0.5, 10.5
