@@ -225,11 +225,12 @@ def _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, serial
     slope_x = grad_s_x.reshape(size)
     slope_z = grad_s_z.reshape(size)
     inv_area = nx / Lx * nz / (z_top - z_bot)
+    records = partial.reshape(partial.size)
     if serial:
         for i in range(nx):
-            _expand_column(partial, i, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
+            _expand_column(records, i, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
     else:
-        _expand_parallel(partial, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
+        _expand_parallel(records, nx, nz, nx / Lx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -315,13 +316,14 @@ def _collect_column(records, i, nx, nz):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _source(partial, i, nz):
+def _source(records, i, nx, nz):
     """The group whose records hold grid column i's totals after _collect_column: the one group
-    that flagged it, else 0 (none: zeros; two or more: collected into partial[0])."""
+    that flagged it, else 0 (none: zeros; two or more: collected into partial[0]); records:
+    partial as one flat array."""
     flagged = 0
     source = 0
     for g in range(DEPOSIT_GROUPS):
-        if partial[g, i * nz, M_FLAG] != 0.0:
+        if records[np.uint64(((g * nx + i) * nz) * N_MOMENTS + M_FLAG)] != 0.0:
             flagged += 1
             source = g
     return source if flagged == 1 else 0
@@ -490,39 +492,47 @@ def _flag_columns(first, last, c00, moments, nz):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
-def _expand_parallel(partial, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
+def _expand_parallel(records, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
     """_expand_column for every grid column, the columns in parallel (each writes its own cells)."""
     for i in prange(nx):
-        _expand_column(partial, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
+        _expand_column(records, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _expand_column(partial, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
+def _expand_column(records, i, nx, nz, inv_dx, inv_area, solid, momentum_x, momentum_z, slope_x, slope_z):
     """s, mean velocities and slopes of grid column i (as _deposit_range then _normalise leave them)
     from the moment records of the grains whose cell c00 is this one (share 00), the one to its
-    left (10), below (01), left-below (11), each column's in partial[_source] after _collect."""
+    left (10), below (01), left-below (11), each column's in partial[_source] after _collect;
+    records: partial as one flat array. [Unsigned offsets (no negative-index checks), the slots
+    as uint64 constants (uint64 + int64 is float64 in numba): 7.1 -> 6.4 us at 80 x 19 cells.]"""
     il = i - 1 if i > 0 else nx - 1
-    column = partial[_source(partial, i, nz)]
-    column_left = partial[_source(partial, il, nz)]
+    m = np.uint64(N_MOMENTS)
+    s0, s1, s2, s3 = np.uint64(M_S), np.uint64(M_S + 1), np.uint64(M_S + 2), np.uint64(M_S + 3)
+    u0, u1, u2, u3 = np.uint64(M_U), np.uint64(M_U + 1), np.uint64(M_U + 2), np.uint64(M_U + 3)
+    w0, w1, w2, w3 = np.uint64(M_W), np.uint64(M_W + 1), np.uint64(M_W + 2), np.uint64(M_W + 3)
+    g0, g1 = np.uint64(M_G), np.uint64(M_G + 1)
+    own = (np.uint64(_source(records, i, nx, nz)) * np.uint64(nx) + np.uint64(i)) * np.uint64(nz) * m
+    left = (np.uint64(_source(records, il, nx, nz)) * np.uint64(nx) + np.uint64(il)) * np.uint64(nz) * m
+    c = np.uint64(i * nz)
     for j in range(nz):
-        c = i * nz + j
-        own = column[c]
-        left = column_left[il * nz + j]
-        a = own[M_S] + left[M_S + 1]
-        b = own[M_U] + left[M_U + 1]
-        e = own[M_W] + left[M_W + 1]
-        gx = (own[M_S] + own[M_S + 1]) - (left[M_S] + left[M_S + 1])
-        gz = own[M_G] + left[M_G + 1]
+        a = records[own + s0] + records[left + s1]
+        b = records[own + u0] + records[left + u1]
+        e = records[own + w0] + records[left + w1]
+        gx = (records[own + s0] + records[own + s1]) - (records[left + s0] + records[left + s1])
+        gz = records[own + g0] + records[left + g1]
         if j > 0:
-            below = column[c - 1]
-            corner = column_left[il * nz + j - 1]
-            a += below[M_S + 2] + corner[M_S + 3]
-            b += below[M_U + 2] + corner[M_U + 3]
-            e += below[M_W + 2] + corner[M_W + 3]
-            gx += (below[M_S + 2] + below[M_S + 3]) - (corner[M_S + 2] + corner[M_S + 3])
-            gz -= below[M_G] + corner[M_G + 1]
+            below = own - m
+            corner = left - m
+            a += records[below + s2] + records[corner + s3]
+            b += records[below + u2] + records[corner + u3]
+            e += records[below + w2] + records[corner + w3]
+            gx += (records[below + s2] + records[below + s3]) - (records[corner + s2] + records[corner + s3])
+            gz -= records[below + g0] + records[corner + g1]
         solid[c], momentum_x[c], momentum_z[c], slope_x[c], slope_z[c] = _normalised(
             a, b, e, gx * inv_dx, gz, inv_area)
+        own += m
+        left += m
+        c += np.uint64(1)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
