@@ -70,9 +70,10 @@ def _finish_grid(Lx, z_bot, z_top, P, s, uz, work, w_bot, w_top):
     nx, nz = P.shape
     dx = Lx / nx
     dz = (z_top - z_bot) / nz
-    for i in range(nx):
-        for j in range(nz):
-            uz[i, j] += w_bot + (j + 0.5) / nz * (w_top - w_bot)
+    for j in range(nz):                     # (a row's w once: a division per row, not per cell)
+        w = w_bot + (j + 0.5) / nz * (w_top - w_bot)
+        for i in range(nx):
+            uz[i, j] += w
     if not _all_finite(P):
         return STATUS_NONFINITE
     pressure_gradient(P, dx, dz, 0.0, 0.0, work[G_GX], work[G_GZ])
@@ -172,11 +173,10 @@ def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old
     must then run before fluid_solve. Returns a status."""
     if not (z_top - z_bot > 0.0 and dt_f > 0.0):
         return STATUS_SOLVER
-    nx, nz = s.shape
     w_bot, w_top = _plane_velocities(state, z_bot, z_top, dt_f)
-    for i in range(nx):
-        for j in range(nz):
-            s_old[i, j] = s[i, j]
+    sf, of = flat(s), flat(s_old)
+    for c in range(np.uint64(sf.size)):
+        of[c] = sf[c]
     deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[G_SX], work[G_SZ], corners, partial,
             grain_kick, serial, finish)
     return STATUS_OK
