@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_DFZ, CR_U, CR_W,
+from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ, CR_U, CR_W,
                      DEPOSIT_GROUPS, M_FLAG, M_G, M_S, M_U, M_W, N_MOMENTS)
 from .lanes import add2, add4, add4_scaled
 from .step import closed_velocity
@@ -167,7 +167,8 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
     corners : float64[N_CORNERS, >= n] out (rows C_*), per grain: flat indices c00, c10 of its
                  corner cells, the areas a00, a10, a01, a11 they receive (c00 = -1 for a
                  grain outside the layer) and d fz/dz, reused by grain_drag_at for the drag;
-                 and the velocity it deposits (rows CR_U, CR_W), scratch.
+                 and the velocity it deposits (rows CR_U, CR_W), scratch; c00 as int64 in row
+                 CR_CELL (viewed as int64).
     partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS] scratch. With corners and partial,
                  the fast form: vectorised passes for the cells and areas (_corners_range)
                  and the velocities (_velocity_range), then each grain adds 14 moments to the
@@ -445,11 +446,14 @@ def _moments_range(first, last, moments, corners, nz):
                 flat[c] = 0.0
     c00, a00s, a10s, a01s, a11s, dfz, us, ws = (corners[CR_00], corners[CR_A00], corners[CR_A10], corners[CR_A01],
                                                  corners[CR_A11], corners[CR_DFZ], corners[CR_U], corners[CR_W])
+    cells = corners[CR_CELL].view(np.int64)
     for kk in range(first, last):
         k = np.uint64(kk)
-        if c00[k] < 0.0:
+        cell = np.int64(c00[k])               # (via int64: one instruction without AVX-512)
+        cells[k] = cell                        # (for the drag: kernels.drag.grain_drag_at)
+        if cell < 0:
             continue
-        r = np.uint64(np.int64(c00[k])) * np.uint64(N_MOMENTS)   # (via int64: one instruction without AVX-512)
+        r = np.uint64(cell) * np.uint64(N_MOMENTS)
         a00 = a00s[k]
         a10 = a10s[k]
         a01 = a01s[k]
@@ -555,6 +559,7 @@ def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w
         if area <= 0.0:
             if corners is not None:
                 corners[CR_00, k] = -1.0
+                corners[CR_CELL].view(np.int64)[k] = -1
             continue
         i0, i1, j0, fx, fz, dfz = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
         c00, c10, c01, c11, a00, a10, a01, a11 = corner_shares(area, i0, i1, j0, fx, fz, nz)
@@ -566,6 +571,7 @@ def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w
             corners[CR_A01, k] = a01
             corners[CR_A11, k] = a11
             corners[CR_DFZ, k] = dfz
+            corners[CR_CELL].view(np.int64)[k] = c00
         a0 = area * (1.0 - fz)
         a1 = area * fz
         vxk = vx[k]

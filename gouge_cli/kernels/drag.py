@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11
+from .layout import CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL
 from .deposit import cell_weights, corner_shares, grain_area
 from .lanes import bilinear_pairs
 from .pressure import flat, flat_columns
@@ -129,20 +129,26 @@ def grain_drag(x, z, radius, n, Lx, z_bot, z_top, fx, fz, drag_x, drag_z):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
-def grain_drag_at(corners, n, pairs, drag_x, drag_z):
+def grain_drag_at(corners, n, nz, pairs, drag_x, drag_z):
     """grain_drag with the corner cells and areas the deposit stored (same positions) and the
     density as interleaved pairs (drag_density_pairs): the same values, without recomputing
-    areas and weights, x and z in the two lanes of one vector sum (kernels.lanes). [A parallel
-    loop on one thread too: a plain loop through an inlined per-grain helper that takes the
-    arrays was ~10x slower (numba reference-counts them per grain).]"""
-    c00, c10 = corners[CR_00], corners[CR_10]
-    for k in prange(n):
-        if c00[k] < 0.0:
+    areas and weights, x and z in the two lanes of one vector sum (kernels.lanes). Cell c00
+    from the int64 row CR_CELL; c10 = c00 + nz, less nx nz past the last column. [Two float ->
+    int conversions per grain (rows CR_00, CR_10) cost ~26 % of the loop at 10,000 grains. A
+    parallel loop on one thread too: a plain loop through an inlined per-grain helper that
+    takes the arrays was ~10x slower (numba reference-counts them per grain).]"""
+    cells = corners[CR_CELL].view(np.int64)
+    a00, a10, a01, a11 = corners[CR_A00], corners[CR_A10], corners[CR_A01], corners[CR_A11]
+    column = np.uint64(2 * nz)
+    end = np.uint64(pairs.size)
+    for kk in prange(n):
+        k = np.uint64(kk)                   # (unsigned: no negative-index checks)
+        cell = cells[k]
+        if cell < 0:
             drag_x[k] = 0.0
             drag_z[k] = 0.0
             continue
-        i00 = np.uint64(np.int64(c00[k]))   # (float -> int64 -> uint64: without AVX-512 a direct float -> uint64
-        i10 = np.uint64(np.int64(c10[k]))   # conversion is a dozen instructions)
-        drag_x[k], drag_z[k] = bilinear_pairs(pairs, i00 * np.uint64(2), i10 * np.uint64(2),
-                                              corners[CR_A00, k], corners[CR_A10, k], corners[CR_A01, k],
-                                              corners[CR_A11, k])
+        i00 = np.uint64(cell) * np.uint64(2)
+        i10 = i00 + column
+        i10 = i10 - end if i10 >= end else i10
+        drag_x[k], drag_z[k] = bilinear_pairs(pairs, i00, i10, a00[k], a10[k], a01[k], a11[k])

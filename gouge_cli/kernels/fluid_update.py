@@ -90,7 +90,7 @@ def fluid_drag(n, work, corners, drag_x, drag_z, status):
             drag_x[k] = 0.0
             drag_z[k] = 0.0
         return
-    grain_drag_at(corners, n, _drag_pairs(work), drag_x, drag_z)
+    grain_drag_at(corners, n, work.shape[2], _drag_pairs(work), drag_x, drag_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")

@@ -135,9 +135,11 @@ STATUS_NONFINITE = 2
 
 DEPOSIT_GROUPS = 4     # grains deposit in this many fixed groups, summed in group order
 # corners rows: flat indices of a grain's cells (i0, j0) and (i1, j0), the areas its four cells
-# receive, and d fz / dz (see cell_weights); then the velocity it deposits, vx and vz - w(z)
-CR_00, CR_10, CR_A00, CR_A10, CR_A01, CR_A11, CR_DFZ, CR_U, CR_W = range(9)
-N_CORNERS = 9
+# receive, and d fz / dz (see cell_weights); then the velocity it deposits, vx and vz - w(z); and
+# the cell (i0, j0) again as int64 bits (the row viewed as int64; -1 outside the layer), the
+# drag's index without a float -> int conversion
+CR_00, CR_10, CR_A00, CR_A10, CR_A01, CR_A11, CR_DFZ, CR_U, CR_W, CR_CELL = range(10)
+N_CORNERS = 10
 # moments a grain adds to the record of its cell c00: its four shares a00, a10, a01, a11, the
 # same times vx and times vz - w(z), and the z-slope terms (a00 + a01) dfz, (a10 + a11) dfz
 M_S, M_U, M_W, M_G = 0, 4, 8, 12

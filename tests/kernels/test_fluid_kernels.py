@@ -100,8 +100,10 @@ def test_grouped_deposit_and_cached_drag():
     expected = np.zeros((2, x.size))
     cached = np.zeros((2, x.size))
     KG.grain_drag(x, z, radius, x.size, width, z_bot, z_top, fx, fz, expected[0], expected[1])
-    KG.grain_drag_at(corners, x.size, pairs, cached[0], cached[1])
+    KG.grain_drag_at(corners, x.size, 4, pairs, cached[0], cached[1])
     assert expected.tobytes() == cached.tobytes() and np.abs(expected).max() > 0
+    cells = corners[L.CR_CELL].view(np.int64)                # c00 as int64; c10 wraps in the last column
+    assert cells.tolist() == corners[L.CR_00].astype(np.int64).tolist() and np.any(cells >= 16)
 
 
 def test_grouped_deposit_reuses_its_scratch_and_takes_owed_kicks():
@@ -536,5 +538,5 @@ def test_wall_grains_take_the_vector_path_with_the_bits_of_grain_area():
     expected, cached = np.zeros((2, x.size)), np.zeros((2, x.size))
     KG.grain_drag(x, z, radius, x.size, width, z_bot, z_top, pairs[0::2].reshape(5, 4).copy(),
                   pairs[1::2].reshape(5, 4).copy(), expected[0], expected[1])
-    KG.grain_drag_at(corners, x.size, pairs, cached[0], cached[1])
+    KG.grain_drag_at(corners, x.size, 4, pairs, cached[0], cached[1])
     assert expected.tobytes() == cached.tobytes()
