@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (CR_00, CR_10, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ, CR_U, CR_W,
+from .layout import (CELL_BITS, CELL_CODE, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ, CR_U, CR_W,
                      DEPOSIT_GROUPS, M_FLAG, M_G, M_S, M_U, M_W, N_MOMENTS)
 from .lanes import add2, add4, add4_scaled
 from .step import closed_velocity
@@ -164,11 +164,11 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  [1/d]: the derivative of s_c with respect to the cell position,
                  so that moving every grain by delta changes s by -delta . grad_s
                  to first order (a rigid translation generates no source).
-    corners : float64[N_CORNERS, >= n] out (rows C_*), per grain: flat indices c00, c10 of its
-                 corner cells, the areas a00, a10, a01, a11 they receive (c00 = -1 for a
-                 grain outside the layer) and d fz/dz, reused by grain_drag_at for the drag;
-                 and the velocity it deposits (rows CR_U, CR_W), scratch; c00 as int64 in row
-                 CR_CELL (viewed as int64).
+    corners : float64[N_CORNERS, >= n] out (rows CR_*), per grain: the flat index c00 of its
+                 corner cell (i0, j0) (row CR_CELL, coded: kernels.layout.CELL_CODE; c00 < 0
+                 for a grain outside the layer), the areas a00, a10, a01, a11 its four cells
+                 receive and d fz/dz, reused by grain_drag_at for the drag; and the velocity it
+                 deposits (rows CR_U, CR_W), scratch.
     partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS] scratch. With corners and partial,
                  the fast form: vectorised passes for the cells and areas (_corners_range)
                  and the velocities (_velocity_range), then each grain adds 14 moments to the
@@ -349,8 +349,8 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
     inv_dz = nz / (z_top - z_bot)
     fnx = float(nx)
     fnz = float(nz)
-    c00, c10, a00, a10, a01, a11, dfz = (corners[CR_00], corners[CR_10], corners[CR_A00], corners[CR_A10],
-                                         corners[CR_A01], corners[CR_A11], corners[CR_DFZ])
+    cell, a00, a10, a01, a11, dfz = (corners[CR_CELL], corners[CR_A00], corners[CR_A10], corners[CR_A01],
+                                     corners[CR_A11], corners[CR_DFZ])
     odd_count = 0
     for kk in range(first, last):
         k = np.uint64(kk)
@@ -364,8 +364,6 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
         fi = np.floor(xi)        # (a float: math.floor returns an int, a conversion AVX2 cannot vectorise)
         fx = xi - fi
         fi = fi + fnx if fi < 0.0 else fi
-        f1 = fi + 1.0
-        f1 = 0.0 if f1 == fnx else f1
         zeta = hb * inv_dz - 0.5
         fj = np.floor(zeta)
         inside = (fj >= 0.0) & (fj < fnz - 1.0)
@@ -374,8 +372,7 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
         fz = zeta - fj if inside else (1.0 if top else 0.0)
         a0 = area * (1.0 - fz)
         a1 = area * fz
-        c00[k] = fi * fnz + j0
-        c10[k] = f1 * fnz + j0
+        cell[k] = (fi * fnz + j0) + CELL_CODE
         a00[k] = a0 * (1.0 - fx)
         a10[k] = a0 * fx
         a01[k] = a1 * (1.0 - fx)
@@ -391,11 +388,12 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
             continue
         area = grain_area(z[k], radius[k], z_bot, z_top)
         if area <= 0.0:
-            c00[k] = -1.0
+            cell[k] = CELL_CODE - 1.0
             dfz[k] = 0.0
             continue
         i0, i1, j0, fx, fz, slope = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
-        c00[k], c10[k], _, _, a00[k], a10[k], a01[k], a11[k] = corner_shares(area, i0, i1, j0, fx, fz, nz)
+        c00, _, _, _, a00[k], a10[k], a01[k], a11[k] = corner_shares(area, i0, i1, j0, fx, fz, nz)
+        cell[k] = float(c00) + CELL_CODE
         dfz[k] = slope
 
 
@@ -444,13 +442,12 @@ def _moments_range(first, last, moments, corners, nz):
             start = np.uint64(head * N_MOMENTS)
             for c in range(start, start + span):
                 flat[c] = 0.0
-    c00, a00s, a10s, a01s, a11s, dfz, us, ws = (corners[CR_00], corners[CR_A00], corners[CR_A10], corners[CR_A01],
-                                                 corners[CR_A11], corners[CR_DFZ], corners[CR_U], corners[CR_W])
+    a00s, a10s, a01s, a11s, dfz, us, ws = (corners[CR_A00], corners[CR_A10], corners[CR_A01], corners[CR_A11],
+                                           corners[CR_DFZ], corners[CR_U], corners[CR_W])
     cells = corners[CR_CELL].view(np.int64)
     for kk in range(first, last):
         k = np.uint64(kk)
-        cell = np.int64(c00[k])               # (via int64: one instruction without AVX-512)
-        cells[k] = cell                        # (for the drag: kernels.drag.grain_drag_at)
+        cell = cells[k] - CELL_BITS           # (an integer load: no float -> int conversion)
         if cell < 0:
             continue
         r = np.uint64(cell) * np.uint64(N_MOMENTS)
@@ -462,28 +459,29 @@ def _moments_range(first, last, moments, corners, nz):
         add4_scaled(flat, r + np.uint64(M_U), a00, a10, a01, a11, us[k])
         add4_scaled(flat, r + np.uint64(M_W), a00, a10, a01, a11, ws[k])
         add2(flat, r + np.uint64(M_G), (a00 + a01) * dfz[k], (a10 + a11) * dfz[k])
-    _flag_columns(first, last, c00, moments, nz)
+    _flag_columns(first, last, corners[CR_CELL], moments, nz)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _flag_columns(first, last, c00, moments, nz):
+def _flag_columns(first, last, cell, moments, nz):
     """Flag (M_FLAG of a column's first record) an arc of grid columns that holds the column of
-    every grain first:last: offsets from the first grain's column, taken into (-nx/2, nx/2]
-    around it, and their least and greatest. The arc may hold columns no grain added to (they
-    stay zero); it is one vector pass (int32 columns, integer min and max), where a flag store per
-    grain cost ~10 us per update at 10,000 grains."""
+    every grain first:last (cell: the corners row CR_CELL): offsets from the first grain's
+    column, taken into (-nx/2, nx/2] around it, and their least and greatest. The arc may hold
+    columns no grain added to (they stay zero); it is one vector pass (int32 columns, integer
+    min and max), where a flag store per grain cost ~10 us per update at 10,000 grains."""
     nx = moments.shape[0] // nz
     if last <= first:
         return
     inv_nz = 1.0 / nz
-    base = np.int32(max(c00[first], 0.0) * inv_nz)       # c00 = i nz + j: i (1/nz rounded: still i)
+    base = np.int32(max(cell[first] - CELL_CODE, 0.0) * inv_nz)   # c00 = i nz + j: i (1/nz rounded: still i)
     half = np.int32(nx // 2)
     width = np.int32(nx)
     lo = np.int32(0)
     hi = np.int32(0)
     for kk in range(first, last):
         k = np.uint64(kk)
-        col = np.int32(c00[k] * inv_nz) if c00[k] >= 0.0 else base     # (c00 = -1: outside the layer)
+        c00 = cell[k] - CELL_CODE                                      # (exact)
+        col = np.int32(c00 * inv_nz) if c00 >= 0.0 else base           # (c00 < 0: outside the layer)
         d = col - base
         d = d - width if d > half else d
         d = d + width if d <= -half else d
@@ -558,20 +556,17 @@ def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w
         area = grain_area(z[k], radius[k], z_bot, z_top)
         if area <= 0.0:
             if corners is not None:
-                corners[CR_00, k] = -1.0
-                corners[CR_CELL].view(np.int64)[k] = -1
+                corners[CR_CELL, k] = CELL_CODE - 1.0
             continue
         i0, i1, j0, fx, fz, dfz = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
         c00, c10, c01, c11, a00, a10, a01, a11 = corner_shares(area, i0, i1, j0, fx, fz, nz)
         if corners is not None:
-            corners[CR_00, k] = c00
-            corners[CR_10, k] = c10
+            corners[CR_CELL, k] = float(c00) + CELL_CODE
             corners[CR_A00, k] = a00
             corners[CR_A10, k] = a10
             corners[CR_A01, k] = a01
             corners[CR_A11, k] = a11
             corners[CR_DFZ, k] = dfz
-            corners[CR_CELL].view(np.int64)[k] = c00
         a0 = area * (1.0 - fz)
         a1 = area * fz
         vxk = vx[k]

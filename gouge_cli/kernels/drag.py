@@ -15,7 +15,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL
+from .layout import CELL_BITS, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL
 from .deposit import cell_weights, corner_shares, grain_area
 from .lanes import bilinear_pairs
 from .pressure import flat, flat_columns
@@ -133,8 +133,9 @@ def grain_drag_at(corners, n, nz, pairs, drag_x, drag_z):
     """grain_drag with the corner cells and areas the deposit stored (same positions) and the
     density as interleaved pairs (drag_density_pairs): the same values, without recomputing
     areas and weights, x and z in the two lanes of one vector sum (kernels.lanes). Cell c00
-    from the int64 row CR_CELL; c10 = c00 + nz, less nx nz past the last column. [Two float ->
-    int conversions per grain (rows CR_00, CR_10) cost ~26 % of the loop at 10,000 grains. A
+    from the bits of the coded row CR_CELL (kernels.layout.CELL_BITS); c10 = c00 + nz, less
+    nx nz past the last column. [Two float -> int conversions per grain (c00 and c10 stored as
+    floats) cost ~26 % of the loop at 10,000 grains. A
     parallel loop on one thread too: a plain loop through an inlined per-grain helper that
     takes the arrays was ~10x slower (numba reference-counts them per grain).]"""
     cells = corners[CR_CELL].view(np.int64)
@@ -143,7 +144,7 @@ def grain_drag_at(corners, n, nz, pairs, drag_x, drag_z):
     end = np.uint64(pairs.size)
     for kk in prange(n):
         k = np.uint64(kk)                   # (unsigned: no negative-index checks)
-        cell = cells[k]
+        cell = cells[k] - CELL_BITS
         if cell < 0:
             drag_x[k] = 0.0
             drag_z[k] = 0.0

@@ -134,12 +134,17 @@ STATUS_SOLVER = 1
 STATUS_NONFINITE = 2
 
 DEPOSIT_GROUPS = 4     # grains deposit in this many fixed groups, summed in group order
-# corners rows: flat indices of a grain's cells (i0, j0) and (i1, j0), the areas its four cells
-# receive, and d fz / dz (see cell_weights); then the velocity it deposits, vx and vz - w(z); and
-# the cell (i0, j0) again as int64 bits (the row viewed as int64; -1 outside the layer), the
-# drag's index without a float -> int conversion
-CR_00, CR_10, CR_A00, CR_A10, CR_A01, CR_A11, CR_DFZ, CR_U, CR_W, CR_CELL = range(10)
-N_CORNERS = 10
+# corners rows: a grain's cell (i0, j0) as c00 + CELL_CODE (below), the areas its four cells
+# (i0, j0), (i1, j0), (i0, j0 + 1), (i1, j0 + 1) receive, and d fz / dz (see cell_weights); then
+# the velocity it deposits, vx and vz - w(z). (i1, j0) is c00 + nz, less nx nz past the last column.
+CR_CELL, CR_A00, CR_A10, CR_A01, CR_A11, CR_DFZ, CR_U, CR_W = range(8)
+N_CORNERS = 8
+# the cell row holds the float c00 + 2^52, exact, whose bits read as int64 are CELL_BITS + c00 (the
+# float bits of 2^52 + v for integers 0 <= v < 2^52 are those of 2^52 plus v): vector loops write it,
+# scalar loops read an integer without a float -> int conversion. A grain outside the layer has
+# 2^52 - 1 there: negative either way (-1 as a float, -2 from the bits)
+CELL_CODE = 2.0 ** 52
+CELL_BITS = 0x4330000000000000
 # moments a grain adds to the record of its cell c00: its four shares a00, a10, a01, a11, the
 # same times vx and times vz - w(z), and the z-slope terms (a00 + a01) dfz, (a10 + a11) dfz
 M_S, M_U, M_W, M_G = 0, 4, 8, 12

@@ -88,7 +88,7 @@ def test_grouped_deposit_and_cached_drag():
             assert a.tobytes() == b.tobytes()
     for a, b in zip(serial, grouped[0]):
         assert np.allclose(a, b, rtol=1e-13, atol=1e-15 * np.abs(a).max())
-    assert np.sum(corners[0] < 0) == np.sum([KD.in_domain_area(zk, rk, z_bot, z_top) <= 0
+    assert np.sum(corners[L.CR_CELL] < 2.0 ** 52) == np.sum([KD.in_domain_area(zk, rk, z_bot, z_top) <= 0
                                              for zk, rk in zip(z, radius)]) > 0
     gx, gz = rng.normal(size=(2, 5, 4))
     s = rng.uniform(-0.2, 1.0, (5, 4))          # some cells without solid: zero density there
@@ -102,8 +102,10 @@ def test_grouped_deposit_and_cached_drag():
     KG.grain_drag(x, z, radius, x.size, width, z_bot, z_top, fx, fz, expected[0], expected[1])
     KG.grain_drag_at(corners, x.size, 4, pairs, cached[0], cached[1])
     assert expected.tobytes() == cached.tobytes() and np.abs(expected).max() > 0
-    cells = corners[L.CR_CELL].view(np.int64)                # c00 as int64; c10 wraps in the last column
-    assert cells.tolist() == corners[L.CR_00].astype(np.int64).tolist() and np.any(cells >= 16)
+    cells = corners[L.CR_CELL].view(np.int64) - L.CELL_BITS  # the coded cell row: c00 as float and as bits
+    inside = cells >= 0
+    assert cells[inside].tolist() == (corners[L.CR_CELL][inside] - 2.0 ** 52).astype(np.int64).tolist()
+    assert np.any(cells >= 16) and np.all(cells[~inside] == -2) and np.sum(~inside) == 3   # (c10 wraps at 16-19)
 
 
 def test_grouped_deposit_reuses_its_scratch_and_takes_owed_kicks():
@@ -529,8 +531,8 @@ def test_wall_grains_take_the_vector_path_with_the_bits_of_grain_area():
         area = KD.grain_area(z[k], radius[k], z_bot, z_top)
         i0, i1, j0, fx, fz, slope = KD.cell_weights(x[k], z[k], 5 / width, 4 / (z_top - z_bot), z_bot, 5, 4)
         c00, c10, _, _, *shares = KD.corner_shares(area, i0, i1, j0, fx, fz, 4)
-        assert list(corners[[L.CR_00, L.CR_10, L.CR_A00, L.CR_A10, L.CR_A01, L.CR_A11, L.CR_DFZ], k]) == \
-            [c00, c10, *shares, slope], k
+        assert list(corners[[L.CR_A00, L.CR_A10, L.CR_A01, L.CR_A11, L.CR_DFZ], k]) == [*shares, slope], k
+        assert corners[L.CR_CELL].view(np.int64)[k] - L.CELL_BITS == c00 and c10 == (c00 + 4) % 20, k
     u = (z[0] - z_bot) / radius[0]                                 # -1e-8: a little less than half inside
     assert KD.grain_area(z[0], radius[0], z_bot, z_top) == pytest.approx(radius[0] ** 2 * (0.5 * math.pi + 2 * u),
                                                                         rel=1e-15)
