@@ -90,11 +90,12 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
     started) and solves. On one thread: solve, then move every grain. Returns how many
     grains are now past skin/2; out: int64 scratch (>= threads + 3: the lists' cell_count),
     out[0] = fluid_solve's status.
-    [The path of thread 0 is then its own part (~9 us), the wait and the solve (~13.5 us): this
-    region at 10,000 grains on two threads ~24 us, where thread 0 finishing and solving while
-    the others moved its grains (~3x slower per grain from the other core's cache) took 29-30
-    (README stop 34). Arrays, not the grains/lists records: unpacked from tuples inside this
-    parallel function, the two tasks ran ~1.7x slower than one after the other.]"""
+    [In the loop at 10,000 grains on two threads, thread 0 moves its part in ~7 us, waits until
+    ~10 (thread 1's finish) and solves until ~24; the region takes 27-30 us, against 29-30 when
+    thread 0 finished and solved while the others moved its grains in chunks (~3x slower per
+    grain from the other core's cache; README stop 34). Arrays, not the grains/lists records:
+    unpacked from tuples inside this parallel function, the two tasks ran ~1.7x slower than one
+    after the other.]"""
     n = x.shape[0]
     tasks = max(min(int(params[THREADS]), n), 1)
     claim = tasks + 1

@@ -176,7 +176,8 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  grains (in parallel), each group into its own partial[g]; the columns two
                  groups or more added to are summed in group order (_collect_column), and one
                  pass over the cells collects the four shares (_expand_column): the same sums
-                 regrouped (equal to round-off), the same bits for any thread count. Without partial, the direct serial form, the definition:
+                 regrouped (equal to round-off), the same bits for any thread count. Without
+                 partial, the direct serial form, the definition:
                  every grain adds to its four cells (the tests' reference).
     grain_kick : (fast form only) None, or (owed, force_x, force_z, inv_mass, body, half, damp,
                  wall_vx, wall_vz): grain forces, inverse masses and kinds, half a time step,
