@@ -103,23 +103,31 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
     out[claim] = 0
     out[done] = 0
     for t in prange(tasks):
-        if t != 0 and pending and fetch_add(out, claim, 1) == 0:
-            fluid_finish_deposit(width, z_bot, z_top, s, ux, uz, work, partial)
-            fetch_add(out, done, 1)
+        if t != 0 and pending:
+            _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, s, ux, uz, work, partial)
         if tasks == 1:                          # (one thread: the grid while the deposit's data is warm)
             out[0] = fluid_solve(width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work)
         late = move_range(t * n // tasks, (t + 1) * n // tasks, x, z, vx, vz, spin, force_x, force_z, torque,
                           inv_mass, inv_inertia, body, x_build, z_build, owed, params)
         if t == 0 and tasks > 1:
-            if pending:
-                if fetch_add(out, claim, 1) == 0:
-                    fluid_finish_deposit(width, z_bot, z_top, s, ux, uz, work, partial)
-                else:
-                    while fetch_add(out, done, 0) == 0:     # (an atomic read: the claimant is running)
-                        pass
+            if pending and not _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, s, ux, uz, work,
+                                                    partial):
+                while fetch_add(out, done, 0) == 0:         # (an atomic read: the claimant is running)
+                    pass
             out[0] = fluid_solve(width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work)
         out[t + 1] = late
     total = 0
     for t in range(tasks):
         total += out[t + 1]
     return total
+
+
+@njit(cache=NUMBA_CACHE, inline="always")
+def _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, s, ux, uz, work, partial):
+    """The deposit's finish (fluid_finish_deposit) if no thread has claimed it (fetch_add on
+    out[claim]), then out[done] set; returns whether this thread did it."""
+    if fetch_add(out, claim, 1) != 0:
+        return False
+    fluid_finish_deposit(width, z_bot, z_top, s, ux, uz, work, partial)
+    fetch_add(out, done, 1)
+    return True

@@ -36,7 +36,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (CELL_BITS, CELL_CODE, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ, CR_U, CR_W,
+from .layout import (CELL_BITS, CELL_CODE, CELL_OUTSIDE, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ, CR_U, CR_W,
                      DEPOSIT_GROUPS, M_FLAG, M_G, M_S, M_U, M_W, N_MOMENTS)
 from .lanes import add2, add4, add4_scaled
 from .step import closed_velocity
@@ -306,15 +306,11 @@ def _collect_column(records, i, nx, nz):
     flagged it), if two groups or more flagged it; records: partial as one flat array. A column
     only one group flagged is left in that group's records (_source: a group's grains are
     nearby, so most columns are; 0 + x is x, so the sums are the same)."""
-    span = np.uint64(nz * N_MOMENTS)
-    group = np.uint64(nx) * span
-    flags = 0
-    for g in range(DEPOSIT_GROUPS):
-        flags += 1 if records[np.uint64(g) * group + np.uint64(i) * span + np.uint64(M_FLAG)] != 0.0 else 0
-    if flags < 2:
+    if _flaggers(records, i, nx, nz)[0] < 2:
         return
+    span = np.uint64(nz * N_MOMENTS)
     for g in range(1, DEPOSIT_GROUPS):
-        _add_column(records, i, g, group, span)
+        _add_column(records, i, g, np.uint64(nx) * span, span)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
@@ -322,13 +318,21 @@ def _source(records, i, nx, nz):
     """The group whose records hold grid column i's totals after _collect_column: the one group
     that flagged it, else 0 (none: zeros; two or more: collected into partial[0]); records:
     partial as one flat array."""
+    flagged, group = _flaggers(records, i, nx, nz)
+    return group if flagged == 1 else 0
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _flaggers(records, i, nx, nz):
+    """(how many groups flagged grid column i, the last of them); records: partial as one flat
+    array."""
     flagged = 0
-    source = 0
+    group = 0
     for g in range(DEPOSIT_GROUPS):
         if records[np.uint64(((g * nx + i) * nz) * N_MOMENTS + M_FLAG)] != 0.0:
             flagged += 1
-            source = g
-    return source if flagged == 1 else 0
+            group = g
+    return flagged, group
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
@@ -389,7 +393,7 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
             continue
         area = grain_area(z[k], radius[k], z_bot, z_top)
         if area <= 0.0:
-            cell[k] = CELL_CODE - 1.0
+            cell[k] = CELL_OUTSIDE
             dfz[k] = 0.0
             continue
         i0, i1, j0, fx, fz, slope = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
@@ -557,7 +561,7 @@ def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w
         area = grain_area(z[k], radius[k], z_bot, z_top)
         if area <= 0.0:
             if corners is not None:
-                corners[CR_CELL, k] = CELL_CODE - 1.0
+                corners[CR_CELL, k] = CELL_OUTSIDE
             continue
         i0, i1, j0, fx, fz, dfz = cell_weights(x[k], z[k], inv_dx, inv_dz, z_bot, nx, nz)
         c00, c10, c01, c11, a00, a10, a01, a11 = corner_shares(area, i0, i1, j0, fx, fz, nz)

@@ -43,8 +43,8 @@ from .layout import (AUTO_EXPLICIT, G_CAPACITY, G_DIAG, G_FX, G_FZ, G_GX, G_GZ, 
                      S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
 from .deposit import deposit, deposit_finish
 from .drag import drag_density_pairs, grain_drag_at, pressure_gradient
-from .pressure import (conjugate_gradient, explicit_bound, explicit_diffusion, face_conductances, flat,
-                       heun_diffusion, implicit_system, permeability_field, undrained_source)
+from .pressure import (conjugate_gradient, copy_grid, explicit_bound, explicit_diffusion, face_conductances,
+                       flat, heun_diffusion, implicit_system, permeability_field, undrained_source)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -174,9 +174,7 @@ def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old
     if not (z_top - z_bot > 0.0 and dt_f > 0.0):
         return STATUS_SOLVER
     w_bot, w_top = _plane_velocities(state, z_bot, z_top, dt_f)
-    sf, of = flat(s), flat(s_old)
-    for c in range(np.uint64(sf.size)):
-        of[c] = sf[c]
+    copy_grid(s, s_old)
     deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[G_SX], work[G_SZ], corners, partial,
             grain_kick, serial, finish)
     return STATUS_OK
@@ -214,9 +212,7 @@ def fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, perm
     heun = solver == SOLVER_AUTO and dt_f <= AUTO_EXPLICIT * dt_max
     if heun or solver == SOLVER_EXPLICIT:
         substeps = 1.0 if heun else max(1.0, math.ceil(dt_f / (params[P_SAFETY] * dt_max)))
-        pf, rf = flat(P), flat(p_star)
-        for c in range(np.uint64(pf.size)):
-            pf[c] = rf[c]
+        copy_grid(p_star, P)
         state[S_ITERATIONS] = 0.0
         state[S_RESIDUAL] = 0.0
         state[S_SUBSTEPS] = substeps

@@ -145,6 +145,7 @@ N_CORNERS = 8
 # 2^52 - 1 there: negative either way (-1 as a float, -2 from the bits)
 CELL_CODE = 2.0 ** 52
 CELL_BITS = 0x4330000000000000
+CELL_OUTSIDE = CELL_CODE - 1.0
 # moments a grain adds to the record of its cell c00: its four shares a00, a10, a01, a11, the
 # same times vx and times vz - w(z), and the z-slope terms (a00 + a01) dfz, (a10 + a11) dfz
 M_S, M_U, M_W, M_G = 0, 4, 8, 12

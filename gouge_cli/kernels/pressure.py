@@ -66,6 +66,14 @@ def flat(a):
     return a.reshape(a.size)
 
 
+@njit(cache=NUMBA_CACHE, inline="always")
+def copy_grid(source, target):
+    """target[:] = source for two grid arrays of one shape, as one flat (vectorised) loop."""
+    sf, tf = flat(source), flat(target)
+    for c in range(np.uint64(sf.size)):
+        tf[c] = sf[c]
+
+
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def undrained_source(P, s, s_old, ux, uz_rel, grad_s_x, grad_s_z, dt_f, beta, s_min, s_max, p_star, div_u):
     """Pressure after the exact undrained response to the solid-fraction change.

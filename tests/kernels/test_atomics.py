@@ -1,5 +1,5 @@
 """fetch_add: threads that take chunks of a range through one shared counter each take a different
-chunk, and together every chunk once (kernels.coupled shares the drift of the grains that way)."""
+chunk, and together every chunk once (kernels.coupled claims the deposit's finish that way)."""
 
 from __future__ import annotations
 
