@@ -15,6 +15,7 @@ from pathlib import Path
 from .catalog import catalog_table, read_catalog, summary_statistics
 from .forkpairs import classify_fork, ForkPair, PAIR_COLUMNS
 from .report import _write_csv
+from .study import transient_slips
 from ..io.runfile import RunReader
 
 PHASE_COLUMNS = ("x", "y", "n_pairs", "n_unclassified", "n_complex", "n_type_I", "n_type_II", "frac_complex",
@@ -43,12 +44,14 @@ def campaign_table(points: list[CampaignPoint]) -> tuple[list[dict], dict[float,
 
     Run rows: n_slips and, per statistic of :data:`RUN_STATS`, its mean and std over the run's
     slips (velocities over V_s, times [t0], slip [d]). Pair rows: :data:`PAIR_COLUMNS` of
-    report.py (type, -C criteria, undrained/drained ratios) for each listed permeability."""
+    report.py (type, -C criteria, undrained/drained ratios, De at onset and largest) for each listed
+    permeability, and ``transient`` (the slip is transient by analysis.study.transient_slips)."""
     rows, by_perm = [], {}
     for p in points:
         with RunReader(p.run_dir) as reader:
             table = catalog_table(reader, read_catalog(reader))
             status = reader.info.status
+            transient = transient_slips(read_catalog(reader))
         stats = summary_statistics(table, RUN_STATS)
         row = {"kind": "run", "point": p.name, **p.values, "status": status, "n_slips": len(table)}
         for key in RUN_STATS:
@@ -60,7 +63,8 @@ def campaign_table(points: list[CampaignPoint]) -> tuple[list[dict], dict[float,
                 if not _listed(perm, p.permeabilities):
                     continue
                 rows.append({"kind": "pair", "point": p.name, **p.values,
-                             **{c: pair.row[c] for c in PAIR_COLUMNS if c != "run"}})
+                             **{c: pair.row[c] for c in PAIR_COLUMNS if c != "run"},
+                             "transient": int(pair.row["slip"]) in transient})
                 by_perm.setdefault(perm, []).append(pair)
     return rows, by_perm
 

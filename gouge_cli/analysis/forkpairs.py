@@ -7,6 +7,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import AnalysisError, NotARunError
 from ..io.runfile import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
@@ -21,7 +23,7 @@ PAIR_COLUMNS = (
     "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
     "undrained_peak_over_Vs", "n_undrained_slips", "n_subevents", "drained_onset", "drained_end",
     "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_ok", "undrained_fit_r2",
-    "deborah_mean", "note",
+    "deborah_mean", "deborah_onset", "deborah_max", "note",
 )
 
 
@@ -69,6 +71,20 @@ def _when(slip, attr: str) -> float:
     return float(getattr(slip, attr)) if slip is not None else _NAN
 
 
+def deborah_during(time, deborah, slip) -> tuple[float, float]:
+    """(De at the slip's onset, largest De from onset to end) of a branch's ``deborah`` series
+    (Eq. 4: l half the layer thickness, u0 the largest deposited solid speed, D the mean
+    diffusivity; see FluidGrid.observe); NaNs without a slip or a fluid."""
+    if slip is None or deborah is None or len(deborah) == 0:
+        return _NAN, _NAN
+    i0 = int(np.searchsorted(time, slip.onset_time, side="left"))
+    i1 = int(np.searchsorted(time, slip.end_time, side="right"))
+    if i0 >= len(deborah):
+        return _NAN, _NAN
+    window = deborah[i0:max(i1, i0 + 1)]
+    return float(deborah[i0]), float(np.nanmax(window)) if np.isfinite(window).any() else _NAN
+
+
 
 def pair_definition(info: RunInfo, main: str = "first") -> PairDefinition:
     """The pair definition with this run's detector thresholds."""
@@ -95,11 +111,12 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
         for udir in undrained_dirs:
             with RunReader(udir) as u:
                 undrained = wall_series(u)
-                deborah = u.series(["deborah"])["deborah"]
+                u_cols = u.series(["time", "deborah"])
                 uinfo = u.info
             result = classify_pair(drained, undrained, info.V_s, info.k, info.m_b, info.sigma, definition)
             d_main, u_main = result.drained_slip, result.undrained_slip
             fired = [name for name, on in result.criteria.items() if on]
+            de_onset, de_max = deborah_during(u_cols["time"], u_cols["deborah"], u_main)
             parent = str(fork_dir.parent.parent)     # parent_run is stored relative to the branch
             row = {
                 "run": parent,
@@ -129,7 +146,9 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 "drained_fit_r2": _r2(result.drained_fit),
                 "drained_fit_ok": bool(result.drained_fit is not None and result.drained_fit.success),
                 "undrained_fit_r2": _r2(result.undrained_fit),
-                "deborah_mean": nan_mean(deborah),
+                "deborah_mean": nan_mean(u_cols["deborah"]),
+                "deborah_onset": de_onset,
+                "deborah_max": de_max,
                 "note": result.note,
             }
             pairs.append(ForkPair(row, result, drained_dir, udir))

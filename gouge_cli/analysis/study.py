@@ -27,7 +27,7 @@ GOOD_R2 = 0.9           # a drained slip "fits Eq. 3" with R^2 above this (and p
 
 STUDY_COLUMNS = (
     "slip", "transient", "k", "sigma", "V", "kappa_c", "type", "undrained_event", "S_d", "S_u",
-    "stress_drop_ratio", "peak_velocity_ratio", "duration_ratio", "deborah", "subevents",
+    "stress_drop_ratio", "peak_velocity_ratio", "duration_ratio", "deborah", "deborah_onset", "deborah_max", "subevents",
     "drained_duration", "drained_fit_r2", "drained_fit_ok", "drained_fit_r2_notched", "m_eff_over_m_b", "criteria",
     "note",
 )
@@ -64,7 +64,8 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
     """One row per pair (:data:`STUDY_COLUMNS`), in slip then permeability order.
 
     S_d, S_u: static strengths; ratios undrained / drained of the compared events; deborah: mean
-    Deborah number of the undrained branch; subevents: sub-events of the undrained event;
+    Deborah number of the undrained branch, deborah_onset / deborah_max: at the compared slip's onset and
+    the largest during it (forkpairs.deborah_during); subevents: sub-events of the undrained event;
     drained_fit_*: Eq. 3 fit of the drained slip in the parent run's catalog (drained_fit_r2_notched:
     its R^2 refitted with the layer's natural vibration notched, a diagnostic,
     analysis.catalog.NotchedFit); m_eff_over_m_b: k (T_fit / pi)^2 / m_b of that fit (NaN when it
@@ -91,6 +92,7 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
             "S_d": r["drained_strength"], "S_u": r["undrained_strength"],
             "stress_drop_ratio": r["stress_drop_ratio"], "peak_velocity_ratio": r["peak_velocity_ratio"],
             "duration_ratio": r["duration_ratio"], "deborah": r["deborah_mean"],
+            "deborah_onset": r["deborah_onset"], "deborah_max": r["deborah_max"],
             "subevents": int(p.result.n_subevents),
             "drained_duration": float(entry.get("duration", _NAN)),
             "drained_fit_r2": fit.r2 if fit is not None else _NAN,

@@ -48,7 +48,7 @@ _FITS = [("number", "#"), ("duration", "duration"), ("half_period", "fit T/2"),
 _PAIRS = [("slip", "slip"), ("branch", "branch"), ("type", "type"), ("criteria", "-C criteria"),
           ("drained_strength", "S_d"), ("undrained_strength", "S_u"), ("strength_difference", "S_u−S_d"),
           ("peak_velocity_ratio", "v ratio"), ("stress_drop_ratio", "Δτ ratio"),
-          ("duration_ratio", "T ratio"), ("deborah_mean", "De")]
+          ("duration_ratio", "T ratio"), ("deborah_onset", "De onset"), ("deborah_max", "De max")]
 
 
 def _print_run(out, analysis, written: dict):

@@ -485,10 +485,27 @@ def write_results(s: Survey, log=print) -> dict:
             log(f"phase cell {x}={c['x']:g}" + (f", {y}={c['y']:g}" if y else "") +
                 f": {c['n_pairs']} pairs, complex fraction {c['frac_complex']:.3g}, Type II fraction "
                 f"{c['frac_type_II']:.3g}")
+    if s.spec.action == "study" and len(perms) >= 2:
+        out.update(_regime_outputs(pair_rows, s, figs))
     sweep_keys = [k for k in swept if k != "seed"]
     if sweep_keys:
         out["slip_statistics"] = sweep_figure([r for r in rows if r["kind"] == "run"], sweep_keys,
                                               figs / "slip_statistics.png", s.spec.name)
+    return out
+
+
+def _regime_outputs(pair_rows: list[dict], s: Survey, figs: Path) -> dict:
+    """regime.csv and figures/regime_map.png: the findings against De, the thesis placed
+    (analysis.regime), for a study campaign with two permeabilities or more."""
+    from ..analysis.campaign_table import write_table
+    from ..analysis.regime import REGIME_COLUMNS, regime_rows, thesis_point
+    from ..plots.regime import regime_figure
+
+    rows = regime_rows(pair_rows)
+    out = {"regime_csv": write_table(rows, [], s.root / "regime.csv", columns=list(REGIME_COLUMNS))}
+    if rows:
+        out["regime_map"] = regime_figure(rows, thesis_point(), figs / "regime_map.png",
+                                          f"{s.spec.name}: drained/undrained findings against De")
     return out
 
 
