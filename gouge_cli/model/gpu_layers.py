@@ -23,16 +23,20 @@ LISTS = ("id", "start", "index", "shear", "rev_start", "rev_slot", "x_build", "z
          "new_shear", "layout", "cell_of", "order", "cell_count", "pair_fx", "pair_fz", "pair_ti", "pair_tj")
 PAIR_SLOTS = ("index", "shear", "rev_slot", "new_index", "new_shear", "pair_fx", "pair_fz", "pair_ti", "pair_tj")
 RECORDS = ("wall", "clock", "counters")
-THREADS = 256       # threads per layer's block on a GPU (the simulator runs fewer)
+THREADS = 256       # threads per layer's block on a GPU
+SIM_THREADS = 4     # under numba-cuda's simulator (each simulated thread is a Python thread)
 
 
 class Layers:
     """The ensemble (module docstring). states: B States with equal N; params: B params vectors
-    (kernels.layout, N_PARAMS) or one for all; threads: threads per block."""
+    (kernels.layout, N_PARAMS) or one for all; threads: threads per block (None: THREADS, or
+    SIM_THREADS under the simulator)."""
 
-    def __init__(self, states: list[State], params, threads: int = THREADS):
-        from numba import cuda
+    def __init__(self, states: list[State], params, threads: int | None = None):
+        from numba import config, cuda
 
+        if threads is None:
+            threads = SIM_THREADS if config.ENABLE_CUDASIM else THREADS
         self.cuda = cuda
         self.states = list(states)
         if len({s.n for s in self.states}) != 1:
@@ -123,8 +127,11 @@ class Layers:
                 s.grow_pairs(needed)
         self.upload()
 
-    def advance(self, nsteps: int, launch_steps: int | None = None):
-        """upload, run, download: the States advanced by nsteps steps."""
+    def advance(self, nsteps: int, launch_steps: int | None = None, params=None):
+        """upload, run, download: the States advanced by nsteps steps (with `params`, as in
+        __init__, when given: the host changes them between calls)."""
+        if params is not None:
+            self.params[...] = np.broadcast_to(np.asarray(params, np.float64), self.params.shape)
         self.upload()
         self.run(nsteps, launch_steps)
         self.download()
