@@ -10,6 +10,8 @@ have the same number of grains; their parameters (params rows) may differ.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from ..kernels import layout as L
@@ -29,14 +31,14 @@ SIM_THREADS = 4     # under numba-cuda's simulator (each simulated thread is a P
 
 class Layers:
     """The ensemble (module docstring). states: B States with equal N; params: B params vectors
-    (kernels.layout, N_PARAMS) or one for all; threads: threads per block (None: THREADS, or
-    SIM_THREADS under the simulator)."""
+    (kernels.layout, N_PARAMS) or one for all; threads: threads per block (None: the environment's
+    GOUGE_GPU_THREADS, else THREADS, or SIM_THREADS under the simulator; the bits do not depend on it)."""
 
     def __init__(self, states: list[State], params, threads: int | None = None):
         from numba import config, cuda
 
         if threads is None:
-            threads = SIM_THREADS if config.ENABLE_CUDASIM else THREADS
+            threads = int(os.environ.get("GOUGE_GPU_THREADS", SIM_THREADS if config.ENABLE_CUDASIM else THREADS))
         self.cuda = cuda
         self.states = list(states)
         if len({s.n for s in self.states}) != 1:

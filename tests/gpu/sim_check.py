@@ -1,6 +1,7 @@
 """Runs a GPU check under numba-cuda's simulator and prints its result as JSON (run by
 test_gpu_sim.py in a fresh process: NUMBA_ENABLE_CUDASIM must be set before numba.cuda is
-imported, and only in this process).
+imported, and only in this process). GOUGE_GPU_DEVICE=1: on the real device instead
+(scripts/gpu_check.sh).
 
     python tests/gpu/sim_check.py lockstep|ensemble|planted [seed]
 """
@@ -11,13 +12,15 @@ import json
 import os
 import sys
 
-os.environ["NUMBA_ENABLE_CUDASIM"] = "1"
-sys.setswitchinterval(1e-5)     # the simulator's block threads meet at every __syncthreads
+DEVICE = os.environ.get("GOUGE_GPU_DEVICE") == "1"
+if not DEVICE:
+    os.environ["NUMBA_ENABLE_CUDASIM"] = "1"
+    sys.setswitchinterval(1e-5)     # the simulator's block threads meet at every __syncthreads
 
 from gouge_cli.kernels import layout as L  # noqa: E402
 from gouge_cli.studies import gpu_check  # noqa: E402
 
-THREADS = 3      # threads per simulated block: fewer than grains, not a divisor of N
+THREADS = 64 if DEVICE else 3      # threads per block (simulated: fewer than grains, not a divisor of N)
 
 
 def plant():

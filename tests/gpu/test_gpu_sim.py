@@ -9,7 +9,9 @@ simulator must be chosen before numba.cuda is imported, and must not reach this 
   through list rebuilds and re-numberings (sort_every 1);
 * ensemble: three 30-grain layers (different seeds, velocities, one of them loading) advanced
   as one ensemble equal each layer advanced alone, bit for bit;
-* planted: a last-bit change in the GPU's contact law alone makes the lockstep comparison fail.
+* planted: a last-bit change in the GPU's contact law alone makes the lockstep comparison fail;
+* `gouge config` refuses numerics.device: gpu (exit 2) where no device is found, and (validation
+  only) `gouge run` on the simulated GPU writes the CPU's run.h5 and checkpoint.
 """
 
 from __future__ import annotations
@@ -66,3 +68,68 @@ def test_planted_change_in_gpu_law_is_caught():
     rows = _run("planted")["rows"]
     assert any(r["diff"] for r in rows)
     assert "force_x" in rows[0]["diff"] or "vx" in rows[0]["diff"] or "x" in rows[0]["diff"]
+
+
+TINY_RUN = """\
+name: tiny
+packing: {n_grains: 40, width: 6}
+compaction: {min_time: 100, max_time: 100}
+loading: {spring_constant: 2.0e-4, velocity: 4.0e-3}
+numerics: {sort_every: 1, dt_safety: 0.5}
+run: {duration: 40}
+output: {series_interval: 2, checkpoint_interval: 10}
+"""
+
+GOUGE = "import sys; sys.setswitchinterval(1e-5); from gouge_cli.cli.main import app; app()"
+
+
+def _gouge(args: list[str], simulator: bool) -> subprocess.CompletedProcess:
+    env = dict(os.environ, NUMBA_NUM_THREADS="1", GOUGE_GPU_THREADS="2")
+    env.pop("NUMBA_ENABLE_CUDASIM", None)
+    if simulator:
+        env["NUMBA_ENABLE_CUDASIM"] = "1"
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(ROOT), env.get("PYTHONPATH")]))
+    return subprocess.run([sys.executable, "-c", GOUGE, *args], capture_output=True, text=True, env=env, cwd=ROOT,
+                          timeout=300)
+
+
+def _datasets(path: Path) -> dict:
+    import h5py
+
+    out = {}
+    with h5py.File(path, "r") as h5:
+        h5.visititems(lambda name, obj: out.__setitem__(name, obj[()].tobytes()) if isinstance(obj, h5py.Dataset)
+                      else None)
+        out["final_state_hash"] = str(h5.attrs.get("final_state_hash"))
+    return out
+
+
+@pytest.mark.validation
+def test_gouge_run_on_gpu_writes_the_cpu_run(tmp_path):
+    """`gouge run` with numerics.device: gpu (compaction and loading on the GPU engine): the
+    same run.h5 series and final state hash, and the same checkpoint, as on the CPU. (~530
+    steps; under the simulator ~40 s on a quiet machine: make validate only.)"""
+    config = tmp_path / "tiny.yaml"
+    config.write_text(TINY_RUN + f"seed: {SEED}\n")
+    runs = {}
+    for device, simulator in (("cpu", False), ("gpu", True)):
+        out = tmp_path / device
+        done = _gouge(["run", str(config), "--out", str(out), "--quiet", "--set", f"numerics.device={device}"],
+                      simulator)
+        assert done.returncode == 0, done.stderr[-3000:]
+        runs[device] = (_datasets(out / "run.h5"), _datasets(out / "checkpoints" / "latest.h5"))
+    cpu, gpu = runs["cpu"], runs["gpu"]
+    assert len(cpu[0]) > 10 and cpu[0]["final_state_hash"] not in ("None", "")
+    assert gpu[0] == cpu[0]
+    assert gpu[1] == cpu[1]
+
+
+def test_device_gpu_refused_without_a_gpu(tmp_path):
+    """Where numba-cuda finds no device, numerics.device: gpu is exit 2 naming the key."""
+    from numba import cuda
+
+    if cuda.is_available():
+        pytest.skip("a CUDA device is present")
+    done = _gouge(["config", "--set", "numerics.device=gpu"], simulator=False)
+    assert done.returncode == 2
+    assert "numerics.device" in done.stderr + done.stdout

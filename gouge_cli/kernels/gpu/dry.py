@@ -52,7 +52,8 @@ def _build(t, nt, g, li, params):
     width = params[WIDTH]
     skin = params[SKIN]
     n = x.shape[0]
-    capacity = li.index.shape[0]
+    index = li[1]                   # (li.index is typed as tuple.index by numba-cuda)
+    capacity = index.shape[0]
     layout = li.layout
     if t == 0:
         layout[_NCX], layout[_NCZ] = d_bin_cells(x, z, radius, width, skin, li.cell_of, li.order, li.cell_count)
@@ -76,10 +77,10 @@ def _build(t, nt, g, li, params):
     for i in range(t, n, nt):
         d_scan_row(i, x, z, radius, body, width, skin, li.cell_of, li.cell_count, li.order, ncx, ncz, li.new_index,
                    new_start[i], capacity)
-        d_carry_history(i, new_start[i], new_start[i + 1], li.start, li.index, li.shear, li.new_index, li.new_shear)
+        d_carry_history(i, new_start[i], new_start[i + 1], li.start, index, li.shear, li.new_index, li.new_shear)
     cuda.syncthreads()
     for k in range(t, total, nt):
-        li.index[k] = li.new_index[k]
+        index[k] = li.new_index[k]
         li.shear[k] = li.new_shear[k]
     for i in range(t, n + 1, nt):
         li.start[i] = new_start[i]
@@ -116,7 +117,7 @@ def _rebuild(t, nt, g, li, params, counters, none):
 def _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none):
     """kernels.step.compute_forces and the wall's second half kick (step 3-4)."""
     x, z, vx, vz, spin, radius, mass = g.x, g.z, g.vx, g.vz, g.spin, g.radius, g.mass
-    start, index, shear = li.start, li.index, li.shear
+    start, index, shear = li.start, li[1], li.shear
     n = x.shape[0]
     built = li.layout[L_BUILT]
     cuda.syncthreads()
