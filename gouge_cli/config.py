@@ -143,6 +143,10 @@ class NumericsConfig(_Section):
         0, ge=0, le=1024,
         description="numba threads; 0 = auto: 1 below 2000 grains (parallel regions cost more than they "
                     "save there), else all cores")
+    device: Literal["cpu", "gpu"] = Field(
+        "cpu",
+        description="where the dry steps run: cpu (numba threads) or gpu (numba-cuda, one CUDA device; pip install "
+                    "'gouge[gpu]'), same bits; steps with a pore fluid and forks run on the cpu")
     sort_every: Optional[int] = Field(
         None, ge=0, le=1_000_000,
         description="re-number the grains by position every this many neighbour-list rebuilds, so that "

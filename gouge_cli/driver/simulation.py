@@ -51,6 +51,7 @@ class Simulation:
         self.compaction_start: tuple[float, int] | None = None     # (time, step) where compaction began
         self.settling: SettleCheck | None = None                    # the last check of compaction's criterion
         self.fluid = None
+        self._layers = None         # the GPU engine (numerics.device: gpu), made on the first dry advance
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(L.N_OBSERVABLES)
         self._measured: dict | None = None      # measure()'s row while run fires a step's callbacks
@@ -135,6 +136,9 @@ class Simulation:
 
     def _advance(self, left: int):
         s = self.state
+        if self.fluid is None and self.config.numerics.device == "gpu":
+            self._gpu_layers().advance(left, params=self.params)
+            return
         while left > 0:
             if self.fluid is None:
                 status, done = K.advance(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params,
@@ -146,6 +150,14 @@ class Simulation:
                 s.grow_pairs(int(s.counters[L.K_NEEDED_CAPACITY]))
             elif status == L.FLUID_FAILED:
                 raise PhysicsError(*self.fluid.failure(int(self._fluid_status[0])), s.time)
+
+    def _gpu_layers(self):
+        """The scene as a one-layer GPU ensemble (model.gpu_layers: the same bits as K.advance)."""
+        if self._layers is None:
+            from ..model.gpu_layers import Layers
+
+            self._layers = Layers([self.state], self.params)
+        return self._layers
 
     def _advance_fluid(self, nsteps: int):
         from ..kernels.coupled import advance_fluid

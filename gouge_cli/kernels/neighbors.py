@@ -84,21 +84,12 @@ def bucket_order(key, nbins, count, order):
     count[0] = 0
 
 
-@njit(parallel=True, cache=NUMBA_CACHE)
-def build_neighbors(x, z, radius, body, width, skin, start, index, shear, new_start, new_index, new_shear,
-                    x_build, z_build, cell_of, order, count, scratch, serial):
-    """Rebuild the half list for pairs closer than R_i + R_j + skin (`serial`: one thread runs it).
-
-    x, z, radius: (N,) [d]; body: (N,) int8, grains of the same wall (body > 0) never pair.
-    Work arrays cell_of, order (N,), count (cells + 1,) and scratch (>= 2 * LIST_BLOCKS + 1,)
-    are preallocated: nothing is allocated here (if the layer grows past count's capacity,
-    cells are made larger, which is still exact). Rows are found in LIST_BLOCKS blocks, each
-    into its own region of new_index, then packed; the list is the same for any thread count.
-    Returns the number of pairs, or -(needed capacity) if ``index`` is too short (the list is
-    unchanged then). 
-    """
+@njit(inline="always", cache=NUMBA_CACHE)
+def bin_cells(x, z, radius, width, skin, cell_of, order, count):
+    """The cell grid of a list build: cells at least 2 R_max + skin [d] wide (larger if count,
+    len > cells, is too short), cell_of (N,) each grain's cell, order/count the grains by cell
+    (bucket_order). Returns (ncx, ncz), the cells along x and z."""
     n = x.shape[0]
-    capacity = index.shape[0]
     rmax = 0.0
     zmin = z[0]
     zmax = z[0]
@@ -116,13 +107,30 @@ def build_neighbors(x, z, radius, body, width, skin, start, index, shear, new_st
             break
         cell *= 1.25
     cw = width / ncx
-    ncell = ncx * ncz
     for i in range(n):
         cx = min(int(x[i] / cw), ncx - 1)
         cz = min(int((z[i] - zmin) / cell), ncz - 1)
         cell_of[i] = cz * ncx + cx
-    bucket_order(cell_of, ncell, count, order)
+    bucket_order(cell_of, ncx * ncz, count, order)
+    return ncx, ncz
 
+
+@njit(parallel=True, cache=NUMBA_CACHE)
+def build_neighbors(x, z, radius, body, width, skin, start, index, shear, new_start, new_index, new_shear,
+                    x_build, z_build, cell_of, order, count, scratch, serial):
+    """Rebuild the half list for pairs closer than R_i + R_j + skin (`serial`: one thread runs it).
+
+    x, z, radius: (N,) [d]; body: (N,) int8, grains of the same wall (body > 0) never pair.
+    Work arrays cell_of, order (N,), count (cells + 1,) and scratch (>= 2 * LIST_BLOCKS + 1,)
+    are preallocated: nothing is allocated here (if the layer grows past count's capacity,
+    cells are made larger, which is still exact). Rows are found in LIST_BLOCKS blocks, each
+    into its own region of new_index, then packed; the list is the same for any thread count.
+    Returns the number of pairs, or -(needed capacity) if ``index`` is too short (the list is
+    unchanged then). 
+    """
+    n = x.shape[0]
+    capacity = index.shape[0]
+    ncx, ncz = bin_cells(x, z, radius, width, skin, cell_of, order, count)
     nb = 1 if serial else LIST_BLOCKS
     region = capacity // nb
     found = scratch[:nb]

@@ -403,9 +403,9 @@ def renumber(grains, lists, drag_x, drag_z, width):
     radius, mass, inv_mass, inv_inertia = grains.radius, grains.mass, grains.inv_mass, grains.inv_inertia
     force_x, force_z, torque = grains.force_x, grains.force_z, grains.torque
     body, top, ident = grains.body, grains.top, grains.id
-    start, index, shear = lists.start, lists.index, lists.shear
-    new_start, new_index, new_shear = lists.new_start, lists.new_index, lists.new_shear
-    layout, cell_of, order, cell_count = lists.layout, lists.cell_of, lists.order, lists.cell_count
+    # (unpacked, not lists.index: numba-cuda types .index on a tuple as tuple.index; this function
+    # also runs on the GPU, kernels.gpu)
+    start, index, shear, _, _, _, _, new_start, new_index, new_shear, layout, cell_of, order, cell_count = lists
     n = x.shape[0]
     spatial_order(x, z, width, order, cell_of, cell_count)
     renumber_list(cell_of, start, index, shear, new_start, new_index, new_shear)

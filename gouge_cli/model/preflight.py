@@ -15,6 +15,7 @@
       dt <= 2 sqrt(m_b wall_spacing / (2 k_n)),  i.e.  m_b >= (dt / 2)^2 2 k_n / wall_spacing;
 
   a lighter wall blows up within a few steps (a segmentation fault once its grains leave the cell grid);
+* numerics.device: gpu needs numba-cuda and a CUDA device (kernels.gpu.availability);
 * the run length: (compaction.max_time + run.duration) / dt steps of n_grains grains, estimated at
   RATE grain-steps per second per thread; above MAX_HOURS it is refused, above NOTE_HOURS the
   estimate is returned as a note to print.
@@ -82,6 +83,12 @@ def check_config(config: Config, threads: int = 1) -> Preflight:
             f"loading.wall_mass = {m_b:g} rho d^2 is too light for the step {dt:.4g} t0: the top wall would "
             f"oscillate unstably on its grains; use loading.wall_mass >= {min_wall_mass(config, dt):.3g} "
             "(or leave it unset: the mass of its grains), or a smaller numerics.dt")
+    if config.numerics.device == "gpu":
+        from ..kernels.gpu import availability
+
+        reason = availability()
+        if reason:
+            raise ConfigError(f"numerics.device = gpu cannot run here: {reason}; use numerics.device: cpu")
     steps = (config.compaction.max_time + config.run.duration) / dt
     hours = steps * config.packing.n_grains / RATE / 3600.0
     per = max(1, threads)

@@ -39,7 +39,8 @@ FORK_SLIP_FRAMES = 30     # snapshots per predicted slip duration while a fork s
 
 def branch_config(base: Config, perm: float | None, overrides: dict | None = None) -> Config:
     data = base.to_dict()
-    data["numerics"] = dict(data["numerics"], stick_scaling=1.0)     # stick scaling: forks at true inertia
+    data["numerics"] = dict(data["numerics"], stick_scaling=1.0,     # stick scaling: forks at true inertia
+                            device="cpu")                            # forks run on the cpu (a GPU run's too)
     for section, values in (overrides or {}).items():
         data[section] = dict(data[section], **values)
     if perm is None:

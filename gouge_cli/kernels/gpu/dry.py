@@ -1,0 +1,241 @@
+"""The dry step on the GPU: kernels.step.advance for B layers at once, one thread block per layer.
+
+``advance_layers[B, threads](...)`` runs todo[b] steps of layer b in one launch (no host work
+between steps). Arrays are the fields of kernels.layout.Grains, Lists and Pairs (model.state.State)
+stacked over layers, [B, N] per grain and [B, capacity] per pair slot; wall, clock, params and
+counters are [B, N_WALL] etc.; top [B, max top grains] with ntop[b] in use.
+
+The step is kernels.step._step, phase by phase, with the block's threads sharing the per-grain
+and per-row loops and __syncthreads between phases:
+  1-2. open_step (thread 0: the wall and its grains), then _move_one of every grain
+       (threads stride over grains; any late grain sets counters[K_NEED_REBUILD])
+  rebuild: renumber (thread 0, every SORT_EVERY rebuilds), bin_cells (thread 0), rows counted
+       by _scan_row per grain, offsets (thread 0), rows written and their history carried per
+       grain: the same list, row for row and slot for slot, as kernels.neighbors.build_neighbors
+  3. the law per list row (kernels.contact), then each grain sums its own pairs in _sum_range's
+       order (no atomics); reverse list by thread 0 (kernels.step.reverse_list) after a rebuild
+  4. wall force and kick (thread 0); 5. close_step's kick per grain on the last step.
+Every function named above is the CPU kernel's own code (gpu.device). Status per layer: OK, or
+LIST_OVERFLOW with done[b] whole steps done and counters[K_NEEDED_CAPACITY] set; the host
+enlarges the pair arrays and launches again (the step resumes at its rebuild, as on the CPU).
+The pair constants are computed per pair and step (kernels.contact.pair_constants, same bits)
+instead of stored, so pairs.pair_const is not used here (the host marks it stale).
+"""
+
+from __future__ import annotations
+
+from numba import cuda
+
+from ..layout import (BG_DAMPING, C_NORMAL, C_TANGENTIAL, DAMPING, DT, FRICTION, K_NEEDED_CAPACITY, K_NEED_REBUILD,
+                      K_PAIRS, K_REBUILDS, K_STEP, L_BUILT, L_SCRATCH, LIST_OVERFLOW, MID_STEP, OK, SKIN, SORT_EVERY,
+                      WIDTH, Grains, Lists)
+from ..neighbors import bin_cells
+from ..step import open_step, renumber
+from .device import (d_bucket_order, d_carry_history, d_half_kick, d_hertz_mindlin, d_minimum_image, d_move_one,
+                     d_pair_constants, d_permute, d_renumber_list, d_reverse_list, d_scan_row, d_set_wall_grain_velocity,
+                     d_spatial_order, d_sum_range, d_wall_force, d_wall_kick, device)
+
+d_open_step = device(open_step, wall_kick=d_wall_kick, _set_wall_grain_velocity=d_set_wall_grain_velocity)
+d_renumber = device(renumber, spatial_order=d_spatial_order, renumber_list=d_renumber_list, permute=d_permute)
+d_bin_cells = device(bin_cells, bucket_order=d_bucket_order)
+
+# layout[L_SCRATCH:] of each layer (the CPU build's per-block counters) carries the build's
+# cell grid and pair count from thread 0 to the block
+_NCX, _NCZ, _TOTAL = L_SCRATCH, L_SCRATCH + 1, L_SCRATCH + 2
+
+
+@cuda.jit(device=True)
+def _build(t, nt, g, li, params):
+    """kernels.neighbors.build_neighbors by the block: the pair count, or -(pairs) if the list
+    does not fit (the list is unchanged then)."""
+    x, z, radius, body = g.x, g.z, g.radius, g.body
+    width = params[WIDTH]
+    skin = params[SKIN]
+    n = x.shape[0]
+    index = li[1]                   # (li.index is typed as tuple.index by numba-cuda)
+    capacity = index.shape[0]
+    layout = li.layout
+    if t == 0:
+        layout[_NCX], layout[_NCZ] = d_bin_cells(x, z, radius, width, skin, li.cell_of, li.order, li.cell_count)
+    cuda.syncthreads()
+    ncx = layout[_NCX]
+    ncz = layout[_NCZ]
+    new_start = li.new_start
+    for i in range(t, n, nt):
+        new_start[i + 1] = d_scan_row(i, x, z, radius, body, width, skin, li.cell_of, li.cell_count, li.order,
+                                      ncx, ncz, li.new_index, 0, 0)
+    cuda.syncthreads()
+    if t == 0:
+        new_start[0] = 0
+        for i in range(n):
+            new_start[i + 1] += new_start[i]
+        layout[_TOTAL] = new_start[n]
+    cuda.syncthreads()
+    total = layout[_TOTAL]
+    if total > capacity:
+        return -total
+    for i in range(t, n, nt):
+        d_scan_row(i, x, z, radius, body, width, skin, li.cell_of, li.cell_count, li.order, ncx, ncz, li.new_index,
+                   new_start[i], capacity)
+        d_carry_history(i, new_start[i], new_start[i + 1], li.start, index, li.shear, li.new_index, li.new_shear)
+    cuda.syncthreads()
+    for k in range(t, total, nt):
+        index[k] = li.new_index[k]
+        li.shear[k] = li.new_shear[k]
+    for i in range(t, n + 1, nt):
+        li.start[i] = new_start[i]
+    for i in range(t, n, nt):
+        li.x_build[i] = x[i]
+        li.z_build[i] = z[i]
+    cuda.syncthreads()
+    return total
+
+
+@cuda.jit(device=True)
+def _rebuild(t, nt, g, li, params, counters, none):
+    """kernels.step.rebuild by the block; False (K_NEEDED_CAPACITY set) if the list does not fit."""
+    every = int(params[SORT_EVERY])
+    if every > 0 and counters[K_REBUILDS] % every == 0:
+        if t == 0:
+            d_renumber(g, li, none, none, params[WIDTH])
+        cuda.syncthreads()
+    npairs = _build(t, nt, g, li, params)
+    cuda.syncthreads()
+    if t == 0:
+        if npairs < 0:
+            counters[K_NEEDED_CAPACITY] = -npairs
+        else:
+            li.layout[L_BUILT] = -1
+            counters[K_PAIRS] = npairs
+            counters[K_REBUILDS] += 1
+            counters[K_NEED_REBUILD] = 0
+    cuda.syncthreads()
+    return npairs >= 0
+
+
+@cuda.jit(device=True)
+def _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none):
+    """kernels.step.compute_forces and the wall's second half kick (step 3-4)."""
+    x, z, vx, vz, spin, radius, mass = g.x, g.z, g.vx, g.vz, g.spin, g.radius, g.mass
+    start, index, shear = li.start, li[1], li.shear
+    n = x.shape[0]
+    built = li.layout[L_BUILT]
+    cuda.syncthreads()
+    if built < 0:
+        if t == 0:
+            d_reverse_list(start, index, n, li.rev_start, li.rev_slot)
+            li.layout[L_BUILT] = 1
+        cuda.syncthreads()
+    dt = params[DT]
+    width = params[WIDTH]
+    c_n = params[C_NORMAL]
+    c_t = params[C_TANGENTIAL]
+    damping = params[DAMPING]
+    friction = params[FRICTION]
+    for i in range(t, n, nt):                   # the law, row by row (kernels.step._fill, _laws)
+        xi = x[i]
+        zi = z[i]
+        vxi = vx[i]
+        vzi = vz[i]
+        wi = spin[i]
+        ri = radius[i]
+        mi = mass[i]
+        for k in range(start[i], start[i + 1]):
+            j = index[k]
+            rj = radius[j]
+            r_ij, m_ij = d_pair_constants(ri, rj, mi, mass[j])
+            fx, fz, ti, tj, ds, overlap, fn = d_hertz_mindlin(
+                d_minimum_image(x[j] - xi, width), z[j] - zi, vx[j] - vxi, vz[j] - vzi, wi, spin[j], ri, rj, r_ij,
+                m_ij, shear[k], dt, c_n, c_t, damping, friction)
+            pair_fx[k] = fx
+            pair_fz[k] = fz
+            pair_ti[k] = ti
+            pair_tj[k] = tj
+            shear[k] = ds
+    cuda.syncthreads()
+    for i in range(t, n, nt):                   # each grain gathers its pairs in the CPU's order
+        d_sum_range(i, i + 1, start, li.rev_start, li.rev_slot, pair_fx, pair_fz, pair_ti, pair_tj, g.force_x,
+                    g.force_z, g.torque, False, none, none)
+    cuda.syncthreads()
+    if t == 0:
+        d_wall_force(g.force_x, g.force_z, g.top, wall)
+        d_wall_kick(wall, clock, params)
+        counters[K_STEP] += 1
+    cuda.syncthreads()
+
+
+@cuda.jit(device=True)
+def _close(t, nt, g, wall, params):
+    """kernels.step.close_step by the block: the wall's grains take its velocity, free grains
+    get their second half kick (kernels.step._kick)."""
+    if t == 0:
+        d_set_wall_grain_velocity(g.vx, g.vz, g.spin, g.top, wall)
+    half = 0.5 * params[DT]
+    damp = params[BG_DAMPING]
+    for i in range(t, g.x.shape[0], nt):
+        if g.body[i] == 0:
+            g.vx[i] = d_half_kick(g.vx[i], g.force_x[i] * g.inv_mass[i], half, damp)
+            g.vz[i] = d_half_kick(g.vz[i], g.force_z[i] * g.inv_mass[i], half, damp)
+            g.spin[i] = d_half_kick(g.spin[i], g.torque[i] * g.inv_inertia[i], half, damp)
+    cuda.syncthreads()
+
+
+@cuda.jit(device=True)
+def _step(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none, owed, close):
+    """kernels.step._step (drifted False) by the block; False if the rebuild overflows (the
+    step is then left drifted, counters[K_NEED_REBUILD] = MID_STEP)."""
+    resume = counters[K_NEED_REBUILD] == MID_STEP
+    cuda.syncthreads()
+    if not resume:
+        if t == 0:
+            d_open_step(g, wall, clock, params)
+        cuda.syncthreads()
+        dt = params[DT]
+        width = params[WIDTH]
+        damp = params[BG_DAMPING]
+        reach = 0.5 * params[SKIN]
+        reach2 = reach * reach
+        for i in range(t, g.x.shape[0], nt):     # kernels.step.move_range
+            if d_move_one(i, g.x, g.z, g.vx, g.vz, g.spin, g.force_x, g.force_z, g.torque, g.inv_mass,
+                          g.inv_inertia, g.body, li.x_build, li.z_build, owed, dt, width, damp, reach2) > 0:
+                counters[K_NEED_REBUILD] = 1
+        cuda.syncthreads()
+    pending = counters[K_NEED_REBUILD] != 0
+    cuda.syncthreads()
+    if pending:
+        if not _rebuild(t, nt, g, li, params, counters, none):
+            if t == 0:
+                counters[K_NEED_REBUILD] = MID_STEP
+            cuda.syncthreads()
+            return False
+    _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none)
+    if close:
+        _close(t, nt, g, wall, params)
+    return True
+
+
+@cuda.jit
+def advance_layers(x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ntop,
+                   ident, start, index, shear, rev_start, rev_slot, x_build, z_build, new_start, new_index, new_shear,
+                   layout, cell_of, order, cell_count, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params,
+                   counters, todo, done, status, none):
+    """kernels.step.advance of layer blockIdx.x for todo[b] steps (module docstring); done[b]:
+    whole steps done, status[b]: OK or LIST_OVERFLOW. none: an empty float64 array (no drag)."""
+    b = cuda.blockIdx.x
+    t = cuda.threadIdx.x
+    nt = cuda.blockDim.x
+    g = Grains(x[b], z[b], vx[b], vz[b], spin[b], radius[b], mass[b], inv_mass[b], inv_inertia[b], body[b],
+               force_x[b], force_z[b], torque[b], top[b, :ntop[b]], ident[b])
+    li = Lists(start[b], index[b], shear[b], rev_start[b], rev_slot[b], x_build[b], z_build[b], new_start[b],
+               new_index[b], new_shear[b], layout[b], cell_of[b], order[b], cell_count[b])
+    nsteps = todo[b]
+    for s in range(nsteps):
+        if not _step(t, nt, g, li, pair_fx[b], pair_fz[b], pair_ti[b], pair_tj[b], wall[b], clock[b], params[b],
+                     counters[b], none, s > 0, s == nsteps - 1):
+            if t == 0:
+                status[b] = LIST_OVERFLOW
+                done[b] = s
+            return
+    if t == 0:
+        status[b] = OK
+        done[b] = nsteps

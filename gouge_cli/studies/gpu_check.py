@@ -1,0 +1,124 @@
+"""The GPU dry engine checked against the CPU kernels: lockstep comparison, ensembles, throughput.
+
+Used by tests/gpu (under numba-cuda's simulator, tiny scenes) and scripts/gpu_check.sh (on a
+GPU). ``lockstep`` advances a copy of a scene on the GPU (model.gpu_layers) and the scene itself
+on the CPU (kernels.step.advance) chunk by chunk and lists every array that differs after each
+chunk; ``ensemble`` runs B copies with different velocities as one ensemble and compares each
+with its own single-layer run; ``throughput`` times grain-steps per second.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+
+import numpy as np
+
+from ..config import build_config
+from ..driver.simulation import Simulation
+from ..kernels import layout as L
+from ..model.gpu_layers import Layers
+from ..model.state import EVOLVING, State
+
+# what a restart needs (State.EVOLVING) and the fixed properties the re-numbering moves
+COMPARED = EVOLVING + ("radius", "mass", "inv_mass", "inv_inertia", "body", "top")
+
+
+def scene(n_grains: int, width: float, seed: int = 1, kick: float = 0.05, sort_every: int = 1,
+          compact: bool = True) -> Simulation:
+    """A small dry scene, compacted on the CPU (if `compact`) and still in compaction, whose free
+    grains get random velocities (normal, `kick` [v0] per component, from `seed`), so that the
+    list is rebuilt (and the grains re-numbered every `sort_every` rebuilds) within a few
+    hundred steps."""
+    sim = Simulation(build_config({"seed": seed, "packing": {"n_grains": n_grains, "width": width},
+                                   "numerics": {"sort_every": sort_every},
+                                   "compaction": {"min_time": 100.0, "max_time": 400.0},
+                                   "loading": {"spring_constant": 2e-4, "velocity": 4e-3}}))
+    if compact:
+        sim.compact()
+    s = sim.state
+    free = s.body == L.FREE
+    rng = np.random.default_rng(seed)
+    s.vx[free] += rng.normal(0.0, kick, free.sum())
+    s.vz[free] += rng.normal(0.0, kick, free.sum())
+    return sim
+
+
+def differences(a: State, b: State, needed: bool = True) -> dict[str, float]:
+    """{array: largest |a - b|} of every compared array that is not bit-identical; needed=False
+    leaves out counters[K_NEEDED_CAPACITY] (the list size asked for at the last overflow)."""
+    out = {}
+    npairs = int(a.start[-1])
+    for name in COMPARED:
+        x = getattr(a, name)
+        y = getattr(b, name)
+        if name == "counters" and not needed:
+            x, y = x.copy(), y.copy()
+            x[L.K_NEEDED_CAPACITY] = y[L.K_NEEDED_CAPACITY] = 0
+        if name in ("index", "shear"):
+            x, y = x[:npairs], y[:npairs]
+        if x.shape != y.shape:
+            out[name] = float("inf")
+        elif x.tobytes() != y.tobytes():
+            out[name] = float(np.max(np.abs(x.astype(np.float64) - y.astype(np.float64))))
+    return out
+
+
+def lockstep(sim: Simulation, chunks, threads: int, capacity: int | None = None) -> list[dict]:
+    """Advance the scene chunk by chunk on the CPU and a copy of it on the GPU; after each chunk
+    a row {step, pairs, rebuilds, gpu_launches (so far), diff}. capacity: start the GPU copy with
+    this few pair slots (at least N and its pairs), so that it runs out of list and grows it
+    where the CPU does not (counters[K_NEEDED_CAPACITY] is then not compared)."""
+    gpu = copy.deepcopy(sim.state)
+    if capacity is not None:
+        npairs = int(gpu.start[-1])
+        gpu._allocate_pairs(max(capacity, gpu.n, npairs), keep=npairs)     # (>= N: re-numbering scratch)
+    layers = Layers([gpu], sim.params, threads)
+    rows = []
+    for n in chunks:
+        layers.params[0] = sim.params            # a phase change on the host reaches the GPU
+        layers.advance(int(n))
+        sim.advance(int(n))                       # kernels.step.advance, growing the list as needed
+        s = sim.state
+        rows.append({"step": int(s.step), "pairs": int(s.counters[L.K_PAIRS]), "rebuilds": int(s.counters[L.K_REBUILDS]),
+                     "gpu_launches": layers.launches, "diff": differences(s, gpu, capacity is None)})
+    return rows
+
+
+def ensemble(sims: list[Simulation], nsteps: int, threads: int) -> list[dict[str, float]]:
+    """The scenes advanced together as one GPU ensemble and each alone as a GPU single layer;
+    per layer, the arrays in which the two differ."""
+    together = [copy.deepcopy(s.state) for s in sims]
+    Layers(together, [s.params for s in sims], threads).advance(nsteps)
+    out = []
+    for s, t in zip(sims, together):
+        alone = copy.deepcopy(s.state)
+        Layers([alone], s.params, threads).advance(nsteps)
+        out.append(differences(alone, t))
+    return out
+
+
+def throughput(state: State, params: np.ndarray, layers: int, steps: int, threads: int, launch_steps: int) -> dict:
+    """Grain-steps per second of `layers` copies of `state` on the GPU (device resident: one
+    upload, timed launches of launch_steps steps, one download), after a warm-up launch."""
+    copies = [copy.deepcopy(state) for _ in range(layers)]
+    ens = Layers(copies, params, threads)
+    ens.upload()
+    ens.run(launch_steps, launch_steps)               # compile and warm up
+    from numba import cuda
+
+    cuda.synchronize()
+    t0 = time.perf_counter()
+    ens.run(steps, launch_steps)
+    cuda.synchronize()
+    seconds = time.perf_counter() - t0
+    ens.download()
+    return {"layers": layers, "grains": state.n, "steps": steps, "launch_steps": launch_steps, "threads": threads,
+            "seconds": seconds, "grain_steps_per_s": layers * state.n * steps / seconds,
+            "hashes_equal": len({provenance_hash(c) for c in copies}) == 1}
+
+
+def provenance_hash(state: State) -> str:
+    from ..io.provenance import state_hash
+
+    return state_hash(state.arrays())

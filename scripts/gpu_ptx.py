@@ -1,0 +1,45 @@
+"""Compile the GPU dry kernel (kernels.gpu.dry.advance_layers) to PTX without a GPU, and count
+what the bits depend on: FMA instructions (must be 0), atomics (0), IEEE div/sqrt, barriers.
+
+    pip install 'gouge[gpu-ptx]'; .venv/bin/python scripts/gpu_ptx.py [cc, default 9.0] [out.ptx]
+
+numba-cuda asks the driver for the compute capability when it compiles device functions; with
+no driver here it is given as the argument (a development check: run scripts/gpu_check.sh on a GPU).
+"""
+
+import sys
+import time
+import types as _types
+
+import numba.cuda.compiler as _compiler
+import numba.cuda.dispatcher as _dispatcher
+import numpy as np
+from numba import cuda, typeof, types
+
+CC = tuple(int(v) for v in (sys.argv[1] if len(sys.argv) > 1 else "9.0").split("."))
+_device = _types.SimpleNamespace(compute_capability=CC)
+_dispatcher.get_current_device = _compiler.get_current_device = lambda: _device
+
+from gouge_cli.config import build_config  # noqa: E402
+from gouge_cli.driver.simulation import Simulation  # noqa: E402
+from gouge_cli.kernels.gpu import dry  # noqa: E402
+from gouge_cli.model.gpu_layers import GRAIN, LISTS, RECORDS, Layers  # noqa: E402
+
+ORDER = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inertia", "body", "force_x", "force_z",
+         "torque", "top", "ntop", "id", "start", "index", "shear", "rev_start", "rev_slot", "x_build", "z_build",
+         "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count", "pair_fx", "pair_fz",
+         "pair_ti", "pair_tj", "wall", "clock", "params", "counters")
+
+sim = Simulation(build_config({"packing": {"n_grains": 40, "width": 6}}))
+layers = Layers([sim.state], sim.params, 64)
+arrays = {name: layers._stack(name, sim.state.index.shape[0]) for name in GRAIN + LISTS + RECORDS}
+arrays.update(top=np.zeros((1, 1), np.int64), ntop=np.zeros(1, np.int64), params=layers.params)
+signature = tuple(typeof(arrays[name]) for name in ORDER) + (types.int64[::1],) * 3 + (types.float64[::1],)
+t0 = time.perf_counter()
+ptx, _ = cuda.compile_ptx(dry.advance_layers.py_func, signature, cc=CC)
+print(f"sm_{CC[0]}{CC[1]}: compiled in {time.perf_counter() - t0:.1f} s; fma.rn.f64 {ptx.count('fma.rn.f64')}, "
+      f"atom. {ptx.count('atom.')}, div.rn.f64 {ptx.count('div.rn.f64')}, sqrt.rn.f64 {ptx.count('sqrt.rn.f64')}, "
+      f"barriers {ptx.count('bar.sync') + ptx.count('barrier.sync')}")
+if len(sys.argv) > 2:
+    open(sys.argv[2], "w").write(ptx)
+sys.exit(1 if ptx.count("fma.rn.f64") or ptx.count("atom.") else 0)

@@ -1,0 +1,61 @@
+"""Runs a GPU check under numba-cuda's simulator and prints its result as JSON (run by
+test_gpu_sim.py in a fresh process: NUMBA_ENABLE_CUDASIM must be set before numba.cuda is
+imported, and only in this process). GOUGE_GPU_DEVICE=1: on the real device instead
+(scripts/gpu_check.sh).
+
+    python tests/gpu/sim_check.py lockstep|ensemble|planted [seed]
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+DEVICE = os.environ.get("GOUGE_GPU_DEVICE") == "1"
+if not DEVICE:
+    os.environ["NUMBA_ENABLE_CUDASIM"] = "1"
+    sys.setswitchinterval(1e-5)     # the simulator's block threads meet at every __syncthreads
+
+from gouge_cli.kernels import layout as L  # noqa: E402
+from gouge_cli.studies import gpu_check  # noqa: E402
+
+THREADS = 64 if DEVICE else 3      # threads per block (simulated: fewer than grains, not a divisor of N)
+
+
+def plant():
+    """A last-bit change in the GPU's contact law only (the CPU kernels are untouched)."""
+    from numba import cuda
+
+    from gouge_cli.kernels import contact
+    from gouge_cli.kernels.gpu import device
+
+    law = contact.hertz_mindlin.py_func
+
+    def planted(*args):
+        fx, fz, ti, tj, ds, overlap, fn = law(*args)
+        return fx * (1.0 + 2.0 ** -52), fz, ti, tj, ds, overlap, fn
+
+    device.d_hertz_mindlin = cuda.jit(device=True)(planted)
+
+
+def main(mode: str, seed: int):
+    if mode == "planted":
+        plant()
+    if mode == "planted":
+        return {"rows": gpu_check.lockstep(gpu_check.scene(40, 6.0, seed), (1, 2), THREADS)}
+    if mode == "lockstep":
+        sim = gpu_check.scene(40, 6.0, seed)
+        rows = gpu_check.lockstep(sim, (1, 1, 8, 60), THREADS, capacity=1)
+        sim.start_loading()                          # spring and drive on, no background damping
+        rows += gpu_check.lockstep(sim, (50, 80), THREADS)
+        return {"rows": rows, "loading": sim.phase == L.LOADING}
+    if mode == "ensemble":
+        sims = [gpu_check.scene(30, 5.0, seed + b, kick=0.03 * (b + 1), compact=False) for b in range(3)]
+        sims[2].start_loading()                      # a layer with other parameters (drive on)
+        return {"layers": gpu_check.ensemble(sims, 40, THREADS)}
+    raise SystemExit(f"unknown mode {mode!r}")
+
+
+if __name__ == "__main__":
+    print(json.dumps(main(sys.argv[1], int(sys.argv[2]) if len(sys.argv) > 2 else 1)))
