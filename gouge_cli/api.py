@@ -379,8 +379,9 @@ class Pair:
                 for name in names:
                     if name not in p:
                         p[name] = xr.full_like(p["wall_vx"], np.nan).assign_attrs(other[name].attrs)
-            ds = xr.concat(parts, dim=pd.Index(["drained", "undrained"], name="branch"), join="outer",
-                           combine_attrs="drop_conflicts")
+            ds = xr.concat(parts, dim="branch", join="outer", combine_attrs="drop_conflicts")
+            ds = ds.assign_coords(branch=("branch", np.array(["drained", "undrained"]),
+                                          _attrs("-", f"drained: the dry twin; undrained: {self.branch}")))
             time_s = float(self.drained.scales.get("time_s", _NAN))
             ds = ds.assign_coords(time_s=("time", ds["time"].values * time_s, _attrs("s", TIME_DOC + ", in seconds")))
             ds.attrs.update(slip=int(self.row["slip"]), undrained_branch=self.branch,

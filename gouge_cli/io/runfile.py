@@ -309,14 +309,14 @@ class RunReader:
     """Open run file with sliced series access. Use as a context manager.
 
     ``allow_running=False`` raises :class:`RunStillRunningError` for status 'running';
-    ``allow_running=True`` also opens a file its writer still holds (no HDF5 file lock is taken:
-    what was flushed is read).
+    ``allow_running=True`` also opens a file its writer still holds (read without the HDF5 file
+    lock: what was flushed).
     """
 
     def __init__(self, path: Path | str, allow_running: bool = False):
         run_dir, h5_path = _locate(Path(path))
         try:
-            self.h5 = h5py.File(h5_path, "r", locking=False if allow_running else None)
+            self.h5 = _open_for_reading(h5_path, allow_running)
         except OSError as exc:
             raise NotARunError(f"{h5_path} cannot be read as HDF5 ({exc}); "
                                "if its run is still going, wait for it to finish") from exc
@@ -444,10 +444,24 @@ def open_run(path: Path | str, allow_running: bool = False) -> RunReader:
 
 
 
+def _open_for_reading(h5_path: Path, unlocked: bool) -> h5py.File:
+    """h5py.File read-only; when its writer holds the HDF5 lock (a run in progress) and ``unlocked``,
+    opened again without taking the lock (the rows flushed so far). The first error is raised."""
+    try:
+        return h5py.File(h5_path, "r")
+    except OSError as first:
+        if not unlocked:
+            raise
+        try:
+            return h5py.File(h5_path, "r", locking=False)
+        except OSError:
+            raise first from None
+
+
 def read_series_items(h5_path: Path, name: str, key) -> np.ndarray:
-    """``/series/<name>[key]`` of a run file, opened for this one read (read-only, no HDF5 file
-    lock: a running run's flushed rows); what gouge_cli.api's lazy series call."""
-    with h5py.File(h5_path, "r", locking=False) as h5:
+    """``/series/<name>[key]`` of a run file, opened for this one read (read-only, a running run's
+    flushed rows too); what gouge_cli.api's lazy series call."""
+    with _open_for_reading(Path(h5_path), True) as h5:
         return h5["series"][name][key]
 
 

@@ -29,7 +29,7 @@ from gouge_cli import api  # noqa: E402
 from gouge_cli.analysis.catalog import CATALOG_COLUMNS  # noqa: E402
 from gouge_cli.analysis.forkpairs import PAIR_COLUMNS  # noqa: E402
 from gouge_cli.cli.main import app  # noqa: E402
-from gouge_cli.errors import EXIT_BAD_INPUT, NotARunError, RunStillRunningError  # noqa: E402
+from gouge_cli.errors import EXIT_BAD_INPUT, AnalysisError, NotARunError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = {
@@ -287,9 +287,12 @@ def test_run_in_progress_opens(tmp_path):
         np.testing.assert_allclose(ds["wall_vx"].values, 1e-5 * np.arange(25))
         np.testing.assert_allclose(ds["time"].values, np.arange(25.0))
         assert len(run.slips) == 0
-        with pytest.raises(RunStillRunningError) as err:
+        with pytest.raises(AnalysisError) as err:          # refused as the analysis commands refuse it
             gouge.open_run(tmp_path, allow_running=False)
-        assert err.value.exit_code == EXIT_BAD_INPUT and "status 'running'" in str(err.value)
+        assert err.value.exit_code == EXIT_BAD_INPUT
+        cli = gouge_cli("analyze", tmp_path)
+        assert cli.exit_code == EXIT_BAD_INPUT
+        assert " ".join(str(err.value).split())[:80] in " ".join(cli.output.split())
     finally:
         proc.kill()
         proc.wait()
