@@ -24,7 +24,7 @@
 # * `GOUGE_TUTORIAL_RUN=DIR`: an existing run directory with at least one fork (`gouge restart`).
 # * `GOUGE_TUTORIAL_SCENE=small`: a reduced 300-grain scene, run and forked here (a few minutes on
 #   one core) into `GOUGE_TUTORIAL_OUT` (default `runs/tutorial_small`).
-# * otherwise the demo: `runs/demo` (made by `make demo`, or run here from `configs/demo.yaml`), its
+# * otherwise the demo: `runs/demo` (made by `make demo`, or run here from the scene `demo`), its
 #   slip `GOUGE_TUTORIAL_SLIP` (default: the second slip with a checkpoint) forked at kappa_c = 1e-5 d^2
 #   when it has no fork yet.
 #
@@ -60,14 +60,14 @@ def forked_run():
         scene = {"name": "tutorial_small", "seed": 4, "packing.n_grains": 300, "packing.width": 15,
                  "loading.spring_constant": 2e-4, "loading.velocity": 4e-5, "numerics.dt_safety": 0.3,
                  "run.duration": 30000, "output.snapshot_interval": 20000}
-        perm, config = 1e-3, "configs/demo.yaml"
+        perm, config = 1e-3, "demo"
     else:
-        out, scene, perm, config = Path("runs/demo"), {}, 1e-5, "configs/demo.yaml"
+        out, scene, perm, config = Path("runs/demo"), {}, 1e-5, "demo"
     run = gouge.open_run(out) if (out / "run.h5").is_file() else gouge.run(config, out=out, overrides=scene)
     with_checkpoint = [int(n) for n, ck in run.slips["checkpoint"].items() if ck]
     slip = int(wanted) if wanted else (with_checkpoint[1] if len(with_checkpoint) > 1 else with_checkpoint[0])
     if slip not in run.forks:
-        gouge.restart(run, slip=slip, perm=[perm], overrides={"output.snapshot_interval": 1000})
+        gouge.restart(run, slip=slip, perm=[perm])
     return run, slip
 
 

@@ -1,7 +1,7 @@
 """gouge: grain-scale simulations of water-saturated fault gouge (2D DEM + Goren pore fluid).
 
-The Python API (``import gouge_cli as gouge``): open_run, open_study, open_campaign, run, restart,
-study -- see gouge_cli.api. They are imported on first use (PEP 562), so ``import gouge_cli`` stays light.
+The Python API (``import gouge_cli as gouge``): open_run, open_study, open_campaign, analyze, figures,
+run, restart, study -- see gouge_cli.api. They are imported on first use (PEP 562), so ``import gouge_cli`` stays light.
 """
 
 __version__ = "0.1.0"
@@ -9,7 +9,7 @@ __version__ = "0.1.0"
 # numba's cache folder is chosen (per digest of the kernel sources) when gouge is imported
 from .kernels import NUMBA_CACHE  # noqa: E402,F401
 
-API = ("open_run", "open_study", "open_campaign", "run", "restart", "study")
+API = ("open_run", "open_study", "open_campaign", "analyze", "figures", "run", "restart", "study")
 
 
 def __getattr__(name: str):

@@ -39,7 +39,8 @@ from .errors import AnalysisError, ConfigError, SlipNotFoundError
 from .io.filedoc import ANALYSIS_UNITS, SLIP_ATTRS, TIME_ORIGIN
 from .io.runfile import RunInfo, RunReader, read_series_items
 
-__all__ = ["Run", "Fork", "Pair", "open_run", "open_study", "open_campaign", "run", "restart", "study"]
+__all__ = ["Run", "Fork", "Pair", "open_run", "open_study", "open_campaign", "analyze", "figures", "run", "restart",
+           "study"]
 
 _NAN = float("nan")
 TIME_DOC = "time since loading began (stored clock minus the clock at the loading start)"
@@ -462,6 +463,34 @@ def open_campaign(spec_or_folder: Path | str) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+# --------------------------------------------------------------------------- what the CLI writes
+
+
+def _run_dir(run) -> Path:
+    return run.path if isinstance(run, Run) else Path(run)
+
+
+def analyze(run: Run | Path | str, notch: bool = True, main: str = "first", write: bool = True):
+    """`gouge analyze` of one run: its :class:`~gouge_cli.analysis.report.RunAnalysis` (catalog,
+    fits, pairs, summary); ``write``: also RUN/analysis/*.csv, summary.json and /analysis in run.h5
+    (the only API call besides the launchers that writes into a run)."""
+    from .analysis.report import analyze_run, write_analysis
+
+    analysis = analyze_run(_run_dir(run), notch=notch, main=main)
+    if write:
+        write_analysis(analysis)
+    return analysis
+
+
+def figures(run_dir: Run | Path | str, slip: int | None = None, out_dir: Path | str | None = None,
+            notch: bool = True, main: str = "first") -> list[Path]:
+    """`gouge plot`: the PNG figures of a run (and of slip ``slip`` and its fork) into ``out_dir``
+    (default RUN/figures); returns the files (gouge_cli.plots.make_figures)."""
+    from .plots import make_figures
+
+    return make_figures(run_dir=_run_dir(run_dir), slip=slip, out_dir=out_dir, notch=notch, main=main)
+
+
 # --------------------------------------------------------------------------- launching
 
 
@@ -498,7 +527,7 @@ def restart(run: Run | Path | str, slip: int, perm=(), overrides=None, duration:
     from .workflows.fork import run_fork
     from .workflows.pairs import write_pair_json
 
-    run_dir = run.path if isinstance(run, Run) else Path(run)
+    run_dir = _run_dir(run)
     perms = [perm] if isinstance(perm, (int, float)) else list(perm)
     run_fork(run_dir, slip, perms, _sets(overrides), duration, force=force, quiet=quiet)
     fork_dir = run_dir / "forks" / f"slip_{slip:03d}"

@@ -94,7 +94,8 @@ def test_series_equals_the_file_with_units_and_lazy(forked):
         assert set(ds.data_vars) == set(g) - {"time"}
         for name, var in ds.data_vars.items():
             assert not var.variable._in_memory, f"{name} was read on opening"
-            assert var.attrs["units"] == g[name].attrs["unit"] and var.attrs["description"] == g[name].attrs["description"]
+            assert var.attrs["units"] == g[name].attrs["unit"]
+            assert var.attrs["description"] == g[name].attrs["description"]
             assert var.attrs["description"]
             np.testing.assert_array_equal(var.values, g[name][...])
         clock = g["time"][...]
@@ -198,7 +199,8 @@ def test_snapshots_equal_the_file(forked):
         np.testing.assert_array_equal(grid["pressure"].values, g["pressure"][...])
         (x0, z0), (dx, dz) = g["pressure"].attrs["origin"], g["pressure"].attrs["spacing"]
     assert grid["pressure"].dims == ("x_cell", "z_cell") and grid["porosity"].attrs["units"] == "-"
-    assert grid["x_cell"].values[0] == pytest.approx(x0 + dx / 2) and grid["z_cell"].values[1] == pytest.approx(z0 + 1.5 * dz)
+    assert grid["x_cell"].values[0] == pytest.approx(x0 + dx / 2)
+    assert grid["z_cell"].values[1] == pytest.approx(z0 + 1.5 * dz)
     np.testing.assert_allclose(np.diff(grid["x_cell"].values), dx)
 
 
