@@ -54,7 +54,7 @@ def wall_velocity(pair, ax=None, fit: bool = True, since_onset: bool = True, sha
     ax.set_ylabel(LABEL["velocity"])
     ax.set_title(f"slip {pair.row['slip']}: drained vs {pair.branch}, Type {pair.type}", fontsize=10)
     ax.grid(True, color="0.9", lw=0.6)
-    ax.legend(loc="upper right", fontsize=8, frameon=False)
+    ax.legend(loc="upper left", fontsize=8, frameon=False)
     return ax
 
 
@@ -63,10 +63,11 @@ def series(run, names=("tau_over_sigma",), ax=None, slips: bool = True, color: s
     each in the legend; slips shaded from ``run.slips``. Returns the Axes."""
     ax = _axes(ax)
     ds = run.series
-    for name in ([names] if isinstance(names, str) else list(names)):
+    names = [names] if isinstance(names, str) else list(names)
+    for name in names:
         var = ds[name]
-        ax.plot(ds["time"].values, var.values, lw=0.8, color=color if len(names) == 1 or isinstance(names, str)
-                else None, label=f"{name} [{var.attrs['units']}]")
+        ax.plot(ds["time"].values, var.values, lw=0.8, color=color if len(names) == 1 else None,
+                label=f"{name} [{var.attrs['units']}]")
     if slips and len(run.slips):
         df = run.slips
         for a, b in zip(df["onset_since_loading"], df["end_since_loading"]):

@@ -328,3 +328,24 @@ def test_tutorial_runs_on_the_small_run(forked, tmp_path):
     assert result.returncode == 0, result.stderr[-3000:]
     assert "Type" in result.stdout and (tmp_path / "wall_velocity.png").is_file()
     assert _hashes(out) == before
+
+
+def test_launchers_return_opened_runs_and_raise_the_cli_errors(forked, tmp_path):
+    from gouge_cli.errors import RunDirError
+
+    out, _ = forked
+    scene = tmp_path / "tiny.yaml"
+    scene.write_text(yaml.safe_dump(SCENE))
+    run = gouge.run(scene, out=tmp_path / "short", overrides={"run.duration": 500.0, "name": "short"})
+    assert isinstance(run, api.Run) and run.status == "finished" and run.path == tmp_path / "short"
+    assert run.config.run.duration == 500.0 and run.series.sizes["time"] >= 2
+    with pytest.raises(RunDirError) as err:                     # as `gouge run` into an existing run
+        gouge.run(scene, out=tmp_path / "short")
+    cli = gouge_cli("run", scene, "--out", tmp_path / "short")
+    assert err.value.exit_code == cli.exit_code == EXIT_BAD_INPUT
+    assert " ".join(str(err.value).split())[:60] in " ".join(cli.output.split())
+    with pytest.raises(RunDirError) as err:                     # as `gouge restart --slip 99`
+        gouge.restart(gouge.open_run(out), slip=99, perm=[PERM])
+    cli = gouge_cli("restart", out, "--slip", 99, "--perm", PERM)
+    assert err.value.exit_code == cli.exit_code == EXIT_BAD_INPUT and "no checkpoint for slip 99" in str(err.value)
+    assert " ".join(str(err.value).split())[:60] in " ".join(cli.output.split())
