@@ -12,8 +12,9 @@ objects, and the workflows (run, restart, study) launched from a notebook.
 Everything is read through :mod:`gouge_cli.io.runfile` (the one reader of run.h5) and computed
 by the functions the CLI uses (analysis.catalog, analysis.forkpairs.classify_fork: the one pair
 definition), so the numbers are those of ``gouge slips --json``, ``gouge analyze`` and pair.json.
-Opening is read-only: no byte of a run is written. A run in progress opens (its status says
-'running') and shows the rows flushed so far. Units are the dimensionless scales of the run file
+Opening and reading never write a byte of a run (analyze, figures and the launchers write what
+their commands write). A run in progress opens (its status says 'running') and shows the rows
+flushed so far. Units are the dimensionless scales of the run file
 (length d, stress E, time t0, velocity v0); every variable carries ``units`` and ``description``.
 Errors are gouge_cli.errors exceptions with the CLI's message; ``exc.exit_code`` is the CLI's code.
 """
