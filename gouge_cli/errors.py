@@ -25,9 +25,13 @@ MAX_LINES = 25
 class InputError(ValueError):
     """Anything the user can fix in what they gave (exit 2); the message names the key or path."""
 
+    exit_code = EXIT_BAD_INPUT
+
 
 class PhysicsFailure(RuntimeError):
     """The run went physically wrong (exit 3); the message names the cause and the fix."""
+
+    exit_code = EXIT_PHYSICS
 
 
 def clip(text: str, limit: int = MAX_MESSAGE) -> str:
@@ -87,9 +91,9 @@ def describe(exc: BaseException, where: str | None = None) -> tuple[str, int] | 
     if isinstance(exc, KeyboardInterrupt):
         return "interrupted", EXIT_INTERRUPTED
     if isinstance(exc, PhysicsFailure):
-        return f"physics failure: {exc}", EXIT_PHYSICS
+        return f"physics failure: {exc}", exc.exit_code
     if isinstance(exc, InputError):
-        return str(exc), EXIT_BAD_INPUT
+        return str(exc), exc.exit_code
     if isinstance(exc, RuntimeError):
         exc = hdf5_os_error(exc, where)
     if isinstance(exc, OSError):

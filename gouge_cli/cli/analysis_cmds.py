@@ -1,4 +1,5 @@
-"""`gouge analyze` and `gouge plot`: thin wrappers over gouge_cli.analysis (report, catalog) and gouge_cli.plots.
+"""`gouge analyze` and `gouge plot`: thin wrappers over gouge_cli.api (analyze, figures: the report of
+gouge_cli.analysis and the figures of gouge_cli.plots, as from Python).
 
 Registered on the main typer app by :func:`register` (called at the end of cli/main.py).
 Bad input (not a run, still running, no slips, no such slip) exits with code 2.
@@ -114,7 +115,8 @@ def register(app: typer.Typer) -> None:
         Writes RUN/analysis/{catalog,fits,pairs}.csv and summary.json, and /analysis in run.h5.
         """
         from ..analysis.forkpairs import campaign
-        from ..analysis.report import analyze_run, write_analysis
+        from ..analysis.report import write_analysis
+        from ..api import analyze as analyze_run
         from ..errors import AnalysisError
         from ..errors import describe_os_error
         from ..errors import EXIT_BAD_INPUT
@@ -123,7 +125,7 @@ def register(app: typer.Typer) -> None:
         done, failed = [], []
         for run_dir in run_dirs:
             try:
-                analysis = analyze_run(run_dir, notch=notch, main=_main(main))
+                analysis = analyze_run(run_dir, notch=notch, main=_main(main), write=False)
                 written = write_analysis(analysis)
             except (AnalysisError, OSError) as exc:
                 exc = exc if isinstance(exc, AnalysisError) else describe_os_error(exc, str(run_dir))[0]
@@ -160,9 +162,9 @@ def register(app: typer.Typer) -> None:
         main: str = typer.Option("first", "--main", help="compared event of each branch: first or largest"),
     ):
         """PNG figures: run overview, grain snapshot, slip N with its fit, μ_d(t), drained vs undrained."""
-        from ..plots import make_figures
+        from ..api import figures
         from .common import guarded, out
 
-        files = guarded(make_figures)(run_dir=run_dir, slip=slip, out_dir=out_dir, notch=notch, main=_main(main))
+        files = guarded(figures)(run_dir=run_dir, slip=slip, out_dir=out_dir, notch=notch, main=_main(main))
         for path in files:
             out.print(str(path), highlight=False)

@@ -308,13 +308,15 @@ def _locate(path: Path) -> tuple[Path, Path]:
 class RunReader:
     """Open run file with sliced series access. Use as a context manager.
 
-    ``allow_running=False`` raises :class:`RunStillRunningError` for status 'running'.
+    ``allow_running=False`` raises :class:`RunStillRunningError` for status 'running';
+    ``allow_running=True`` also opens a file its writer still holds (read without the HDF5 file
+    lock: what was flushed).
     """
 
     def __init__(self, path: Path | str, allow_running: bool = False):
         run_dir, h5_path = _locate(Path(path))
         try:
-            self.h5 = h5py.File(h5_path, "r")
+            self.h5 = _open_for_reading(h5_path, allow_running)
         except OSError as exc:
             raise NotARunError(f"{h5_path} cannot be read as HDF5 ({exc}); "
                                "if its run is still going, wait for it to finish") from exc
@@ -408,6 +410,15 @@ class RunReader:
             return float(self._time[0] - self.h5["series"]["load_time"][0])
         return self.info.load_start_time if math.isfinite(self.info.load_start_time) else 0.0
 
+    def attributes(self) -> dict:
+        """Every root attribute of the file, decoded (JSON ones such as scales and provenance as text)."""
+        return {k: attr_value(self.h5.attrs, k) for k in self.h5.attrs.keys()}
+
+    def documentation(self, group: str) -> dict[str, tuple[str, str]]:
+        """(unit, description) of each dataset of ``group`` ("series", "snapshots/<step>", ...)."""
+        return {name: (str(attr_value(ds.attrs, "unit", "-")), str(attr_value(ds.attrs, "description", "")))
+                for name, ds in self.h5[group].items() if isinstance(ds, h5py.Dataset)}
+
     # snapshots ------------------------------------------------------------
     def snapshot_names(self) -> list[str]:
         return sorted(self.h5["snapshots"].keys()) if "snapshots" in self.h5 else []
@@ -431,6 +442,27 @@ def open_run(path: Path | str, allow_running: bool = False) -> RunReader:
     """Open a run directory (or its run.h5) for reading; see :class:`RunReader`."""
     return RunReader(path, allow_running)
 
+
+
+def _open_for_reading(h5_path: Path, unlocked: bool) -> h5py.File:
+    """h5py.File read-only; when its writer holds the HDF5 lock (a run in progress) and ``unlocked``,
+    opened again without taking the lock (the rows flushed so far). The first error is raised."""
+    try:
+        return h5py.File(h5_path, "r")
+    except OSError as first:
+        if not unlocked:
+            raise
+        try:
+            return h5py.File(h5_path, "r", locking=False)
+        except OSError:
+            raise first from None
+
+
+def read_series_items(h5_path: Path, name: str, key) -> np.ndarray:
+    """``/series/<name>[key]`` of a run file, opened for this one read (read-only, a running run's
+    flushed rows too); what gouge_cli.api's lazy series call."""
+    with _open_for_reading(Path(h5_path), True) as h5:
+        return h5["series"][name][key]
 
 
 def read_slips(h5: h5py.File) -> list[dict] | None:

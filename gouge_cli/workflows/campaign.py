@@ -454,11 +454,10 @@ def _results_stale(s: Survey) -> bool:
     return newest > table.stat().st_mtime
 
 
-def write_results(s: Survey, log=print) -> dict:
-    """table.csv (one row per run and per pair), phase_diagram.csv and the figures."""
-    from ..analysis.campaign_table import PHASE_COLUMNS, CampaignPoint, campaign_table, phase_cells, write_table
-    from ..plots.phase import pair_histograms, phase_diagram_figure, sweep_figure
-    from .campaign_spec import phase_axes
+def done_points(s: Survey) -> list:
+    """The points whose run is done, as analysis.campaign_table.CampaignPoint (swept values, the
+    slips whose fork is done, the study's permeabilities): the rows of table.csv and gouge_cli.api."""
+    from ..analysis.campaign_table import CampaignPoint
 
     done_runs = {p.piece.point for p in s.pieces if p.piece.kind == "run" and p.state == "done"}
     forks: dict[str, list[int]] = {}
@@ -467,10 +466,19 @@ def write_results(s: Survey, log=print) -> dict:
             forks.setdefault(p.piece.point, []).append(p.piece.slip)
     swept = [k for k in s.spec.swept_keys()]
     perms = list(s.spec.study.permeabilities) if s.spec.study else []
-    points = [CampaignPoint(p.name, s.point_dir(p.name), {k: _value(p.config, k) for k in swept},
-                            sorted(forks.get(p.name, [])), perms)
-              for p in s.points if p.name in done_runs]
-    rows, pairs_by_perm = campaign_table(points)
+    return [CampaignPoint(p.name, s.point_dir(p.name), {k: _value(p.config, k) for k in swept},
+                          sorted(forks.get(p.name, [])), perms)
+            for p in s.points if p.name in done_runs]
+
+
+def write_results(s: Survey, log=print) -> dict:
+    """table.csv (one row per run and per pair), phase_diagram.csv and the figures."""
+    from ..analysis.campaign_table import PHASE_COLUMNS, campaign_table, phase_cells, write_table
+    from ..plots.phase import pair_histograms, phase_diagram_figure, sweep_figure
+    from .campaign_spec import phase_axes
+
+    swept = [k for k in s.spec.swept_keys()]
+    rows, pairs_by_perm = campaign_table(done_points(s))
     out = {"table": write_table(rows, swept, s.root / "table.csv")}
     figs = s.root / "figures"
     pair_rows = [r for r in rows if r["kind"] == "pair"]
@@ -518,4 +526,4 @@ def _value(config: Config, key: str) -> float:
 
 
 __all__ = ["Piece", "Survey", "advance_run", "advance_fork", "survey", "status_lines",
-           "run_campaign", "write_results", "run_settings", "load_spec"]
+           "run_campaign", "write_results", "done_points", "run_settings", "load_spec"]

@@ -265,3 +265,24 @@ def test_existing_scheduler_runs_a_campaign(campaign, client, folder):
     with h5py.File(run_dir / "run.h5", "r") as h5:
         assert h5.attrs["status"] == "finished"
     assert read_ledger(run_dir / "ledger" / "run.json")["pid"] in client.run(os.getpid).values()
+
+
+def test_open_campaign_equals_the_table(campaign):
+    """gouge_cli.api.open_campaign (from the campaign file or its folder): the rows of table.csv."""
+    import csv
+
+    from gouge_cli.api import open_campaign
+
+    root = campaign["root"]
+    rows = list(csv.DictReader(open(root / "table.csv")))
+    for df in (open_campaign(campaign["spec"]), open_campaign(root)):
+        assert len(df) == len(rows) and list(df["kind"]) == [r["kind"] for r in rows]
+        for (_, got), want in zip(df.iterrows(), rows):
+            assert got["point"] == want["point"] and got["seed"] == int(float(want["seed"]))
+            if want["kind"] == "run":
+                assert got["n_slips"] == int(want["n_slips"])
+                assert got["stress_drop_mean"] == pytest.approx(float(want["stress_drop_mean"]), rel=1e-12, nan_ok=True)
+            else:
+                assert got["type"] == want["type"] and got["slip"] == int(float(want["slip"]))
+                assert got["permeability"] == pytest.approx(float(want["permeability"]))
+        assert set(df[df["kind"] == "pair"].groupby("loading.normal_stress").size().index) <= {3.0e-4, 3.5e-4}

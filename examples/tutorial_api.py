@@ -1,0 +1,137 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: py:percent
+#     text_representation:
+#       extension: .py
+#       format_name: percent
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
+# %% [markdown]
+# # gouge from Python: a run, a slip, its drained and undrained twins, and a study table
+#
+# This notebook opens a gouge run with the Python API (`import gouge_cli as gouge`), looks at its
+# time series and slip catalog, overlays the top-wall velocity of the drained and undrained
+# branches of one slip with the block-slider fit (thesis Eq. 3), and tabulates the pairs of a study.
+# Every number is the one the CLI prints (`gouge slips --json`, `gouge analyze`, pair.json).
+#
+# Which run it uses (environment variables, so the same file runs in the docs and in the tests):
+#
+# * `GOUGE_TUTORIAL_RUN=DIR`: an existing run directory with at least one fork (`gouge restart`).
+# * `GOUGE_TUTORIAL_SCENE=small`: a reduced 300-grain scene, run and forked here (a few minutes on
+#   one core) into `GOUGE_TUTORIAL_OUT` (default `runs/tutorial_small`).
+# * otherwise the demo: `runs/demo` (made by `make demo`, or run here from the scene `demo`), its
+#   slip `GOUGE_TUTORIAL_SLIP` (default: the second slip with a checkpoint) forked at kappa_c = 1e-5 d^2
+#   when it has no fork yet.
+#
+# `GOUGE_TUTORIAL_FIGURES=DIR` also saves the figures as PNG files there.
+
+# %%
+import os
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+
+import gouge_cli as gouge
+from gouge_cli.plots.axes import series, table_scatter, wall_velocity
+
+figures = os.environ.get("GOUGE_TUTORIAL_FIGURES")
+
+
+def save(ax, name):
+    if figures:
+        Path(figures).mkdir(parents=True, exist_ok=True)
+        ax.figure.savefig(Path(figures) / f"{name}.png", dpi=100)
+
+
+def forked_run():
+    """The run this tutorial looks at, and the slip whose fork it overlays (see the first cell)."""
+    given = os.environ.get("GOUGE_TUTORIAL_RUN")
+    wanted = os.environ.get("GOUGE_TUTORIAL_SLIP")
+    if given:
+        run = gouge.open_run(given)
+        return run, int(wanted) if wanted else min(run.forks)
+    if os.environ.get("GOUGE_TUTORIAL_SCENE") == "small":
+        out = Path(os.environ.get("GOUGE_TUTORIAL_OUT", "runs/tutorial_small"))
+        scene = {"name": "tutorial_small", "seed": 4, "packing.n_grains": 300, "packing.width": 15,
+                 "loading.spring_constant": 2e-4, "loading.velocity": 4e-5, "numerics.dt_safety": 0.3,
+                 "run.duration": 30000, "output.snapshot_interval": 20000}
+        perm, config = 1e-3, "demo"
+    else:
+        out, scene, perm, config = Path("runs/demo"), {}, 1e-5, "demo"
+    run = gouge.open_run(out) if (out / "run.h5").is_file() else gouge.run(config, out=out, overrides=scene)
+    with_checkpoint = [int(n) for n, ck in run.slips["checkpoint"].items() if ck]
+    slip = int(wanted) if wanted else (with_checkpoint[1] if len(with_checkpoint) > 1 else with_checkpoint[0])
+    if slip not in run.forks:
+        gouge.restart(run, slip=slip, perm=[perm])
+    return run, slip
+
+
+run, slip = forked_run()
+run
+
+# %% [markdown]
+# ## Time series: an `xarray.Dataset`
+#
+# Each variable carries its unit and description from the run file; the coordinate `time` is in t0
+# since loading began, `time_s` the same in seconds. Nothing but the time column is read until a
+# variable is used.
+
+# %%
+ds = run.series
+print(ds)
+print(ds["tau_over_sigma"].attrs)
+
+# %%
+ax = series(run, ["tau_over_sigma"])
+ax.set_ylabel("τ / σ")
+save(ax, "series")
+
+# %% [markdown]
+# ## The slip catalog: a `pandas.DataFrame`
+
+# %%
+columns = ["onset_since_loading", "duration", "static_strength", "stress_drop", "peak_velocity_over_Vs",
+           "fit_r2", "fit_ok", "m_eff_over_m_b", "checkpoint"]
+print(run.slips[columns].to_string(float_format=lambda v: f"{v:.4g}"))
+
+# %% [markdown]
+# ## A grain snapshot
+
+# %%
+snap = run.snapshot(-1)
+print(f"snapshot at t = {snap.attrs['time']:.6g} t0 since loading: {snap.sizes['grain']} grains, "
+      f"{snap.sizes['contact']} contacts")
+
+# %% [markdown]
+# ## Drained and undrained twins of one slip, with the block-slider fit
+#
+# `run.pair(slip, perm)` puts both branches on one time axis and classifies them with the one pair
+# definition: the type and measures below are those of the fork's `pair.json`.
+
+# %%
+fork = run.fork(slip)
+pair = fork.pair(min(fork.undrained))
+ax = wall_velocity(pair)
+save(ax, "wall_velocity")
+print(pair)
+print(pair.measures[["type", "criteria", "drained_strength", "undrained_strength", "peak_velocity_ratio",
+                     "stress_drop_ratio", "duration_ratio"]].to_string())
+
+# %% [markdown]
+# ## The pairs of a study: one table, ready for `groupby`
+
+# %%
+pairs = gouge.open_study(run.path)
+print(pairs[["slip", "permeability", "type", "transient", "strength_difference", "peak_velocity_ratio",
+             "stress_drop_ratio"]].to_string(float_format=lambda v: f"{v:.4g}"))
+print(pairs.groupby(["permeability", "type"]).size())
+
+# %%
+ax = table_scatter(pairs, "permeability", "stress_drop_ratio", by="type")
+save(ax, "pairs")
+plt.close("all")

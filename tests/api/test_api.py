@@ -1,0 +1,358 @@
+"""The Python API (gouge_cli.api) against the run files and the CLI's outputs, on a tiny real run
+forked before one slip: series and snapshots equal the HDF5 contents with units and
+descriptions, the slip table equals `gouge slips --json` and `gouge analyze`'s CSV files, a pair
+equals pair.json, opening changes no byte, a run in progress opens, a damaged file gives the CLI's error."""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import math
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import h5py
+import matplotlib
+import numpy as np
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+matplotlib.use("Agg")
+
+import gouge_cli as gouge  # noqa: E402
+from gouge_cli import api  # noqa: E402
+from gouge_cli.analysis.catalog import CATALOG_COLUMNS  # noqa: E402
+from gouge_cli.analysis.forkpairs import PAIR_COLUMNS  # noqa: E402
+from gouge_cli.cli.main import app  # noqa: E402
+from gouge_cli.errors import EXIT_BAD_INPUT, AnalysisError, NotARunError  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENE = {
+    "name": "tiny_api",
+    "seed": 4,
+    "packing": {"n_grains": 300, "width": 15},
+    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
+    "numerics": {"dt_safety": 0.3, "threads": 1},
+    "run": {"duration": 80000},            # tests/plots: 2 or more slips for any GOUGE_TEST_SEED_OFFSET
+    "output": {"series_interval": 10, "snapshot_interval": 20000},
+}
+PERM = 1e-3
+runner = CliRunner()
+
+
+def gouge_cli(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def forked(tmp_path_factory):
+    """The tiny scene of tests/plots, forked before its first slip with a checkpoint (drained + one
+    undrained branch writing snapshots with a pressure grid)."""
+    base = tmp_path_factory.mktemp("api")
+    scene = base / "tiny.yaml"
+    scene.write_text(yaml.safe_dump(SCENE))
+    out = base / "tiny"
+    result = gouge_cli("run", scene, "--out", out, "--quiet")
+    assert result.exit_code == 0, result.output
+    slips = json.loads(gouge_cli("slips", out, "--json").output)
+    slip = next(e["number"] for e in slips if e["checkpoint"])
+    result = gouge_cli("restart", out, "--slip", slip, "--perm", PERM, "--set", "output.snapshot_interval=1000",
+                       "--quiet")
+    assert result.exit_code == 0, result.output
+    return out, slip
+
+
+def _same(a, b, rel=1e-12) -> bool:
+    """Equal numbers (NaN and None alike), strings and bools."""
+    if a is None or (isinstance(a, float) and math.isnan(a)):
+        return b is None or (isinstance(b, float) and math.isnan(b)) or b == ""
+    if isinstance(a, (bool, np.bool_)) or isinstance(b, (bool, np.bool_)):
+        return bool(a) == (b in (True, "True", "true")) if isinstance(b, str) else bool(a) == bool(b)
+    if isinstance(a, (int, float, np.integer, np.floating)):
+        return math.isclose(float(a), float(b), rel_tol=rel, abs_tol=0.0)
+    return str(a) == str(b)
+
+
+def test_package_names_the_api():
+    for name in ("open_run", "open_study", "open_campaign", "run", "restart", "study"):
+        assert getattr(gouge, name) is getattr(api, name)
+    with pytest.raises(AttributeError):
+        gouge.no_such_name
+
+
+def test_series_equals_the_file_with_units_and_lazy(forked):
+    out, _ = forked
+    run = gouge.open_run(out)
+    ds = run.series
+    with h5py.File(out / "run.h5", "r") as h5:
+        g = h5["series"]
+        assert set(ds.data_vars) == set(g) - {"time"}
+        for name, var in ds.data_vars.items():
+            assert not var.variable._in_memory, f"{name} was read on opening"
+            assert var.attrs["units"] == g[name].attrs["unit"]
+            assert var.attrs["description"] == g[name].attrs["description"]
+            assert var.attrs["description"]
+            np.testing.assert_array_equal(var.values, g[name][...])
+        clock = g["time"][...]
+        offset = clock[0] - g["load_time"][0]
+        scales = json.loads(h5.attrs["scales"])
+    np.testing.assert_array_equal(ds["clock"].values, clock)
+    np.testing.assert_allclose(ds["time"].values, clock - offset, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(ds["time_s"].values, (clock - offset) * scales["time_s"], rtol=1e-12)
+    for name in ("time", "time_s", "clock"):
+        assert ds[name].attrs["units"] and ds[name].attrs["description"]
+    assert ds["time"].values[0] == pytest.approx(0.0, abs=1e-9)
+    part = ds["wall_vx"].isel(time=slice(5, 50, 3)).values        # a lazy slice reads that slice only
+    np.testing.assert_array_equal(part, ds["wall_vx"].values[5:50:3])
+    assert run.config.loading.spring_constant == SCENE["loading"]["spring_constant"]
+    assert run.provenance["final_state_hash"] and "libraries" in run.provenance
+    assert run.status == "finished" and run.scales["time_s"] == scales["time_s"]
+
+
+def test_slips_equal_cli_json_and_analyze_csv(forked, tmp_path):
+    out, _ = forked
+    df = gouge.open_run(out).slips
+    cli = json.loads(gouge_cli("slips", out, "--json").output)
+    assert len(df) == len(cli) >= 1
+    for entry, (_, row) in zip(cli, df.iterrows()):
+        assert row["number"] == entry["number"]
+        assert _same(row["onset_since_loading"], entry["onset_time"], 1e-9)
+        assert _same(row["end_since_loading"], entry["end_time"], 1e-9)
+        for key in ("duration", "static_strength", "stress_drop", "peak_velocity", "slip"):
+            assert _same(row[key], entry[key]), key
+        assert row["checkpoint"] == entry["checkpoint"]
+        assert Path(row["checkpoint_path"]).is_file()
+    assert set(df.attrs["units"]) == set(df.columns) and df.attrs["units"]["onset_since_loading"] == "t0"
+    copy = tmp_path / "copy"           # `gouge analyze` writes into the run: a copy keeps the fixture as it is
+    import shutil
+
+    shutil.copytree(out, copy)
+    assert gouge_cli("analyze", copy).exit_code == 0
+    with open(copy / "analysis" / "catalog.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    for csv_row, (_, row) in zip(rows, df.iterrows()):
+        for col in CATALOG_COLUMNS:
+            assert _same(row[col], csv_row[col] if col == "checkpoint" else float(csv_row[col])), col
+    with open(copy / "analysis" / "fits.csv", newline="") as fh:
+        fits = list(csv.DictReader(fh))
+    for fit, (_, row) in zip(fits, df.iterrows()):
+        assert _same(row["fit_r2"], float(fit["r2"])) and _same(row["m_eff"], float(fit["m_eff"]))
+        assert row["fit_ok"] == (fit["success"] == "True")
+        assert _same(row["fit_half_period"], float(fit["half_period"]))
+
+
+def test_pair_equals_pair_json(forked):
+    out, slip = forked
+    run = gouge.open_run(out)
+    assert list(run.forks) == [slip]
+    pair = run.pair(slip, PERM)
+    record = json.loads((out / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())
+    (stored,) = record["pairs"]
+    for col in PAIR_COLUMNS:
+        if col == "run":
+            continue
+        assert _same(pair.row[col], stored[col]), (col, pair.row[col], stored[col])
+    assert pair.type == stored["type"] and pair.measures["type"] == stored["type"]
+    ds = pair.series
+    assert list(ds["branch"].values) == ["drained", "undrained"]
+    for branch, sub in (("drained", pair.drained), ("undrained", pair.undrained)):
+        v = ds["wall_vx"].sel(branch=branch)
+        inside = np.isin(ds["time"].values, sub.series["time"].values)
+        np.testing.assert_array_equal(v.values[inside], sub.series["wall_vx"].values)
+        assert np.isnan(v.values[~inside]).all()
+        assert ds["wall_vx"].attrs["units"] == "v0"
+    assert ds["pressure_mean"].attrs["units"] == "E"
+    assert np.isnan(ds["pressure_mean"].sel(branch="drained")).all()
+    assert pair.undrained.info.permeability == pytest.approx(PERM)
+    for branch in ("drained", "undrained"):
+        f, curve = pair.fits[branch], pair.fit_curve(branch)
+        assert (curve is None) == (f is None or not np.isfinite(f.omega))
+        if curve is not None:           # A sin(omega (t - t0)) over its half period, on the time axis since loading
+            assert curve.attrs["units"] == "v0" and curve.values.max() == pytest.approx(abs(f.amplitude), rel=1e-3)
+            assert float(curve["time"][0]) == pytest.approx(f.t0 - pair.time_offset)
+            assert float(curve["time"][-1] - curve["time"][0]) == pytest.approx(f.half_period)
+    table = run.fork(slip).pairs
+    assert list(table.columns) == list(PAIR_COLUMNS) and len(table) == 1
+
+
+def test_snapshots_equal_the_file(forked):
+    out, slip = forked
+    run = gouge.open_run(out)
+    assert len(run.snapshots) >= 1
+    snap = run.snapshot(-1)
+    with h5py.File(out / "run.h5", "r") as h5:
+        name = sorted(h5["snapshots"])[-1]
+        g = h5["snapshots"][name]
+        for key, var in snap.data_vars.items():
+            np.testing.assert_array_equal(var.values, g[key][...])
+            assert var.attrs["units"] == g[key].attrs["unit"] and var.attrs["description"]
+        assert snap.attrs["step"] == g.attrs["step"]
+        assert snap.attrs["time"] == pytest.approx(g.attrs["time"] - run.time_offset)
+    wet = run.pair(slip, PERM).undrained
+    assert len(wet.snapshots) >= 1
+    grid = wet.snapshot(0)
+    with h5py.File(wet.info.h5_path, "r") as h5:
+        g = h5["snapshots"][sorted(h5["snapshots"])[0]]
+        np.testing.assert_array_equal(grid["pressure"].values, g["pressure"][...])
+        (x0, z0), (dx, dz) = g["pressure"].attrs["origin"], g["pressure"].attrs["spacing"]
+    assert grid["pressure"].dims == ("x_cell", "z_cell") and grid["porosity"].attrs["units"] == "-"
+    assert grid["x_cell"].values[0] == pytest.approx(x0 + dx / 2)
+    assert grid["z_cell"].values[1] == pytest.approx(z0 + 1.5 * dz)
+    np.testing.assert_allclose(np.diff(grid["x_cell"].values), dx)
+
+
+def _hashes(folder: Path) -> dict:
+    return {str(p.relative_to(folder)): (hashlib.sha256(p.read_bytes()).hexdigest(), p.stat().st_mtime_ns)
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_opening_changes_no_byte(forked):
+    out, slip = forked
+    before = _hashes(out)
+    run = gouge.open_run(out)
+    run.series.load()
+    run.slips
+    [s for s in run.snapshots]
+    pair = run.pair(slip, PERM)
+    pair.series
+    pair.undrained.snapshot(0)
+    gouge.open_study(out)
+    assert _hashes(out) == before
+
+
+def test_open_study_equals_pair_json(forked):
+    out, slip = forked
+    df = gouge.open_study(out)
+    record = json.loads((out / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())
+    assert len(df) == len(record["pairs"]) == 1
+    row = df.iloc[0]
+    for col in PAIR_COLUMNS:
+        if col != "run":
+            assert _same(row[col], record["pairs"][0][col]), col
+    with h5py.File(out / "run.h5", "r") as h5:
+        assert row["seed"] == h5.attrs["seed"]
+    assert row["k"] == SCENE["loading"]["spring_constant"] and row["sigma"] > 0
+    if slip == 1:
+        assert bool(row["transient"])                        # slip 1 is always transient (analysis.study)
+    assert df.groupby("permeability").size().tolist() == [1] and df["permeability"].iloc[0] == pytest.approx(PERM)
+
+
+def test_plot_helpers_return_axes(forked):
+    import matplotlib.pyplot as plt
+
+    from gouge_cli.plots.axes import series, table_scatter, wall_velocity
+
+    out, slip = forked
+    run = gouge.open_run(out)
+    pair = run.pair(slip, PERM)
+    ax = wall_velocity(pair)
+    lines = ax.get_lines()
+    fits = [b for b in ("drained", "undrained") if pair.fit_curve(b) is not None]
+    assert len(lines) == 2 + len(fits)                     # two branches, their Eq. 3 fits
+    V_s = run.info.V_s
+    onset = pair.events["drained"].onset_time - pair.time_offset
+    np.testing.assert_allclose(lines[0].get_ydata(), pair.series["wall_vx"].sel(branch="drained").values / V_s)
+    np.testing.assert_allclose(lines[0].get_xdata(), pair.series["time"].values - onset)      # since the onset
+    if "drained" in fits:
+        assert lines[1].get_ydata().max() == pytest.approx(abs(pair.fits["drained"].amplitude) / V_s, rel=1e-3)
+    ax = series(run, ["tau_over_sigma"])
+    np.testing.assert_array_equal(ax.get_lines()[0].get_ydata(), run.series["tau_over_sigma"].values)
+    ax = table_scatter(gouge.open_study(out), "permeability", "stress_drop_ratio")
+    assert ax.get_xscale() == "log" and ax.get_xlabel() == "permeability [d^2]"
+    plt.close("all")
+
+
+WRITER = textwrap.dedent("""
+    import sys, time
+    from pathlib import Path
+    from gouge_cli.config import build_config
+    from gouge_cli.io.runfile import RunFile
+    w = RunFile(Path(sys.argv[1]) / "run.h5", build_config({}), 0.1, flush_rows=1000,
+                extra_attrs={"n_grains": 10, "width": 5.0, "wall_mass_per_length": 2.0})
+    for i in range(25):
+        w.append({"time": 100.0 + i, "load_time": float(i), "wall_vx": 1e-5 * i, "tau_over_sigma": 0.1})
+    w.flush()
+    for i in range(25, 30):                       # buffered, not flushed
+        w.append({"time": 100.0 + i, "load_time": float(i), "wall_vx": 1e-5 * i, "tau_over_sigma": 0.1})
+    print("flushed", flush=True)
+    time.sleep(60)
+""")
+
+
+def test_run_in_progress_opens(tmp_path):
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    proc = subprocess.Popen([sys.executable, "-c", WRITER, str(tmp_path)], stdout=subprocess.PIPE, env=env, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "flushed"
+        run = gouge.open_run(tmp_path)
+        assert run.status == "running"
+        ds = run.series
+        assert ds.sizes["time"] == 25                      # what was flushed
+        np.testing.assert_allclose(ds["wall_vx"].values, 1e-5 * np.arange(25))
+        np.testing.assert_allclose(ds["time"].values, np.arange(25.0))
+        assert len(run.slips) == 0
+        with pytest.raises(AnalysisError) as err:          # refused as the analysis commands refuse it
+            gouge.open_run(tmp_path, allow_running=False)
+        assert err.value.exit_code == EXIT_BAD_INPUT
+        cli = gouge_cli("analyze", tmp_path)
+        assert cli.exit_code == EXIT_BAD_INPUT
+        assert " ".join(str(err.value).split())[:80] in " ".join(cli.output.split())
+    finally:
+        proc.kill()
+        proc.wait()
+
+
+def test_damaged_file_gives_the_cli_error(forked, tmp_path):
+    out, _ = forked
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    data = (out / "run.h5").read_bytes()
+    (bad / "run.h5").write_bytes(data[: len(data) // 3])
+    with pytest.raises(NotARunError) as err:
+        gouge.open_run(bad)
+    assert err.value.exit_code == EXIT_BAD_INPUT
+    cli = gouge_cli("analyze", bad)
+    assert cli.exit_code == EXIT_BAD_INPUT
+    assert " ".join(str(err.value).split())[:60] in " ".join(cli.output.split())
+    with pytest.raises(NotARunError) as err:
+        gouge.open_run(tmp_path / "missing")
+    assert err.value.exit_code == EXIT_BAD_INPUT
+
+
+def test_tutorial_runs_on_the_small_run(forked, tmp_path):
+    out, slip = forked
+    env = dict(os.environ, GOUGE_TUTORIAL_RUN=str(out), GOUGE_TUTORIAL_SLIP=str(slip), MPLBACKEND="Agg",
+               GOUGE_TUTORIAL_FIGURES=str(tmp_path),
+               PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    before = _hashes(out)
+    result = subprocess.run([sys.executable, str(ROOT / "examples" / "tutorial_api.py")], env=env,
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr[-3000:]
+    assert "Type" in result.stdout and (tmp_path / "wall_velocity.png").is_file()
+    assert _hashes(out) == before
+
+
+def test_launchers_return_opened_runs_and_raise_the_cli_errors(forked, tmp_path):
+    from gouge_cli.errors import RunDirError
+
+    out, _ = forked
+    scene = tmp_path / "tiny.yaml"
+    scene.write_text(yaml.safe_dump(SCENE))
+    run = gouge.run(scene, out=tmp_path / "short", overrides={"run.duration": 500.0, "name": "short"})
+    assert isinstance(run, api.Run) and run.status == "finished" and run.path == tmp_path / "short"
+    assert run.config.run.duration == 500.0 and run.series.sizes["time"] >= 2
+    with pytest.raises(RunDirError) as err:                     # as `gouge run` into an existing run
+        gouge.run(scene, out=tmp_path / "short")
+    cli = gouge_cli("run", scene, "--out", tmp_path / "short")
+    assert err.value.exit_code == cli.exit_code == EXIT_BAD_INPUT
+    assert " ".join(str(err.value).split())[:60] in " ".join(cli.output.split())
+    with pytest.raises(RunDirError) as err:                     # as `gouge restart --slip 99`
+        gouge.restart(gouge.open_run(out), slip=99, perm=[PERM])
+    cli = gouge_cli("restart", out, "--slip", 99, "--perm", PERM)
+    assert err.value.exit_code == cli.exit_code == EXIT_BAD_INPUT and "no checkpoint for slip 99" in str(err.value)
+    assert " ".join(str(err.value).split())[:60] in " ".join(cli.output.split())
