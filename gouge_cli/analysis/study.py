@@ -18,7 +18,7 @@ from .forkpairs import ForkPair
 from ..io.runfile import RunReader
 
 __all__ = ["STUDY_COLUMNS", "THESIS", "TRANSIENT_TOL", "DURATION_TOL", "GOOD_R2",
-           "transient_slips", "within_median", "study_rows", "study_summary", "summary_lines"]
+           "transient_slips", "within_median", "study_rows", "study_summary", "study_summaries", "summary_lines"]
 
 _NAN = float("nan")
 TRANSIENT_TOL = 0.3     # a slip is steady when S and stress drop are within 30 % of the late medians
@@ -26,10 +26,10 @@ DURATION_TOL = 0.15     # drained durations "characteristic": within 15 % of the
 GOOD_R2 = 0.9           # a drained slip "fits Eq. 3" with R^2 above this (and passing the fit bar)
 
 STUDY_COLUMNS = (
-    "slip", "transient", "k", "sigma", "V", "kappa_c", "type", "undrained_event", "S_d", "S_u",
-    "stress_drop_ratio", "peak_velocity_ratio", "duration_ratio", "deborah", "subevents",
-    "drained_duration", "drained_fit_r2", "drained_fit_ok", "drained_fit_r2_notched", "m_eff_over_m_b", "criteria",
-    "note",
+    "slip", "transient", "k", "sigma", "V", "kappa_c", "deborah", "regime", "type", "undrained_event", "S_d", "S_u",
+    "stress_drop_ratio", "peak_velocity_ratio", "duration_ratio", "subevents",
+    "drained_duration", "drained_fit_r2", "drained_fit_ok", "drained_fit_verdict", "drained_fit_r2_notched",
+    "m_eff_over_m_b", "criteria", "fit_reason", "note",
 )
 
 #: The thesis's study (Section 4.2-4.3, Table 3): 39 pairs at kappa_c = 1e-5.
@@ -64,7 +64,8 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
     """One row per pair (:data:`STUDY_COLUMNS`), in slip then permeability order.
 
     S_d, S_u: static strengths; ratios undrained / drained of the compared events; deborah: mean
-    Deborah number of the undrained branch; subevents: sub-events of the undrained event;
+    Deborah number of the undrained branch over its compared slip, regime: its drainage
+    (analysis.forkpairs.regime); subevents: sub-events of the undrained event;
     drained_fit_*: Eq. 3 fit of the drained slip in the parent run's catalog (drained_fit_r2_notched:
     its R^2 refitted with the layer's natural vibration notched, a diagnostic,
     analysis.catalog.NotchedFit); m_eff_over_m_b: k (T_fit / pi)^2 / m_b of that fit (NaN when it
@@ -90,11 +91,13 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
             "kappa_c": r["permeability"], "type": r["type"], "undrained_event": r["undrained_event"],
             "S_d": r["drained_strength"], "S_u": r["undrained_strength"],
             "stress_drop_ratio": r["stress_drop_ratio"], "peak_velocity_ratio": r["peak_velocity_ratio"],
-            "duration_ratio": r["duration_ratio"], "deborah": r["deborah_mean"],
+            "duration_ratio": r["duration_ratio"], "deborah": r["deborah_slip"], "regime": r["regime"],
             "subevents": int(p.result.n_subevents),
             "drained_duration": float(entry.get("duration", _NAN)),
             "drained_fit_r2": fit.r2 if fit is not None else _NAN,
             "drained_fit_ok": bool(fit is not None and fit.success),
+            "drained_fit_verdict": fit.verdict if fit is not None else "none",
+            "fit_reason": fit.verdict_reason if fit is not None else "",
             "drained_fit_r2_notched": notched.get(n, _NAN),
             "m_eff_over_m_b": fit.m_eff / info.m_b if (fit is not None and fit.success) else _NAN,
             "criteria": r["criteria"], "note": r["note"],
@@ -160,6 +163,19 @@ def study_summary(rows: list[dict]) -> dict:
         "drained_duration_median": med,
         "m_eff_over_m_b": _spread(r["m_eff_over_m_b"] for r in drained),
     }
+
+
+def study_summaries(rows: list[dict]) -> list[dict]:
+    """:func:`study_summary` of each permeability's rows on its own (never pooled), in increasing
+    kappa_c: ``[{"permeability", "regimes": {name: count}, **study_summary}]``."""
+    out = []
+    for perm in sorted({float(r["kappa_c"]) for r in rows}):
+        mine = [r for r in rows if float(r["kappa_c"]) == perm]
+        regimes: dict[str, int] = {}
+        for r in mine:
+            regimes[r["regime"]] = regimes.get(r["regime"], 0) + 1
+        out.append(dict(permeability=perm, regimes=regimes, **study_summary(mine)))
+    return out
 
 
 def _pct(x: float) -> str:
