@@ -139,6 +139,7 @@ def slips(
 
     from ..io.runfile import RunReader
     from ..units import ResultUnits
+    from .analysis_cmds import _fmt
 
     with RunReader(target, allow_running=True) as reader:
         info = reader.info
@@ -158,8 +159,7 @@ def slips(
     for _, header in cols:
         table.add_column(escape(header), justify="right", no_wrap=True)
     for e in catalog:
-        table.add_row(*["–" if e.get(c) is None else f"{e[c]:.5g}" if isinstance(e[c], float) else str(e[c])
-                        for c, _ in cols])
+        table.add_row(*["–" if e.get(c) is None else escape(_fmt(e[c], 5)) for c, _ in cols])
     out.print(table)
 
 
