@@ -15,6 +15,8 @@ from ..errors import NotARunError, SlipNotFoundError
 from ..io.runfile import RunReader, read_slips
 from .blockslider import BlockSliderFit, fit_block_slider
 from .friction import dynamic_friction, estimate_natural_frequency, mean_dynamic_friction, notch_filter
+from .pairs import regime
+from ..units import ResultUnits
 
 _NAN = float("nan")
 
@@ -129,12 +131,9 @@ def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[
     static_strength: tau/sigma before the onset; stress_drop: drop of tau/sigma; velocities over
     V_s; recurrence: onset minus the previous onset [t0] (NaN for the first); deborah: mean of the
     Deborah-number series over the slip samples (NaN for a dry run) and regime its name
-    (:func:`~gouge_cli.analysis.forkpairs.regime`; "dry" for a dry run); pressure_min/max_over_sigma:
+    (:func:`~gouge_cli.analysis.pairs.regime`; "dry" for a dry run); pressure_min/max_over_sigma:
     extremes of the pore-pressure series over the slip [sigma].
     """
-    from ..units import ResultUnits
-    from .forkpairs import regime
-
     if catalog is None:
         catalog = read_catalog(reader)
     V_s, sigma = reader.info.V_s, reader.info.sigma
@@ -344,8 +343,6 @@ def fit_table(reader: RunReader, catalog: list[dict] | None = None, notch: bool 
     verdict: "holds", "failed" or "inapplicable" (BlockSliderFit.verdict) and reason: why not
     (empty when it holds); the fitted numbers of a fit that does not hold are kept, marked so.
     """
-    from ..units import ResultUnits
-
     if catalog is None:
         catalog = read_catalog(reader)
     info = reader.info

@@ -12,7 +12,7 @@ import numpy as np
 from ..errors import AnalysisError, NotARunError
 from ..io.runfile import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
-from .pairs import PairDefinition, PairResult, campaign_summary, classify_pair
+from .pairs import DRAINED_DE, UNDRAINED_DE, PairDefinition, PairResult, campaign_summary, classify_pair, regime  # noqa: F401
 
 _NAN = float("nan")
 
@@ -45,23 +45,6 @@ def branch_perm(path: Path) -> float:
         return float(Path(path).name[len("perm_"):])
     except ValueError:
         return math.inf
-
-
-DRAINED_DE = 0.01      # De below this (two decades under 1: "De << 1") is "drained-like"
-UNDRAINED_DE = 1.0     # De at or above this is "undrained"; between the two "partially drained"
-
-
-def regime(deborah: float) -> str:
-    """Name of a fluid branch's drainage from its Deborah number De = l u0 / D (thesis Eq. 4: the time
-    for pressure to diffuse over the distance l to the drained walls over the time to generate it):
-    "drained-like" for De < DRAINED_DE (the thesis's De << 1, "fully drained"), "undrained" for
-    De >= UNDRAINED_DE (its "effectively undrained", De >= 1), "partially drained" between, "unknown"
-    without a finite De. The De used is the branch's mean over its compared slip (deborah_slip)."""
-    if not math.isfinite(deborah):
-        return "unknown"
-    if deborah < DRAINED_DE:
-        return "drained-like"
-    return "undrained" if deborah >= UNDRAINED_DE else "partially drained"
 
 
 def fork_dirs(run_dir: Path) -> list[Path]:

@@ -65,7 +65,7 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
 
     S_d, S_u: static strengths; ratios undrained / drained of the compared events; deborah: mean
     Deborah number of the undrained branch over its compared slip, regime: its drainage
-    (analysis.forkpairs.regime); subevents: sub-events of the undrained event;
+    (analysis.pairs.regime); subevents: sub-events of the undrained event;
     drained_fit_*: Eq. 3 fit of the drained slip in the parent run's catalog (drained_fit_r2_notched:
     its R^2 refitted with the layer's natural vibration notched, a diagnostic,
     analysis.catalog.NotchedFit); m_eff_over_m_b: k (T_fit / pi)^2 / m_b of that fit (NaN when it
