@@ -13,6 +13,7 @@ import statistics
 
 import numpy as np
 
+from .blockslider import EQ3_PERIOD_FACTOR
 from .catalog import fit_slip, fit_slip_notched, read_catalog
 from .forkpairs import ForkPair
 from ..io.runfile import RunReader
@@ -126,7 +127,7 @@ def study_summary(rows: list[dict]) -> dict:
 
     counts: I, II, tie, none, complex (-C), slow; slower: fraction of classified pairs with
     peak-velocity ratio < 1; smaller_drop: stress-drop ratio < 1; drained: fraction of the
-    study's drained slips passing the fit bar, with R^2 > GOOD_R2 (and, a diagnostic, R^2 > GOOD_R2
+    study's drained slips passing the fit bar (and of those whose Eq. 3 fit holds, verdict "holds"), with R^2 > GOOD_R2 (and, a diagnostic, R^2 > GOOD_R2
     with the natural vibration notched), and with duration within DURATION_TOL of the median;
     m_eff (in m_b) mean, std, cv.
     """
@@ -156,6 +157,7 @@ def study_summary(rows: list[dict]) -> dict:
         "frac_smaller_drop": frac(classified, lambda r: r["stress_drop_ratio"] < 1),
         "n_drained": n_d,
         "drained_frac_fit_ok": frac(drained, lambda r: r["drained_fit_ok"]),
+        "drained_frac_eq3_holds": frac(drained, lambda r: r.get("drained_fit_verdict") == "holds"),
         "drained_frac_r2_good": frac(drained, lambda r: r["drained_fit_ok"] and r["drained_fit_r2"] > GOOD_R2),
         "drained_frac_r2_good_notched": frac(drained, lambda r: r["drained_fit_ok"]
                                              and r["drained_fit_r2_notched"] > GOOD_R2),
@@ -197,6 +199,8 @@ def summary_lines(s: dict) -> list[tuple[str, str, str]]:
         ("undrained slower (peak v ratio < 1)", _pct(s["frac_slower"]), "not tabulated"),
         ("undrained smaller stress drop", _pct(s["frac_smaller_drop"]), "'in both Type I and II' (Figs. 9-10)"),
         ("drained slips passing the fit bar", _pct(s["drained_frac_fit_ok"]), "'good agreement' (Sec. 4.1)"),
+        (f"  of them Eq. 3 holds (T/2 within {EQ3_PERIOD_FACTOR:g}x of π√(m_b/k))", _pct(s["drained_frac_eq3_holds"]),
+         "'good agreement' (Sec. 4.1)"),
         (f"drained slips with R^2 > {GOOD_R2}", _pct(s["drained_frac_r2_good"]), "not tabulated"),
         ("  the same, natural vibration notched (diagnostic)", _pct(s["drained_frac_r2_good_notched"]),
          "fluctuations 'an artifact that Eq. 3 does not account for' (Secs. II, 4.1)"),

@@ -28,6 +28,14 @@ def _fmt(value, digits: int = 4) -> str:
     return "" if value is None else str(value)
 
 
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return text in ("–", "")
+    return True
+
+
 def _table(title: str, columns: list[tuple[str, str]], rows: list[dict], width: int | None = None):
     """A rich table of ``rows``, never truncating a value: when the columns do not fit the console
     (``width``; default the output console's), they are split into several tables, each repeating
@@ -54,7 +62,9 @@ def _table(title: str, columns: list[tuple[str, str]], rows: list[dict], width: 
         part = f" ({n + 1}/{len(chunks)})" if len(chunks) > 1 else ""
         table = Table(title=title + part, title_justify="left")
         for i in [0] + chunk:
-            table.add_column(escape(columns[i][1]), justify="right", no_wrap=True, min_width=need[i] - 3)
+            numeric = all(_is_number(c[i]) for c in cells)
+            table.add_column(escape(columns[i][1]), justify="right" if numeric else "left", no_wrap=True,
+                             min_width=need[i] - 3)
         for c in cells:
             table.add_row(*[escape(c[i]) for i in [0] + chunk])
         tables.append(table)

@@ -125,7 +125,7 @@ class ItemProgress:
     stderr every ``every_s`` seconds, on a terminal or not, with the count and an ETA from the mean
     pace so far; ``quiet`` prints nothing."""
 
-    def __init__(self, label: str, total: int, every_s: float = 5.0, quiet: bool = False):
+    def __init__(self, label: str, total: int, every_s: float = 10.0, quiet: bool = False):
         self.label, self.total, self.every_s, self.quiet = label, int(total), every_s, quiet
         self._t0 = self._last = time.perf_counter()
 

@@ -113,7 +113,7 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
                                 sigma=u.info.sigma,
                                 time_offset=u.time_offset()))
     if len(pairs) >= 2:
-        written.append(campaign_figure(pairs, out / "campaign.png", title=str(run_dir)))
+        written.append(campaign_figure(pairs, out / "campaign.png", title=str(Path(run_dir).resolve())))
     return written
 
 
@@ -134,6 +134,10 @@ FIGURES = (
 
 def describe_figure(path: Path) -> str:
     """What the figure at ``path`` shows (:data:`FIGURES`), or ''."""
+    import re
     from fnmatch import fnmatch
 
-    return next((text for pattern, text in FIGURES if fnmatch(Path(path).name, pattern)), "")
+    name = Path(path).name
+    text = next((text for pattern, text in FIGURES if fnmatch(name, pattern)), "")
+    number = re.match(r"slip_(\d+)", name)
+    return text.replace("slip N", f"slip {int(number.group(1))}") if number else text

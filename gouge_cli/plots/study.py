@@ -98,7 +98,7 @@ def study_figures(run_dir: Path, pairs: list[ForkPair], rows: list[dict], out: P
                 written.append(undrained_friction_figure(u, p, out / f"friction_slip_{n:03d}_{branch}.png", notch,
                                                          drained_mean.get(n)))
     if pairs:
-        written.append(campaign_figure(pairs, out / "types.png", title=str(run_dir)))
+        written.append(campaign_figure(pairs, out / "types.png", title=str(Path(run_dir).resolve())))
     written.append(study_figure(rows, out / "study.png", title=f"{run_dir}: strength difference of each pair "
                                                                 f"and effective block mass of each drained slip"))
     return written
