@@ -69,7 +69,7 @@ def study_figure(rows: list[dict], path: Path, title: str = "") -> Path:
             mid = 0.5 * (lo + hi)
             ax.set_xlim(mid - 1, mid + 1)
     fig.suptitle(title, fontsize=11)
-    fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.14, wspace=0.55)
+    fig.subplots_adjust(left=0.1, right=0.98, top=0.88, bottom=0.14, wspace=0.62)
     return save(fig, path)
 
 
