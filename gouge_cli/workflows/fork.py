@@ -21,7 +21,7 @@ from ..analysis.forkpairs import branch_name
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint
 from ..config import build_config, Config
-from ..errors import ConfigError
+from ..errors import AnalysisError, ConfigError
 from ..driver.slips import lead_time
 from ..io.runfile import RunFile, RunReader, slip_catalog
 from ..model.preflight import check_config
@@ -161,8 +161,6 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
 
 def _finished_drained(fork_dir: Path) -> BranchResult | None:
     """The fork's drained branch when it has finished (kept when --perm adds a branch), else None."""
-    from ..errors import AnalysisError
-
     out_dir = fork_dir / "drained"
     if not (out_dir / "run.h5").is_file():
         return None
