@@ -89,3 +89,52 @@ def to_dimensionless(value, dimension: str, scales: Scales) -> float:
         raise ValueError(f"unit {unit!r} does not measure {dimension}; allowed units: {hint}")
     factor, _ = _UNITS[unit]
     return number * factor / scales.si(dimension)
+
+
+@dataclass(frozen=True)
+class ResultUnits:
+    """The one unit of each quantity in gouge's results, and its SI size for one run.
+
+    times: t0; wall velocities: V_s (the loading velocity); stresses, strengths and pore
+    pressure: sigma (the normal stress, so tau/sigma, P/sigma); slip distance: d; permeability
+    (kappa_c): d^2. SI from the run's scales (Table 1: d, E, rho_s) and its V_s and sigma.
+    """
+
+    scales: Scales
+    V_s: float          # loading velocity [v0]
+    sigma: float        # normal stress [E]
+
+    @classmethod
+    def of_run(cls, config: dict, V_s: float, sigma: float) -> "ResultUnits":
+        """From a run file's config dict (its ``scales`` section, defaults where absent)."""
+        s = (config or {}).get("scales") or {}
+        base = Scales()
+        return cls(Scales(float(s.get("length_m", base.length_m)), float(s.get("stress_pa", base.stress_pa)),
+                          float(s.get("density_kg_m3", base.density_kg_m3))), float(V_s), float(sigma))
+
+    @property
+    def t0_s(self) -> float:
+        return self.scales.time_s
+
+    @property
+    def V_s_m_s(self) -> float:
+        return self.V_s * self.scales.velocity_m_s
+
+    @property
+    def sigma_MPa(self) -> float:
+        return self.sigma * self.scales.stress_pa / 1e6
+
+    @property
+    def d_m(self) -> float:
+        return self.scales.length_m
+
+    def as_dict(self) -> dict:
+        """The units and their SI sizes (for summary.json and figure captions)."""
+        return {"time": "t0", "t0_s": self.t0_s, "wall_velocity": "V_s", "V_s_m_s": self.V_s_m_s,
+                "stress": "sigma", "sigma_MPa": self.sigma_MPa, "slip": "d", "d_m": self.d_m,
+                "permeability": "d^2", "d2_m2": self.d_m ** 2}
+
+    def caption(self) -> str:
+        """One line for a figure: the SI size of each unit."""
+        return (f"units: t0 = {self.t0_s:.3g} s, V_s = {self.V_s_m_s:.3g} m/s, σ = {self.sigma_MPa:.3g} MPa, "
+                f"d = {self.d_m * 1e3:.3g} mm")

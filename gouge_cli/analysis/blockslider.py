@@ -16,6 +16,9 @@ otherwise ``success`` is False and ``message`` says why (the fitted numbers are 
 nothing downstream uses or draws them). The effective block mass of a slip is
 ``m_eff = k (T_fit / pi)^2`` (T_fit: fitted half period): the mass a rigid block would need
 to slip for as long (thesis Section 4.1: constant slip duration is the test of Eq. 3).
+A fit that passes the bar but whose half period is not within ``EQ3_PERIOD_FACTOR`` (2) of
+``pi sqrt(m_b / k)`` is "inapplicable" (:attr:`BlockSliderFit.verdict`): a sine describes the slip,
+but not the wall's block slider of Eq. 3; every output marks it so, and no figure draws it as a fit.
 """
 
 from __future__ import annotations
@@ -40,10 +43,12 @@ __all__ = [
     "judge_fit",
     "FIT_MIN_R2",
     "FIT_PERIOD_FACTOR",
+    "EQ3_PERIOD_FACTOR",
 ]
 
 FIT_MIN_R2 = 0.5
 FIT_PERIOD_FACTOR = 2.0
+EQ3_PERIOD_FACTOR = 2.0     # Eq. 3 applies when the fitted half period is within this factor of pi sqrt(m_b/k)
 
 _NAN = float("nan")
 
@@ -101,6 +106,29 @@ class BlockSliderFit:
     def reason(self) -> str:
         """Why the fit does not count ("" when it does)."""
         return "" if self.success else (self.message or "failed")
+
+    @property
+    def verdict(self) -> str:
+        """"holds": the fit passes the bar and its half period is within EQ3_PERIOD_FACTOR of the
+        prediction pi sqrt(m_b/k) (so m_eff within EQ3_PERIOD_FACTOR^2 of m_b); "failed": it fails
+        the bar (:func:`judge_fit`); "inapplicable": a sine fits, but not with the wall's mass, so
+        Eq. 3 does not describe the slip."""
+        if not self.success:
+            return "failed"
+        ratio = self.half_period_ratio
+        return "holds" if 1.0 / EQ3_PERIOD_FACTOR <= ratio <= EQ3_PERIOD_FACTOR else "inapplicable"
+
+    @property
+    def verdict_reason(self) -> str:
+        """Why the fit does not hold ("" when it does), for tables, files and figures."""
+        verdict = self.verdict
+        if verdict == "failed":
+            return f"fit failed: {self.reason}"
+        if verdict == "inapplicable":
+            return (f"Eq. 3 does not apply: fitted half period {self.half_period_ratio:.3g} x π√(m_b/k) "
+                    f"(allowed 1/{EQ3_PERIOD_FACTOR:g} to {EQ3_PERIOD_FACTOR:g}), "
+                    f"m_eff = {self.half_period_ratio ** 2:.3g} m_b")
+        return ""
 
     def to_dict(self) -> dict:
         return asdict(self)

@@ -15,15 +15,17 @@ from ..errors import NotARunError, SlipNotFoundError
 from ..io.runfile import RunReader, read_slips
 from .blockslider import BlockSliderFit, fit_block_slider
 from .friction import dynamic_friction, estimate_natural_frequency, mean_dynamic_friction, notch_filter
+from .pairs import regime
+from ..units import ResultUnits
 
 _NAN = float("nan")
 
 
 CATALOG_COLUMNS = (
-    "number", "onset_time", "onset_since_loading", "end_time", "duration", "slip", "static_strength", "stress_drop",
-    "peak_velocity", "mean_velocity", "peak_velocity_over_Vs", "mean_velocity_over_Vs",
-    "recurrence", "porosity_change", "n_subevents", "deborah", "pressure_min", "pressure_max",
-    "checkpoint",
+    "number", "onset_time", "end_time", "onset_clock", "duration", "slip", "static_strength", "stress_drop",
+    "peak_velocity_over_Vs", "mean_velocity_over_Vs", "recurrence", "porosity_change", "n_subevents", "deborah",
+    "regime", "pressure_min_over_sigma", "pressure_max_over_sigma", "checkpoint",
+    "onset_time_s", "duration_s", "slip_m", "stress_drop_MPa", "peak_velocity_m_s",
 )
 
 
@@ -37,9 +39,9 @@ SUMMARY_COLUMNS = (
 
 FIT_COLUMNS = (
     "number", "duration", "half_period", "predicted_half_period", "half_period_ratio",
-    "amplitude", "amplitude_over_Vs", "delta_mu", "static_friction", "mean_dynamic_friction",
-    "delta_mu_eq7", "notch_frequency", "r2", "nrms", "n_points", "success", "reason",
-    "m_eff", "m_eff_over_m_b",
+    "amplitude_over_Vs", "delta_mu", "static_friction", "mean_dynamic_friction",
+    "delta_mu_eq7", "notch_frequency", "r2", "nrms", "n_points", "success", "verdict", "reason",
+    "m_eff_over_m_b", "duration_s", "half_period_s",
 )
 
 
@@ -120,19 +122,22 @@ def _nan_ext(a, fn) -> float:
 
 
 def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[dict]:
-    """One row per slip with :data:`CATALOG_COLUMNS`.
+    """One row per slip with :data:`CATALOG_COLUMNS`, each quantity in its one unit
+    (:class:`~gouge_cli.units.ResultUnits`) and the main ones again in SI (``*_s``, ``*_m``, ``*_MPa``,
+    ``*_m_s``, from the run's scales).
 
-    onset_time: the stored clock (since compaction began); onset_since_loading: the same
-    onset in t0 since loading began (the time origin of every command and figure);
-    static_strength: tau/sigma before the onset; stress_drop: drop of tau/sigma;
-    velocities [v0] and over V_s; recurrence: onset minus the previous onset [t0]
-    (NaN for the first); deborah: mean of the Deborah-number series over the slip
-    samples (NaN for a dry run); pressure_min/max: extremes of the pore-pressure
-    series over the slip [E].
+    onset_time, end_time: t0 since loading began (the time origin of every command, file and
+    figure); onset_clock: the same onset on the stored clock (since compaction began);
+    static_strength: tau/sigma before the onset; stress_drop: drop of tau/sigma; velocities over
+    V_s; recurrence: onset minus the previous onset [t0] (NaN for the first); deborah: mean of the
+    Deborah-number series over the slip samples (NaN for a dry run) and regime its name
+    (:func:`~gouge_cli.analysis.pairs.regime`; "dry" for a dry run); pressure_min/max_over_sigma:
+    extremes of the pore-pressure series over the slip [sigma].
     """
     if catalog is None:
         catalog = read_catalog(reader)
-    V_s = reader.info.V_s
+    V_s, sigma = reader.info.V_s, reader.info.sigma
+    units = ResultUnits.of_run(reader.info.config, V_s, sigma)
     fluid_names = ("deborah", "pressure_min", "pressure_max")
     has_fluid_series = any(reader.has(n) for n in fluid_names)
     rows, previous = [], None
@@ -147,26 +152,31 @@ def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[
             p_min = _nan_ext(s["pressure_min"], np.min)
             p_max = _nan_ext(s["pressure_max"], np.max)
         peak, mean = float(entry["peak_velocity"]), float(entry["mean_velocity"])
+        duration, drop = float(entry["duration"]), float(entry["stress_drop"])
         rows.append({
             "number": int(entry["number"]),
-            "onset_time": onset,
-            "onset_since_loading": onset - origin,
-            "end_time": float(entry["end_time"]),
-            "duration": float(entry["duration"]),
+            "onset_time": onset - origin,
+            "end_time": float(entry["end_time"]) - origin,
+            "onset_clock": onset,
+            "duration": duration,
             "slip": float(entry["slip"]),
             "static_strength": float(entry["static_strength"]),
-            "stress_drop": float(entry["stress_drop"]),
-            "peak_velocity": peak,
-            "mean_velocity": mean,
+            "stress_drop": drop,
             "peak_velocity_over_Vs": peak / V_s,
             "mean_velocity_over_Vs": mean / V_s,
             "recurrence": onset - previous if previous is not None else _NAN,
             "porosity_change": float(entry.get("porosity_change", _NAN)),
             "n_subevents": len(entry.get("subevent_time", [])),
             "deborah": deborah,
-            "pressure_min": p_min,
-            "pressure_max": p_max,
+            "regime": regime(deborah) if reader.info.has_fluid else "dry",
+            "pressure_min_over_sigma": p_min / sigma,
+            "pressure_max_over_sigma": p_max / sigma,
             "checkpoint": str(entry.get("checkpoint", "") or ""),
+            "onset_time_s": (onset - origin) * units.t0_s,
+            "duration_s": duration * units.t0_s,
+            "slip_m": float(entry["slip"]) * units.d_m,
+            "stress_drop_MPa": drop * units.sigma_MPa,
+            "peak_velocity_m_s": peak / V_s * units.V_s_m_s,
         })
         previous = onset
     return rows
@@ -329,11 +339,14 @@ def fit_table(reader: RunReader, catalog: list[dict] | None = None, notch: bool 
 
     half_period: fitted pi/omega [t0] against predicted pi sqrt(m_b/k);
     delta_mu: mu_s - mu_d implied by the fitted amplitude, A sqrt(k m_b)/sigma;
-    delta_mu_eq7: static strength minus the mean mu_d(t) of Eq. 7 over the slip.
+    delta_mu_eq7: static strength minus the mean mu_d(t) of Eq. 7 over the slip;
+    verdict: "holds", "failed" or "inapplicable" (BlockSliderFit.verdict) and reason: why not
+    (empty when it holds); the fitted numbers of a fit that does not hold are kept, marked so.
     """
     if catalog is None:
         catalog = read_catalog(reader)
     info = reader.info
+    t0_s = ResultUnits.of_run(info.config, info.V_s, info.sigma).t0_s
     rows = []
     for entry in catalog:
         fit = fit_slip(reader, entry)
@@ -344,7 +357,6 @@ def fit_table(reader: RunReader, catalog: list[dict] | None = None, notch: bool 
             "half_period": fit.half_period,
             "predicted_half_period": fit.predicted_half_period,
             "half_period_ratio": fit.half_period_ratio,
-            "amplitude": fit.amplitude,
             "amplitude_over_Vs": fit.amplitude / info.V_s,
             "delta_mu": fit.delta_mu,
             "static_friction": fr.mu_s,
@@ -355,9 +367,11 @@ def fit_table(reader: RunReader, catalog: list[dict] | None = None, notch: bool 
             "nrms": fit.nrms,
             "n_points": fit.n_points,
             "success": bool(fit.success),
-            "reason": fit.reason,
-            "m_eff": fit.m_eff,
+            "verdict": fit.verdict,
+            "reason": fit.verdict_reason,
             "m_eff_over_m_b": fit.m_eff / info.m_b,
+            "duration_s": float(entry["duration"]) * t0_s,
+            "half_period_s": fit.half_period * t0_s,
         })
     return rows
 

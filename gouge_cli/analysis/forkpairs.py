@@ -12,20 +12,39 @@ import numpy as np
 from ..errors import AnalysisError, NotARunError
 from ..io.runfile import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
-from .pairs import PairDefinition, PairResult, campaign_summary, classify_pair
+from .pairs import DRAINED_DE, UNDRAINED_DE, PairDefinition, PairResult, campaign_summary, classify_pair, regime  # noqa: F401
 
 _NAN = float("nan")
 
 
 PAIR_COLUMNS = (
-    "run", "slip", "branch", "permeability", "main", "type", "base_type", "complex", "criteria",
-    "undrained_event", "drained_strength", "undrained_strength", "strength_difference",
-    "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
+    "run", "slip", "branch", "permeability", "regime", "deborah_slip", "deborah_mean", "main", "type",
+    "base_type", "complex", "criteria", "undrained_event", "drained_strength", "undrained_strength",
+    "strength_difference", "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
     "undrained_peak_over_Vs", "n_undrained_slips", "n_subevents", "drained_onset", "drained_end",
-    "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_ok", "undrained_fit_r2",
-    "deborah_mean", "deborah_onset", "deborah_max", "note",
+    "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_ok", "drained_fit_verdict",
+    "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "note",
 )
 
+
+
+def perm_text(perm: float) -> str:
+    """kappa_c in the one format of branch folders and labels: shortest exact scientific, e.g.
+    1e-05, 2.5e-05, 1e-03."""
+    return np.format_float_scientific(float(perm), trim="-", exp_digits=2)
+
+
+def branch_name(perm: float | None) -> str:
+    """Branch folder of a fork: ``drained`` or ``perm_<perm_text>`` (e.g. perm_1e-05, perm_1e-03)."""
+    return "drained" if perm is None else f"perm_{perm_text(perm)}"
+
+
+def branch_perm(path: Path) -> float:
+    """kappa_c of a ``perm_*`` branch folder (also the older ``perm_0.001`` spelling); inf if unreadable."""
+    try:
+        return float(Path(path).name[len("perm_"):])
+    except ValueError:
+        return math.inf
 
 
 def fork_dirs(run_dir: Path) -> list[Path]:
@@ -40,14 +59,7 @@ def fork_branches(fork_dir: Path) -> tuple[Path | None, list[Path]]:
     fork_dir = Path(fork_dir)
     drained = fork_dir / "drained"
     perms = [p for p in fork_dir.glob("perm_*") if (p / "run.h5").is_file()]
-
-    def perm_value(p: Path) -> float:
-        try:
-            return float(p.name[len("perm_"):])
-        except ValueError:
-            return math.inf
-
-    return (drained if (drained / "run.h5").is_file() else None), sorted(perms, key=perm_value)
+    return (drained if (drained / "run.h5").is_file() else None), sorted(perms, key=branch_perm)
 
 
 
@@ -67,8 +79,13 @@ def _r2(fit) -> float:
 
 
 
-def _when(slip, attr: str) -> float:
-    return float(getattr(slip, attr)) if slip is not None else _NAN
+def _verdict(fit) -> str:
+    return fit.verdict if fit is not None else "none"
+
+
+def _when(slip, attr: str, origin: float) -> float:
+    """A slip's time in t0 since loading began (``origin``: the stored clock at that moment)."""
+    return float(getattr(slip, attr)) - origin if slip is not None else _NAN
 
 
 def deborah_during(time, deborah, slip) -> tuple[float, float]:
@@ -106,18 +123,25 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
     pairs = []
     with RunReader(drained_dir) as d:
         info = d.info
+        origin = d.time_offset()           # the branches carry the parent's loading clock on
         drained = wall_series(d)
         definition = pair_definition(info, main)
         for udir in undrained_dirs:
             with RunReader(udir) as u:
                 undrained = wall_series(u)
-                u_cols = u.series(["time", "deborah"])
+                ds = u.series(["time", "deborah"])
                 uinfo = u.info
             result = classify_pair(drained, undrained, info.V_s, info.k, info.m_b, info.sigma, definition)
             d_main, u_main = result.drained_slip, result.undrained_slip
             fired = [name for name, on in result.criteria.items() if on]
-            de_onset, de_max = deborah_during(u_cols["time"], u_cols["deborah"], u_main)
-            parent = str(fork_dir.parent.parent)     # parent_run is stored relative to the branch
+            de_onset, de_max = deborah_during(ds["time"], ds["deborah"], u_main)
+            de_slip = _NAN
+            if u_main is not None and ds["deborah"] is not None:
+                inside = (ds["time"] >= u_main.onset_time) & (ds["time"] <= u_main.end_time)
+                de_slip = nan_mean(ds["deborah"][inside])
+            de_mean = nan_mean(ds["deborah"])
+            de = de_slip if math.isfinite(de_slip) else de_mean
+            parent = str(info.parent_dir)      # parent_run is stored relative to the branch
             row = {
                 "run": parent,
                 "slip": int(info.fork_slip) if info.fork_slip is not None else _slip_number(fork_dir),
@@ -139,14 +163,21 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 "undrained_peak_over_Vs": result.undrained_peak_over_Vs,
                 "n_undrained_slips": len(result.undrained_slips),
                 "n_subevents": result.n_subevents,
-                "drained_onset": _when(d_main, "onset_time"),
-                "drained_end": _when(d_main, "end_time"),
-                "undrained_onset": _when(u_main, "onset_time"),
-                "undrained_end": _when(u_main, "end_time"),
+                "drained_onset": _when(d_main, "onset_time", origin),
+                "drained_end": _when(d_main, "end_time", origin),
+                "undrained_onset": _when(u_main, "onset_time", origin),
+                "undrained_end": _when(u_main, "end_time", origin),
                 "drained_fit_r2": _r2(result.drained_fit),
                 "drained_fit_ok": bool(result.drained_fit is not None and result.drained_fit.success),
+                "drained_fit_verdict": _verdict(result.drained_fit),
                 "undrained_fit_r2": _r2(result.undrained_fit),
-                "deborah_mean": nan_mean(u_cols["deborah"]),
+                "undrained_fit_verdict": _verdict(result.undrained_fit),
+                "fit_reason": "; ".join(f"{b}: {f.verdict_reason}" for b, f in
+                                        (("drained", result.drained_fit), ("undrained", result.undrained_fit))
+                                        if f is not None and f.verdict_reason),
+                "deborah_mean": de_mean,
+                "deborah_slip": de_slip,
+                "regime": regime(de),
                 "deborah_onset": de_onset,
                 "deborah_max": de_max,
                 "note": result.note,
@@ -180,6 +211,23 @@ def run_pairs(run_dir: Path, strict: bool = False, main: str = "first") -> tuple
 
 
 
+def by_permeability(pairs: list[ForkPair]) -> dict[float, list[ForkPair]]:
+    """The pairs grouped by kappa_c, in increasing order (pairs at different permeabilities are
+    never pooled)."""
+    groups: dict[float, list[ForkPair]] = {}
+    for p in pairs:
+        groups.setdefault(float(p.row["permeability"]), []).append(p)
+    return dict(sorted(groups.items()))
+
+
 def campaign(pairs: list[ForkPair]) -> dict:
-    """Counts per type and undrained/drained ratio statistics over pairs (of one or more runs)."""
-    return campaign_summary([p.result for p in pairs])
+    """Counts per type and undrained/drained ratio statistics, one summary per permeability (of
+    one or more runs): ``{"n", "per_permeability": [{"permeability", "regimes": {name: count},
+    **campaign_summary}]}``; never pooled over permeabilities."""
+    groups = []
+    for perm, members in by_permeability(pairs).items():
+        regimes: dict[str, int] = {}
+        for p in members:
+            regimes[p.row["regime"]] = regimes.get(p.row["regime"], 0) + 1
+        groups.append(dict(permeability=perm, regimes=regimes, **campaign_summary([p.result for p in members])))
+    return {"n": len(pairs), "per_permeability": groups}

@@ -37,7 +37,7 @@ from ..config import SLIP_END_FACTOR, SLIP_START_FACTOR
 from ..driver.detector import Slip, WallSeries, detect_slips
 
 __all__ = ["PairDefinition", "PairResult", "classify_pair", "complexity_criteria", "campaign_summary",
-           "compared_event", "static_strength", "SLOW", "CRITERIA"]
+           "compared_event", "static_strength", "regime", "DRAINED_DE", "UNDRAINED_DE", "SLOW", "CRITERIA"]
 
 _NAN = float("nan")
 CRITERIA = ("subevents", "restart", "creep", "fit", "slow")
@@ -132,6 +132,23 @@ class PairResult:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+DRAINED_DE = 0.01      # De below this (two decades under 1: "De << 1") is "drained-like"
+UNDRAINED_DE = 1.0     # De at or above this is "undrained"; between the two "partially drained"
+
+
+def regime(deborah: float) -> str:
+    """Name of a fluid branch's drainage from its Deborah number De = l u0 / D (thesis Eq. 4: the time
+    for pressure to diffuse over the distance l to the drained walls over the time to generate it):
+    "drained-like" for De < DRAINED_DE (the thesis's De << 1, "fully drained"), "undrained" for
+    De >= UNDRAINED_DE (its "effectively undrained", De >= 1), "partially drained" between, "unknown"
+    without a finite De. The De used is the branch's mean over its compared slip (deborah_slip)."""
+    if not math.isfinite(deborah):
+        return "unknown"
+    if deborah < DRAINED_DE:
+        return "drained-like"
+    return "undrained" if deborah >= UNDRAINED_DE else "partially drained"
 
 
 def compared_event(slips: list[Slip], main: str) -> Slip | None:

@@ -56,8 +56,12 @@ class RunAnalysis:
                                               "mean_dynamic_friction", "delta_mu_eq7", "r2"))
 
     def to_dict(self) -> dict:
+        from ..units import ResultUnits
+
         return {
-            "run": str(self.info.run_dir),
+            "run": str(self.info.run_dir.resolve()),
+            "time_origin": "loading start",
+            "units": ResultUnits.of_run(self.info.config, self.info.V_s, self.info.sigma).as_dict(),
             "parameters": {"k": self.info.k, "V_s": self.info.V_s, "sigma": self.info.sigma,
                            "m_b": self.info.m_b, "predicted_half_period": self.info.predicted_half_period,
                            "has_fluid": self.info.has_fluid, "notch": self.notch},

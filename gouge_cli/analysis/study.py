@@ -13,12 +13,13 @@ import statistics
 
 import numpy as np
 
+from .blockslider import EQ3_PERIOD_FACTOR
 from .catalog import fit_slip, fit_slip_notched, read_catalog
 from .forkpairs import ForkPair
 from ..io.runfile import RunReader
 
 __all__ = ["STUDY_COLUMNS", "THESIS", "TRANSIENT_TOL", "DURATION_TOL", "GOOD_R2",
-           "transient_slips", "within_median", "study_rows", "study_summary", "summary_lines"]
+           "transient_slips", "within_median", "study_rows", "study_summary", "study_summaries", "summary_lines"]
 
 _NAN = float("nan")
 TRANSIENT_TOL = 0.3     # a slip is steady when S and stress drop are within 30 % of the late medians
@@ -26,10 +27,10 @@ DURATION_TOL = 0.15     # drained durations "characteristic": within 15 % of the
 GOOD_R2 = 0.9           # a drained slip "fits Eq. 3" with R^2 above this (and passing the fit bar)
 
 STUDY_COLUMNS = (
-    "slip", "transient", "k", "sigma", "V", "kappa_c", "type", "undrained_event", "S_d", "S_u",
-    "stress_drop_ratio", "peak_velocity_ratio", "duration_ratio", "deborah", "deborah_onset", "deborah_max", "subevents",
-    "drained_duration", "drained_fit_r2", "drained_fit_ok", "drained_fit_r2_notched", "m_eff_over_m_b", "criteria",
-    "note",
+    "slip", "transient", "k", "sigma", "V", "kappa_c", "deborah", "deborah_onset", "deborah_max", "regime", "type", "undrained_event", "S_d", "S_u",
+    "stress_drop_ratio", "peak_velocity_ratio", "duration_ratio", "subevents",
+    "drained_duration", "drained_fit_r2", "drained_fit_ok", "drained_fit_verdict", "drained_fit_r2_notched",
+    "m_eff_over_m_b", "criteria", "fit_reason", "note",
 )
 
 #: The thesis's study (Section 4.2-4.3, Table 3): 39 pairs at kappa_c = 1e-5.
@@ -64,8 +65,9 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
     """One row per pair (:data:`STUDY_COLUMNS`), in slip then permeability order.
 
     S_d, S_u: static strengths; ratios undrained / drained of the compared events; deborah: mean
-    Deborah number of the undrained branch, deborah_onset / deborah_max: at the compared slip's onset and
-    the largest during it (forkpairs.deborah_during); subevents: sub-events of the undrained event;
+    Deborah number of the undrained branch over its compared slip (deborah_onset / deborah_max: at
+    its onset and the largest during it, forkpairs.deborah_during), regime: its drainage
+    (analysis.pairs.regime); subevents: sub-events of the undrained event;
     drained_fit_*: Eq. 3 fit of the drained slip in the parent run's catalog (drained_fit_r2_notched:
     its R^2 refitted with the layer's natural vibration notched, a diagnostic,
     analysis.catalog.NotchedFit); m_eff_over_m_b: k (T_fit / pi)^2 / m_b of that fit (NaN when it
@@ -91,12 +93,14 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
             "kappa_c": r["permeability"], "type": r["type"], "undrained_event": r["undrained_event"],
             "S_d": r["drained_strength"], "S_u": r["undrained_strength"],
             "stress_drop_ratio": r["stress_drop_ratio"], "peak_velocity_ratio": r["peak_velocity_ratio"],
-            "duration_ratio": r["duration_ratio"], "deborah": r["deborah_mean"],
+            "duration_ratio": r["duration_ratio"], "deborah": r["deborah_slip"], "regime": r["regime"],
             "deborah_onset": r["deborah_onset"], "deborah_max": r["deborah_max"],
             "subevents": int(p.result.n_subevents),
             "drained_duration": float(entry.get("duration", _NAN)),
             "drained_fit_r2": fit.r2 if fit is not None else _NAN,
             "drained_fit_ok": bool(fit is not None and fit.success),
+            "drained_fit_verdict": fit.verdict if fit is not None else "none",
+            "fit_reason": fit.verdict_reason if fit is not None else "",
             "drained_fit_r2_notched": notched.get(n, _NAN),
             "m_eff_over_m_b": fit.m_eff / info.m_b if (fit is not None and fit.success) else _NAN,
             "criteria": r["criteria"], "note": r["note"],
@@ -125,7 +129,7 @@ def study_summary(rows: list[dict]) -> dict:
 
     counts: I, II, tie, none, complex (-C), slow; slower: fraction of classified pairs with
     peak-velocity ratio < 1; smaller_drop: stress-drop ratio < 1; drained: fraction of the
-    study's drained slips passing the fit bar, with R^2 > GOOD_R2 (and, a diagnostic, R^2 > GOOD_R2
+    study's drained slips passing the fit bar (and of those whose Eq. 3 fit holds, verdict "holds"), with R^2 > GOOD_R2 (and, a diagnostic, R^2 > GOOD_R2
     with the natural vibration notched), and with duration within DURATION_TOL of the median;
     m_eff (in m_b) mean, std, cv.
     """
@@ -155,6 +159,7 @@ def study_summary(rows: list[dict]) -> dict:
         "frac_smaller_drop": frac(classified, lambda r: r["stress_drop_ratio"] < 1),
         "n_drained": n_d,
         "drained_frac_fit_ok": frac(drained, lambda r: r["drained_fit_ok"]),
+        "drained_frac_eq3_holds": frac(drained, lambda r: r.get("drained_fit_verdict") == "holds"),
         "drained_frac_r2_good": frac(drained, lambda r: r["drained_fit_ok"] and r["drained_fit_r2"] > GOOD_R2),
         "drained_frac_r2_good_notched": frac(drained, lambda r: r["drained_fit_ok"]
                                              and r["drained_fit_r2_notched"] > GOOD_R2),
@@ -162,6 +167,19 @@ def study_summary(rows: list[dict]) -> dict:
         "drained_duration_median": med,
         "m_eff_over_m_b": _spread(r["m_eff_over_m_b"] for r in drained),
     }
+
+
+def study_summaries(rows: list[dict]) -> list[dict]:
+    """:func:`study_summary` of each permeability's rows on its own (never pooled), in increasing
+    kappa_c: ``[{"permeability", "regimes": {name: count}, **study_summary}]``."""
+    out = []
+    for perm in sorted({float(r["kappa_c"]) for r in rows}):
+        mine = [r for r in rows if float(r["kappa_c"]) == perm]
+        regimes: dict[str, int] = {}
+        for r in mine:
+            regimes[r["regime"]] = regimes.get(r["regime"], 0) + 1
+        out.append(dict(permeability=perm, regimes=regimes, **study_summary(mine)))
+    return out
 
 
 def _pct(x: float) -> str:
@@ -183,6 +201,8 @@ def summary_lines(s: dict) -> list[tuple[str, str, str]]:
         ("undrained slower (peak v ratio < 1)", _pct(s["frac_slower"]), "not tabulated"),
         ("undrained smaller stress drop", _pct(s["frac_smaller_drop"]), "'in both Type I and II' (Figs. 9-10)"),
         ("drained slips passing the fit bar", _pct(s["drained_frac_fit_ok"]), "'good agreement' (Sec. 4.1)"),
+        (f"  of them Eq. 3 holds (T/2 within {EQ3_PERIOD_FACTOR:g}x of π√(m_b/k))", _pct(s["drained_frac_eq3_holds"]),
+         "'good agreement' (Sec. 4.1)"),
         (f"drained slips with R^2 > {GOOD_R2}", _pct(s["drained_frac_r2_good"]), "not tabulated"),
         ("  the same, natural vibration notched (diagnostic)", _pct(s["drained_frac_r2_good_notched"]),
          "fluctuations 'an artifact that Eq. 3 does not account for' (Secs. II, 4.1)"),

@@ -23,54 +23,106 @@ def _fmt(value, digits: int = 4) -> str:
     if isinstance(value, int):
         return str(value)
     if isinstance(value, float):
-        return "–" if not math.isfinite(value) else f"{value:.{digits}g}"
+        if not math.isfinite(value):
+            return "–"
+        return f"{value:.0f}" if 1e4 <= abs(value) < 1e9 else f"{value:.{digits}g}"
     return "" if value is None else str(value)
 
 
-def _table(title: str, columns: list[tuple[str, str]], rows: list[dict]):
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return text in ("–", "")
+    return True
+
+
+def _table(title: str, columns: list[tuple[str, str]], rows: list[dict], width: int | None = None):
+    """A rich table of ``rows``, never truncating a value: when the columns do not fit the console
+    (``width``; default the output console's), they are split into several tables, each repeating
+    the first (key) column."""
+    from rich.console import Group
+    from rich.markup import escape
     from rich.table import Table
 
-    table = Table(title=title, title_justify="left")
-    for _, header in columns:
-        table.add_column(header, justify="right")
-    for row in rows:
-        table.add_row(*[_fmt(row.get(key)) for key, _ in columns])
-    return table
+    from .common import out
+
+    width = width or out.width
+    cells = [[_fmt(row.get(key)) for key, _ in columns] for row in rows]
+    need = [max([len(header)] + [len(c[i]) for c in cells]) + 3 for i, (_, header) in enumerate(columns)]
+    chunks, current, used = [], [], need[0] + 4
+    for i in range(1, len(columns)):
+        if current and used + need[i] > width:
+            chunks.append(current)
+            current, used = [], need[0] + 4
+        current.append(i)
+        used += need[i]
+    chunks.append(current)
+    tables = []
+    for n, chunk in enumerate(chunks):
+        part = f" ({n + 1}/{len(chunks)})" if len(chunks) > 1 else ""
+        table = Table(title=title + part, title_justify="left")
+        for i in [0] + chunk:
+            numeric = all(_is_number(c[i]) for c in cells)
+            table.add_column(escape(columns[i][1]), justify="right" if numeric else "left", no_wrap=True,
+                             min_width=need[i] - 3)
+        for c in cells:
+            table.add_row(*[escape(c[i]) for i in [0] + chunk])
+        tables.append(table)
+    return tables[0] if len(tables) == 1 else Group(*tables)
 
 
-_CATALOG = [("number", "#"), ("onset_since_loading", "onset t/t0 (since loading)"), ("duration", "duration/t0"),
-            ("static_strength", "τs/σ"), ("stress_drop", "Δτ/σ"), ("peak_velocity_over_Vs", "vpeak/Vs"),
-            ("mean_velocity_over_Vs", "vmean/Vs"), ("slip", "slip/d"), ("recurrence", "recurrence/t0"),
-            ("n_subevents", "sub"), ("deborah", "De")]
-_FITS = [("number", "#"), ("duration", "duration"), ("half_period", "fit T/2"),
-         ("predicted_half_period", "π√(m_b/k)"), ("half_period_ratio", "ratio"),
-         ("amplitude_over_Vs", "A/Vs"), ("delta_mu", "Δμ Eq.3"), ("static_friction", "μs"),
-         ("mean_dynamic_friction", "μd Eq.7"), ("delta_mu_eq7", "Δμ Eq.7"), ("r2", "R²")]
-_PAIRS = [("slip", "slip"), ("branch", "branch"), ("type", "type"), ("criteria", "-C criteria"),
-          ("drained_strength", "S_d"), ("undrained_strength", "S_u"), ("strength_difference", "S_u−S_d"),
-          ("peak_velocity_ratio", "v ratio"), ("stress_drop_ratio", "Δτ ratio"),
-          ("duration_ratio", "T ratio"), ("deborah_onset", "De onset"), ("deborah_max", "De max")]
+_CATALOG = [("number", "#"), ("onset_time", "onset [t0]"), ("onset_time_ms", "onset [ms]"),
+            ("duration", "duration [t0]"), ("duration_us", "duration [µs]"), ("static_strength", "τs/σ"),
+            ("stress_drop", "Δτ/σ"), ("stress_drop_MPa", "Δτ [MPa]"), ("peak_velocity_over_Vs", "v_peak/V_s"),
+            ("peak_velocity_m_s", "v_peak [m/s]"), ("mean_velocity_over_Vs", "v_mean/V_s"), ("slip", "slip [d]"),
+            ("recurrence", "recurrence [t0]"), ("n_subevents", "sub-events"), ("deborah", "De"),
+            ("regime", "drainage")]
+_FITS = [("number", "#"), ("verdict", "Eq. 3 fit"), ("duration", "duration [t0]"), ("duration_us", "duration [µs]"),
+         ("half_period", "fitted T/2 [t0]"), ("predicted_half_period", "π√(m_b/k) [t0]"),
+         ("half_period_ratio", "T/2 ÷ π√(m_b/k)"), ("m_eff_over_m_b", "m_eff/m_b"), ("r2", "R²"),
+         ("amplitude_over_Vs", "A/V_s"), ("delta_mu", "Δμ (from A)"), ("static_friction", "μ_s"),
+         ("mean_dynamic_friction", "mean μ_d"), ("delta_mu_eq7", "μ_s − mean μ_d")]
+_PAIRS = [("slip", "slip"), ("branch", "branch"), ("deborah_slip", "De"), ("regime", "drainage"), ("type", "type"),
+          ("criteria", "-C criteria"), ("drained_onset", "drained onset [t0]"),
+          ("undrained_onset", "undrained onset [t0]"), ("drained_strength", "S_d [τ/σ]"),
+          ("undrained_strength", "S_u [τ/σ]"), ("strength_difference", "S_u − S_d"),
+          ("peak_velocity_ratio", "v_peak ratio"), ("stress_drop_ratio", "Δτ ratio"),
+          ("duration_ratio", "duration ratio"), ("deborah_onset", "De onset"), ("deborah_max", "De max"),
+          ("drained_fit_verdict", "drained fit"),
+          ("undrained_fit_verdict", "undrained fit")]
 
 
 def _print_run(out, analysis, written: dict):
     from rich.markup import escape
 
+    from ..units import ResultUnits
+
     info = analysis.info
-    out.print(f"[bold]{escape(str(info.run_dir))}[/]: k = {info.k:g}, V_s = {info.V_s:g}, σ = {info.sigma:g}, "
-              f"m_b = {info.m_b:.4g}, predicted slip duration π√(m_b/k) = {info.predicted_half_period:.4g} t0"
-              f"{'' if info.has_fluid else ', dry'}", highlight=False)
-    columns = _CATALOG if info.has_fluid else _CATALOG[:-1]
-    out.print(_table(f"slips ({len(analysis.catalog)})", columns, analysis.catalog))
+    units = ResultUnits.of_run(info.config, info.V_s, info.sigma)
+    out.print(f"[bold]{escape(str(info.run_dir))}[/]: k = {info.k:g}, V_s = {info.V_s:g} v0, σ = {info.sigma:g} E, "
+              f"m_b = {info.m_b:.4g}, predicted slip duration π√(m_b/k) = {info.predicted_half_period:.4g} t0 "
+              f"({info.predicted_half_period * units.t0_s:.3g} s){'' if info.has_fluid else ', dry'}", highlight=False)
+    out.print(f"units: times in t0 since loading began ({units.caption().removeprefix('units: ')}); wall "
+              "velocities in V_s; stresses in σ", highlight=False)
+    columns = _CATALOG if info.has_fluid else _CATALOG[:-2]
+    shown = [dict(r, onset_time_ms=r["onset_time_s"] * 1e3, duration_us=r["duration_s"] * 1e6) for r in analysis.catalog]
+    out.print(_table(f"slips ({len(analysis.catalog)})", columns, shown))
     stats = [{"quantity": k, **v} for k, v in analysis.summary.items() if v["n"]]
-    out.print(_table("over all slips", [("quantity", "quantity"), ("mean", "mean"), ("std", "std"),
-                                        ("min", "min"), ("max", "max"), ("n", "n")], stats))
+    out.print(_table("over all slips of this run", [("quantity", "quantity"), ("mean", "mean"), ("std", "std"),
+                                                    ("min", "min"), ("max", "max"), ("n", "n")], stats))
     notch = "notch-filtered" if analysis.notch else "unfiltered"
-    out.print(_table(f"block-slider fits (Eq. 3) and mean μ_d (Eq. 7, {notch})", _FITS, analysis.fits))
+    fits = [dict(r, duration_us=r["duration_s"] * 1e6) for r in analysis.fits]
+    out.print(_table(f"block-slider fits (thesis Eq. 3) and mean μ_d (Eq. 7, {notch})", _FITS, fits))
+    for row in analysis.fits:
+        if row["reason"]:
+            out.print(f"  slip {row['number']}: {escape(row['reason'])}", highlight=False)
     if analysis.pairs:
-        out.print(_table("drained / undrained pairs", _PAIRS, analysis.pair_rows))
+        out.print(_table("drained / undrained pairs (times since loading began)", _PAIRS, analysis.pair_rows))
         for row in analysis.pair_rows:
-            if row["note"]:
-                out.print(f"  slip {row['slip']} {escape(row['branch'])}: {escape(row['note'])}", highlight=False)
+            for text in (row["fit_reason"], row["note"]):
+                if text:
+                    out.print(f"  slip {row['slip']} {escape(row['branch'])}: {escape(text)}", highlight=False)
     for reason in analysis.skipped:
         out.print(f"[yellow]skipped fork:[/] {escape(reason)}", highlight=False)
     out.print("wrote " + ", ".join(escape(str(p)) for k, p in written.items() if k != "h5_skipped"), highlight=False)
@@ -79,14 +131,20 @@ def _print_run(out, analysis, written: dict):
 
 
 def _print_campaign(out, summary: dict, n_runs: int):
-    counts = ", ".join(f"{k}: {v}" for k, v in summary["counts"].items() if v)
-    ratio = summary["ratios"]["peak_velocity_ratio"]
-    line = (f"[bold]campaign[/] ({n_runs} run{'s' if n_runs > 1 else ''}, {summary['n']} pairs): {counts}; "
-            f"Type I {summary['n_type_I']}, Type II {summary['n_type_II']}, complex {summary['n_complex']}")
-    if ratio["n"]:
-        line += (f"; peak velocity ratio mean {ratio['mean']:.3g} ± {ratio['std']:.2g}, "
-                 f"{100 * ratio['frac_below_1']:.0f}% below 1")
-    out.print(line, highlight=False)
+    """One line per permeability (pairs at different permeabilities are never pooled)."""
+    from ..analysis.forkpairs import perm_text
+
+    for g in summary["per_permeability"]:
+        counts = ", ".join(f"{k}: {v}" for k, v in g["counts"].items() if v)
+        regimes = ", ".join(f"{k} {v}" for k, v in g["regimes"].items())
+        ratio = g["ratios"]["peak_velocity_ratio"]
+        line = (f"[bold]κ_c = {perm_text(g['permeability'])} d²[/] ({regimes}; {n_runs} run{'s' if n_runs > 1 else ''}, "
+                f"{g['n']} pair{'s' if g['n'] != 1 else ''}): {counts}; Type I {g['n_type_I']}, "
+                f"Type II {g['n_type_II']}, complex {g['n_complex']}")
+        if ratio["n"]:
+            line += (f"; peak velocity ratio (undrained/drained) mean {ratio['mean']:.3g} ± {ratio['std']:.2g} "
+                     f"over {ratio['n']}, {100 * ratio['frac_below_1']:.0f}% below 1")
+        out.print(line, highlight=False)
 
 
 def _main(main: str) -> str:
@@ -161,10 +219,13 @@ def register(app: typer.Typer) -> None:
         notch: bool = typer.Option(True, "--notch/--no-notch", help="notch-filter μ_d(t)"),
         main: str = typer.Option("first", "--main", help="compared event of each branch: first or largest"),
     ):
-        """PNG figures: run overview, grain snapshot, slip N with its fit, μ_d(t), drained vs undrained."""
+        """PNG figures: run overview, last grain snapshot, pair types per permeability; with --slip N the
+        slip and its Eq. 3 fit, μ_d(t), and for its fork the drained branch against every permeability.
+        Lists each file with what it shows."""
         from ..api import figures
+        from ..plots.make import describe_figure
         from .common import guarded, out
 
         files = guarded(figures)(run_dir=run_dir, slip=slip, out_dir=out_dir, notch=notch, main=_main(main))
         for path in files:
-            out.print(str(path), highlight=False)
+            out.print(f"{path}\n    {describe_figure(path)}", highlight=False)

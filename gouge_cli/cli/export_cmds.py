@@ -80,7 +80,7 @@ def register(app: typer.Typer) -> None:
         from .common import fail, out as console
 
         try:
-            path, frames = make_movie(run_dir, slip, perm, out, fps=fps)
+            path, frames = make_movie(run_dir, slip, perm, out, fps=fps)      # progress lines on stderr
         except AnalysisError as exc:
             fail(str(exc))
         console.print(f"{path}: {frames} frames at {fps} fps ({path.stat().st_size / 1e6:.2f} MB)", highlight=False)
@@ -91,7 +91,9 @@ _CLOCK_KEYS = ("onset_time", "end_time", "peak_time", "checkpoint_time")
 
 def catalog_since_loading(run_dir: Path, slip_catalog) -> tuple[list[dict], float]:
     """The run's slip catalog (``slip_catalog(run_dir)``) with every time in t0 since loading
-    began and NaN as None (valid JSON); returns (catalog, the clock at which loading began)."""
+    began, velocities in V_s (peak_velocity_over_Vs, mean_velocity_over_Vs, subevent_velocity_over_Vs
+    in place of the v0 values), NaN as None (valid JSON) and without the run file's
+    attribute_units; returns (catalog, the clock at which loading began)."""
     from ..errors import AnalysisError
     from ..io.runfile import RunReader
     from ..errors import RunDirError
@@ -100,14 +102,21 @@ def catalog_since_loading(run_dir: Path, slip_catalog) -> tuple[list[dict], floa
     try:
         with RunReader(run_dir, allow_running=True) as reader:
             origin = reader.time_offset()
+            V_s = reader.info.V_s
     except AnalysisError as exc:
         raise RunDirError(str(exc)) from None
     catalog = slip_catalog(run_dir)
     for entry in catalog:
+        entry.pop("attribute_units", None)
         for key in _CLOCK_KEYS:
             if key in entry:
                 entry[key] = float(entry[key]) - origin
         entry["subevent_time"] = [t - origin for t in entry.get("subevent_time", [])]
+        for key in ("peak_velocity", "mean_velocity"):
+            if key in entry:
+                entry[f"{key}_over_Vs"] = float(entry.pop(key)) / V_s
+        if "subevent_velocity" in entry:
+            entry["subevent_velocity_over_Vs"] = [v / V_s for v in entry.pop("subevent_velocity")]
         entry["time_origin"] = "loading start"
     return json_safe(catalog), origin
 

@@ -69,13 +69,15 @@ def restart(
     duration: Optional[float] = typer.Option(None, "--duration", help="run each branch this long [t0]"),
     until_slip_ends: bool = typer.Option(True, "--until-slip-ends/--full",
                                          help="stop each branch when its first slip ends (default)"),
-    force: bool = typer.Option(False, "--force", help="run an existing fork again"),
+    force: bool = typer.Option(False, "--force", help="run an existing branch of the same permeability (and "
+                               "the drained branch) again; without it, --perm K adds branch K to an existing fork"),
     main: str = typer.Option("first", "--main", help="compared event of each branch in pair.json: first "
                              "(the forked slip) or largest"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
 ):
     """Fork drained and undrained branches from the packing kept just before slip N (no --perm:
-    the drained branch alone); with --perm, writes pair.json."""
+    the drained branch alone); with --perm, writes pair.json. On a slip forked before, --perm K adds
+    the branch K (the finished drained branch is kept). Times printed in t0 since loading began."""
     import json
 
     from ..io.filedoc import json_safe
@@ -133,15 +135,31 @@ def slips(
     if as_json:
         print(json.dumps(catalog, allow_nan=False))
         return
-    table = Table(title=f"slips; times in t0 since loading began (stored clock - {origin:.6g} t0)")
-    cols = (("number", "#"), ("onset_time", "onset / t0"), ("duration", "duration / t0"),
-            ("static_strength", "static τ/σ"), ("stress_drop", "Δτ/σ"), ("peak_velocity", "peak v / v0"),
-            ("slip", "slip / d"), ("checkpoint", "checkpoint"))
-    for _, header in cols:
-        table.add_column(header, justify="right")
+    from rich.markup import escape
+
+    from ..io.runfile import RunReader
+    from ..units import ResultUnits
+    from .analysis_cmds import _fmt
+
+    with RunReader(target, allow_running=True) as reader:
+        info = reader.info
+        units = ResultUnits.of_run(info.config, info.V_s, info.sigma)
     for e in catalog:
-        table.add_row(*["–" if e[c] is None else f"{e[c]:.5g}" if isinstance(e[c], float) else str(e[c])
-                        for c, _ in cols])
+        for key, scale, si in (("onset_time", units.t0_s * 1e3, "onset_time_ms"),
+                               ("duration", units.t0_s * 1e6, "duration_us"),
+                               ("peak_velocity_over_Vs", units.V_s_m_s, "peak_velocity_m_s"),
+                               ("stress_drop", units.sigma_MPa, "stress_drop_MPa")):
+            e[si] = e[key] * scale if e.get(key) is not None else None
+    table = Table(title=escape(f"slips of {target}: times in t0 since loading began (stored clock − {origin:.6g} t0); "
+                        f"{units.caption()}"), title_justify="left")
+    cols = (("number", "#"), ("onset_time", "onset [t0]"), ("onset_time_ms", "onset [ms]"),
+            ("duration", "duration [t0]"), ("duration_us", "duration [µs]"), ("static_strength", "τs/σ"),
+            ("stress_drop", "Δτ/σ"), ("stress_drop_MPa", "Δτ [MPa]"), ("peak_velocity_over_Vs", "v_peak/V_s"),
+            ("peak_velocity_m_s", "v_peak [m/s]"), ("slip", "slip [d]"), ("checkpoint", "checkpoint"))
+    for _, header in cols:
+        table.add_column(escape(header), justify="right", no_wrap=True)
+    for e in catalog:
+        table.add_row(*["–" if e.get(c) is None else escape(_fmt(e[c], 5)) for c, _ in cols])
     out.print(table)
 
 

@@ -10,6 +10,15 @@ import typer
 from .common import guarded
 
 
+#: The study table's columns on the terminal (study/table.csv holds every column).
+_COLUMNS = [("slip", "slip"), ("transient", "transient"), ("kappa_c", "κ_c [d²]"), ("deborah", "De"),
+            ("regime", "drainage"), ("type", "type"), ("undrained_event", "undrained event"), ("S_d", "S_d [τ/σ]"),
+            ("S_u", "S_u [τ/σ]"), ("peak_velocity_ratio", "v_peak ratio"), ("stress_drop_ratio", "Δτ ratio"),
+            ("duration_ratio", "duration ratio"), ("drained_duration", "drained duration [t0]"),
+            ("drained_fit_verdict", "drained Eq. 3 fit"), ("drained_fit_r2", "R²"),
+            ("m_eff_over_m_b", "m_eff/m_b")]
+
+
 def register(app: typer.Typer) -> None:
     """Add the `study` command to ``app``."""
 
@@ -28,7 +37,8 @@ def register(app: typer.Typer) -> None:
         quiet: bool = typer.Option(False, "--quiet"),
     ):
         """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
-        from ..analysis.study import STUDY_COLUMNS, summary_lines
+        from ..analysis.forkpairs import perm_text
+        from ..analysis.study import summary_lines
         from ..errors import StudyInterrupted
         from ..workflows.study import parse_slips, run_study
         from .analysis_cmds import _table
@@ -47,10 +57,13 @@ def register(app: typer.Typer) -> None:
                                quiet=quiet, figures=figures, on_progress=say)
         except StudyInterrupted as e:
             fail(str(e), EXIT_INTERRUPTED)
-        cols = [(c, c) for c in STUDY_COLUMNS if c not in ("note", "criteria")]
-        out.print(_table(f"study of {result.run_dir} ({len(result.rows)} pairs)", cols, result.rows))
-        side = [{"quantity": a, "this study": b, "thesis": c} for a, b, c in summary_lines(result.summary)]
-        out.print(_table("summary (transient slips left out) next to the thesis",
-                         [("quantity", "quantity"), ("this study", "this study"), ("thesis", "thesis")], side))
+        out.print(_table(f"study of {result.run_dir} ({len(result.rows)} pairs; full table in study/table.csv)",
+                         _COLUMNS, result.rows))
+        for g in result.summary:
+            side = [{"quantity": a, "this study": b, "thesis": c} for a, b, c in summary_lines(g)]
+            regimes = ", ".join(f"{k} {v}" for k, v in g["regimes"].items())
+            out.print(_table(f"κ_c = {perm_text(g['permeability'])} d² ({regimes}): summary (transient slips left "
+                             "out) next to the thesis (κ_c = 1e-05)",
+                             [("quantity", "quantity"), ("this study", "this study"), ("thesis", "thesis")], side))
         out.print(f"ran {len(result.ran)} branches, {len(result.skipped)} done before; wrote "
                   f"{result.run_dir / 'study'}", highlight=False)

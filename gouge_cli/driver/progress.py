@@ -118,3 +118,22 @@ class SettleReport:
     def close(self):
         if self._progress is not None:
             self._progress.stop()
+
+
+class ItemProgress:
+    """Progress of a loop over ``total`` items (movie frames, exported snapshots): one plain line on
+    stderr every ``every_s`` seconds, on a terminal or not, with the count and an ETA from the mean
+    pace so far; ``quiet`` prints nothing."""
+
+    def __init__(self, label: str, total: int, every_s: float = 10.0, quiet: bool = False):
+        self.label, self.total, self.every_s, self.quiet = label, int(total), every_s, quiet
+        self._t0 = self._last = time.perf_counter()
+
+    def update(self, done: int):
+        now = time.perf_counter()
+        if self.quiet or now - self._last < self.every_s or done >= self.total:
+            return
+        self._last = now
+        eta = (now - self._t0) * (self.total - done) / done if done else math.inf
+        print(f"{self.label}: {done} / {self.total} ({100 * done / max(self.total, 1):.0f}%), ETA {format_eta(eta)}",
+              file=sys.stderr, flush=True)

@@ -44,6 +44,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from ..driver.progress import ItemProgress
 from ..errors import ExportError
 from ..io.runfile import RunReader
 from ..io.filedoc import BODY_CODES, TIME_ORIGIN
@@ -245,11 +246,27 @@ class ExportResult:
     paths: list           # every file written (one, or one per block with split)
 
 
-def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool = False) -> ExportResult:
+def default_export_path(info) -> Path:
+    """``RUN/export/<run>.vtkhdf``, for a fork ``PARENT/export/slip_NNN_<branch>.vtkhdf``: the parent
+    found from the branch folder (:attr:`RunInfo.parent_dir`), never from the current directory.
+    Raises :class:`ExportError` if the path would leave the run directory."""
+    if info.is_fork:
+        root = info.parent_dir
+        out = root / "export" / f"slip_{info.fork_slip:03d}_{info.branch}.vtkhdf"
+    else:
+        root = info.run_dir
+        out = root / "export" / f"{info.run_dir.name}.vtkhdf"
+    if not out.resolve().is_relative_to(root.resolve()):
+        raise ExportError(f"the default export path {out} lies outside the run {root}; give --out")
+    return out
+
+
+def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool = False,
+               progress: bool = True) -> ExportResult:
     """Write every snapshot of a run (or fork branch) directory to ``out`` (default
     ``RUN/export/<run or branch>.vtkhdf``, for a fork ``PARENT/export/slip_NNN_<branch>.vtkhdf``).
     ``split``: one temporal PolyData file per block instead (``<out stem>_<block>.vtkhdf``), for
-    readers without temporal collections."""
+    readers without temporal collections. ``progress``: a plain line on stderr every few seconds."""
     with RunReader(run_dir) as reader:
         info = reader.info
         names = reader.snapshot_names()
@@ -259,7 +276,9 @@ def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool =
         offset = reader.time_offset()
         blocks: dict[str, list[Piece]] = {"grains": [], "contacts": [], "walls": [], "pressure_grid": []}
         times = []
-        for name in names:
+        ticker = ItemProgress(f"export {info.run_dir.name}: snapshots", len(names), quiet=not progress)
+        for done, name in enumerate(names):
+            ticker.update(done)
             snap = reader.snapshot(name)
             attrs = dict(reader.h5["snapshots"][name].attrs)
             pattrs = dict(reader.h5["snapshots"][name]["pressure"].attrs) if "pressure" in snap else {}
@@ -274,11 +293,7 @@ def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool =
             model = next(p for p in grid if p is not None)
             blocks["pressure_grid"] = [p if p is not None else _empty_like(model) for p in grid]
         if out is None:
-            if info.is_fork:
-                base = Path(info.parent_run) if info.parent_run else info.run_dir.parent.parent.parent
-                out = base / "export" / f"slip_{info.fork_slip:03d}_{info.branch}.vtkhdf"
-            else:
-                out = info.run_dir / "export" / f"{info.run_dir.name}.vtkhdf"
+            out = default_export_path(info)
         source = info.h5_path
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)

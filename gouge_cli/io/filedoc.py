@@ -143,10 +143,15 @@ CHECKPOINT_ATTRS = {
 }
 
 
-_T0 = ("onset_time", "end_time", "duration", "recurrence", "half_period", "predicted_half_period")
-ANALYSIS_UNITS = dict({k: "t0" for k in _T0}, onset_since_loading="t0", slip="d", peak_velocity="v0",
-                      mean_velocity="v0", amplitude="v0", pressure_min="E", pressure_max="E",
-                      permeability="d^2", notch_frequency="1/t0")
+_T0 = ("onset_time", "end_time", "onset_clock", "duration", "recurrence", "half_period", "predicted_half_period",
+       "drained_onset", "drained_end", "undrained_onset", "undrained_end")
+ANALYSIS_UNITS = dict({k: "t0" for k in _T0}, slip="d", peak_velocity_over_Vs="V_s", mean_velocity_over_Vs="V_s",
+                      amplitude_over_Vs="V_s", drained_peak_over_Vs="V_s", undrained_peak_over_Vs="V_s",
+                      pressure_min_over_sigma="sigma", pressure_max_over_sigma="sigma", static_strength="sigma",
+                      stress_drop="sigma", drained_strength="sigma", undrained_strength="sigma",
+                      strength_difference="sigma", m_eff_over_m_b="m_b", permeability="d^2",
+                      notch_frequency="1/t0", onset_time_s="s", duration_s="s", half_period_s="s", slip_m="m",
+                      stress_drop_MPa="MPa", peak_velocity_m_s="m/s")
 ANALYSIS_ATTRS = {
     "created": RUN_ATTRS["created"], "version": RUN_ATTRS["version"],
     "notch": ("-", "whether mu_d(t) was notch-filtered"),

@@ -36,6 +36,7 @@ from __future__ import annotations
 import bisect
 import json
 import math
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -273,6 +274,16 @@ class RunInfo:
     @property
     def is_fork(self) -> bool:
         return self.branch is not None
+
+    @property
+    def parent_dir(self) -> Path | None:
+        """A fork's parent run directory: parent_run is stored relative to the branch folder, so it
+        is joined to run_dir (never to the current directory); None for a run that is no fork."""
+        if not self.is_fork:
+            return None
+        if not self.parent_run:
+            return Path(os.path.normpath(self.run_dir.absolute() / ".." / ".." / ".."))
+        return Path(os.path.normpath(self.run_dir.absolute() / self.parent_run))
 
     def describe(self) -> str:
         if self.is_fork:

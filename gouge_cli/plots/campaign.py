@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib.ticker import MaxNLocator
 
 from ..analysis.forkpairs import campaign, ForkPair
-from .style import DRAINED, UNDRAINED, new_figure, save
+from .style import DRAINED, UNDRAINED, new_figure, save  # noqa: F401
 
 _ORDER = ("I", "I-C", "II", "II-C", "tie", "tie-C", "none")
 _COLORS = {"I": "#e76f51", "I-C": "#f4a261", "II": UNDRAINED, "II-C": "#7fa7e0", "tie": "0.5",
@@ -16,26 +16,48 @@ _COLORS = {"I": "#e76f51", "I-C": "#f4a261", "II": UNDRAINED, "II-C": "#7fa7e0",
 
 
 def campaign_figure(pairs: list[ForkPair], path: Path, title: str = "") -> Path:
-    """Left: pairs per type. Right: histogram of the undrained/drained peak-velocity ratio
-    (the thesis finds undrained slips always slower, ratio < 1)."""
+    """Per permeability, never pooled (one colour each, :func:`~gouge_cli.plots.series.branch_colors`).
+    Left: pairs per type. Right: histogram of the undrained/drained peak-velocity ratio (the thesis
+    finds undrained slips always slower, ratio < 1), with each permeability's median."""
+    from .series import branch_colors
+    from ..analysis.forkpairs import perm_text
+
     summary = campaign(pairs)
+    groups = summary["per_permeability"]
+    colors = branch_colors([g["permeability"] for g in groups])
     fig, (ax1, ax2) = new_figure("campaign", 1, 2)
-    counts = [summary["counts"].get(k, 0) for k in _ORDER]
-    bars = ax1.bar(_ORDER, counts, color=[_COLORS[k] for k in _ORDER], edgecolor="0.3", lw=0.6)
-    ax1.bar_label(bars, fontsize=8)
-    ax1.set_xlabel("pair type (undrained vs drained)")
+    width = 0.8 / max(len(groups), 1)
+    x = np.arange(len(_ORDER))
+    top = 1
+    any_ratio = False
+    for i, g in enumerate(groups):
+        perm = g["permeability"]
+        regimes = ", ".join(g["regimes"])
+        label = (f"κ_c = {perm_text(perm)} d² ({regimes}): {g['n']} pair{'s' if g['n'] != 1 else ''}, "
+                 f"{g['n_type_I']} Type I, {g['n_type_II']} Type II, {g['n_complex']} complex")
+        counts = [g["counts"].get(k, 0) for k in _ORDER]
+        top = max(top, *counts)
+        bars = ax1.bar(x - 0.4 + width * (i + 0.5), counts, width, color=colors[perm], edgecolor="0.3", lw=0.6,
+                       label=label)
+        ax1.bar_label(bars, fontsize=7)
+        ratios = np.array([p.row["peak_velocity_ratio"] for p in pairs if float(p.row["permeability"]) == perm],
+                          dtype=float)
+        ratios = ratios[np.isfinite(ratios)]
+        if ratios.size:
+            any_ratio = True
+            ax2.hist(ratios, bins=max(5, min(30, ratios.size)), histtype="step", lw=1.6, color=colors[perm],
+                     label=f"κ_c = {perm_text(perm)} d²")
+            ax2.axvline(float(np.median(ratios)), color=colors[perm], lw=1.0, ls=":",
+                        label=f"median {np.median(ratios):.3g}")
+    ax1.set_xticks(x, _ORDER)
+    ax1.set_xlabel("pair type (I: undrained weaker, II: stronger; -C: complex)")
     ax1.set_ylabel("number of pairs")
-    ax1.set_ylim(0, max(counts + [1]) * 1.2)
+    ax1.set_ylim(0, top * 1.35)
     ax1.grid(True, axis="y", color="0.9")
-    ratios = np.array([p.row["peak_velocity_ratio"] for p in pairs], dtype=float)
-    ratios = ratios[np.isfinite(ratios)]
-    if ratios.size:
-        bins = max(5, min(30, ratios.size))
-        ax2.hist(ratios, bins=bins, color=UNDRAINED, alpha=0.8, edgecolor="white")
+    ax1.legend(fontsize=7, frameon=False, loc="upper right")
+    if any_ratio:
         ax2.axvline(1.0, color=DRAINED, lw=1.0, ls="--", label="drained = undrained")
-        ax2.axvline(float(np.median(ratios)), color="#d62728", lw=1.0,
-                    label=f"median {np.median(ratios):.3g}")
-        ax2.legend(fontsize=8, frameon=False)
+        ax2.legend(fontsize=7, frameon=False)
     else:
         ax2.text(0.5, 0.5, "no pair with a slip in both branches", transform=ax2.transAxes,
                  ha="center", va="center", color="0.4")
@@ -44,9 +66,7 @@ def campaign_figure(pairs: list[ForkPair], path: Path, title: str = "") -> Path:
     ax2.grid(True, color="0.9")
     for ax in (ax1, ax2):
         ax.yaxis.set_major_locator(MaxNLocator(integer=True))
-    n1, n2 = summary["n_type_I"], summary["n_type_II"]
-    fig.suptitle((title + ": " if title else "") +
-                 f"{summary['n']} pairs, {n1} Type I, {n2} Type II, {summary['n_complex']} complex (-C)",
-                 fontsize=11)
-    fig.subplots_adjust(left=0.07, right=0.98, top=0.88, bottom=0.14, wspace=0.25)
+    fig.suptitle((title + "\n" if title else "") + "Pair types and undrained/drained peak-velocity ratios, "
+                 "each permeability on its own (never pooled)", fontsize=10)
+    fig.subplots_adjust(left=0.07, right=0.98, top=0.84, bottom=0.14, wspace=0.25)
     return save(fig, path)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,7 @@ from ..analysis.forkpairs import fork_branches, run_pairs
 from ..errors import NoSlipsError
 from ..io.runfile import RunReader
 from .campaign import campaign_figure
-from .series import friction_figure, overview_figure, pair_figure, slip_figure
+from .series import comparison_figure, friction_figure, overview_figure, pair_figure, slip_figure
 from .snapshot import snapshot_figure
 
 
@@ -29,7 +30,9 @@ def undrained_friction_figure(u: RunReader, pair, path: Path, notch: bool, drain
     slip = int(pair.row["slip"])
     fr = slip_friction(u, {"number": slip, "onset_time": main.onset_time, "end_time": main.end_time,
                            "static_strength": pair.result.undrained_strength}, notch=notch)
-    return friction_figure(fr, u.info.V_s, path, title=f"slip {slip}, {pair.row['branch']}: R/σ = μ_d (1 − P*/σ), Eq. 6",
+    title = (f"Slip {slip}, κ_c = {pair.row['branch'].removeprefix('perm_')} d² ({pair.row['regime']}): "
+             "combined resistance R/σ (Eq. 6)")
+    return friction_figure(fr, u.info.V_s, path, title=title,
                            drained_mean=drained_mean)
 
 
@@ -37,10 +40,11 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
                  notch: bool = True, main: str = "first") -> list[Path]:
     """Draw the figures of one run into ``out_dir`` (default ``RUN/figures``); returns the files.
 
-    Always: ``overview.png`` (four panels, slips shaded) and ``snapshot_<step>.png`` (the run's
-    last snapshot); ``campaign.png`` when the run has two or more drained/undrained pairs.
-    With ``slip=N``: ``slip_NNN.png`` (the slip magnified, Eq. 3 fit), ``slip_NNN_friction.png``
-    (mu_d(t), Eq. 7), and for a fork of that slip, per undrained branch B:
+    Always: ``overview.png`` (four panels, slips shaded) and ``snapshot_latest.png`` (the run's
+    last snapshot); ``campaign.png`` when the run has two or more drained/undrained pairs (one
+    summary per permeability). With ``slip=N``: ``slip_NNN.png`` (the slip magnified, Eq. 3 fit),
+    ``slip_NNN_friction.png`` (mu_d(t), Eq. 7), for a fork of that slip ``slip_NNN_compare.png``
+    (drained and every permeability on shared axes) and per undrained branch B:
     ``slip_NNN_pair_B.png`` (drained black, undrained blue, pore pressure),
     ``slip_NNN_friction_B.png`` (R/sigma, Eq. 6) and ``slip_NNN_snapshot_B.png`` (the branch's
     snapshot nearest its peak velocity, pressure shaded) when the branch wrote snapshots.
@@ -62,8 +66,9 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
         names = reader.snapshot_names()
         if names:
             snap = reader.snapshot(names[-1])
-            written.append(snapshot_figure(snap, reader.info.width, out / f"snapshot_{snap['step']:012d}.png",
-                                           title=reader.info.run_dir.name, sigma=reader.info.sigma,
+            written.append(snapshot_figure(snap, reader.info.width, out / "snapshot_latest.png",
+                                           title=f"{reader.info.run_dir}: last snapshot (step {snap['step']})",
+                                           sigma=reader.info.sigma,
                                            time_offset=reader.time_offset()))
         drained_mean = None
         if entry is not None:
@@ -72,14 +77,17 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
             fr = slip_friction(reader, entry, notch=notch)
             drained_mean = fr.mean_mu_d
             written.append(friction_figure(fr, reader.info.V_s, out / f"{tag}_friction.png",
-                                           title=f"{reader.info.run_dir.name}, slip {slip}: "
-                                                 f"{'μ_d(t), Eq. 7' if fr.drained else 'R/σ, Eq. 6'}"))
+                                           title=f"{reader.info.run_dir}, slip {slip}: "
+                                                 f"{'dynamic friction μ_d(t) (Eq. 7)' if fr.drained else 'combined resistance R/σ (Eq. 6)'}"))
     pairs, _ = run_pairs(run_dir, main=main)
     if entry is not None:
         fork = run_dir / "forks" / f"slip_{slip:03d}"
         drained_dir, undrained_dirs = fork_branches(fork)
         mine = [p for p in pairs if p.drained_dir.parent == fork]
         if drained_dir is not None and mine:
+            with RunReader(drained_dir) as d, ExitStack() as stack:
+                readers = [(stack.enter_context(RunReader(p.undrained_dir)), p) for p in mine]
+                written.append(comparison_figure(d, readers, out / f"slip_{slip:03d}_compare.png"))
             with RunReader(drained_dir) as d:
                 for pair in mine:
                     with RunReader(pair.undrained_dir) as u:
@@ -100,9 +108,36 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
                             snap = u.snapshot(name)
                             written.append(snapshot_figure(
                                 snap, u.info.width, out / f"{tag}_snapshot_{branch}.png",
-                                title=f"slip {slip}, {branch} ({snap['time'] - t_peak:+.4g} t₀ from peak velocity)",
+                                title=f"Slip {slip}, κ_c = {branch.removeprefix('perm_')} d²: grains and pore pressure "
+                                      f"{snap['time'] - t_peak:+.4g} t₀ from the peak velocity",
                                 sigma=u.info.sigma,
                                 time_offset=u.time_offset()))
     if len(pairs) >= 2:
-        written.append(campaign_figure(pairs, out / "campaign.png", title=run_dir.name))
+        written.append(campaign_figure(pairs, out / "campaign.png", title=str(Path(run_dir).resolve())))
     return written
+
+
+#: What each figure of `gouge plot` shows, by file-name pattern (fnmatch), for the command's listing.
+FIGURES = (
+    ("overview.png", "the whole run: τ/σ, v_w/V_s, porosity and wall displacement against time since "
+                     "loading began, slips shaded"),
+    ("snapshot_latest.png", "the grains and force chains at the run's last snapshot"),
+    ("slip_???.png", "slip N magnified with its Eq. 3 fit (drawn only when the fit holds; otherwise the reason)"),
+    ("slip_???_friction.png", "slip N: dynamic friction μ_d(t) of Eq. 7 with the wall velocity"),
+    ("slip_???_compare.png", "slip N: the drained branch and every permeability on shared axes, De in the legend"),
+    ("slip_???_pair_*.png", "slip N: drained against one permeability, with the pore pressure"),
+    ("slip_???_friction_*.png", "slip N, one permeability: combined resistance R/σ of Eq. 6"),
+    ("slip_???_snapshot_*.png", "slip N, one permeability: grains and pore pressure nearest the peak velocity"),
+    ("campaign.png", "pair types and undrained/drained peak-velocity ratios, per permeability"),
+)
+
+
+def describe_figure(path: Path) -> str:
+    """What the figure at ``path`` shows (:data:`FIGURES`), or ''."""
+    import re
+    from fnmatch import fnmatch
+
+    name = Path(path).name
+    text = next((text for pattern, text in FIGURES if fnmatch(name, pattern)), "")
+    number = re.match(r"slip_(\d+)", name)
+    return text.replace("slip N", f"slip {int(number.group(1))}") if number else text

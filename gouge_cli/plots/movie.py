@@ -23,6 +23,8 @@ import numpy as np
 from matplotlib.collections import LineCollection
 
 from ..analysis.catalog import find_slip, read_catalog
+from ..analysis.forkpairs import branch_name, branch_perm, fork_branches, perm_text
+from ..driver.progress import ItemProgress
 from ..errors import MovieError
 from ..io.runfile import RunReader
 from .snapshot import CHAIN, chain_segments, draw_discs, draw_pressure, pressure_grid
@@ -76,18 +78,18 @@ def open_fork(run_dir: Path | str, slip: int, perm: float | None = None) -> tupl
             find_slip(read_catalog(r), slip)          # names the slips there are, if slip is not one
         raise MovieError(f"{run_dir} has no fork of slip {slip}; run `gouge restart {run_dir} --slip {slip} "
                          f"--perm K` first")
-    wet = sorted(p for p in fork.glob("perm_*") if (p / "run.h5").is_file())
+    _, wet = fork_branches(fork)
     if perm is not None:
-        wet = [p for p in wet if float(p.name.removeprefix("perm_")) == perm]
+        wet = [p for p in wet if branch_perm(p) == perm]
     if not (fork / "drained" / "run.h5").is_file() or not wet:
         have = ", ".join(p.name for p in sorted(fork.iterdir()) if p.is_dir()) or "none"
-        raise MovieError(f"{fork} needs a drained and an undrained branch{'' if perm is None else f' perm_{perm:g}'}; "
+        raise MovieError(f"{fork} needs a drained and an undrained branch{'' if perm is None else ' ' + branch_name(perm)}; "
                          f"it has: {have}")
     if len(wet) > 1:
         raise MovieError(f"{fork} has several undrained branches ({', '.join(p.name for p in wet)}); pick one "
                          "with --perm")
     drained = _branch("drained", fork / "drained")
-    undrained = _branch(f"undrained, κ_c = {float(wet[0].name.removeprefix('perm_')):g} d²", wet[0])
+    undrained = _branch(f"undrained, κ_c = {perm_text(branch_perm(wet[0]))} d²", wet[0])
     return drained, undrained
 
 
@@ -208,9 +210,9 @@ def _encoder(path: Path, fps: int):
 
 
 def make_movie(run_dir: Path | str, slip: int, perm: float | None = None, out: Path | str | None = None,
-               fps: int = FPS, max_frames: int | None = None) -> tuple[Path, int]:
-    """Write the movie of slip ``slip`` (default ``RUN/figures/slip_NNN_movie.mp4``); returns
-    (path, frames)."""
+               fps: int = FPS, max_frames: int | None = None, progress: bool = True) -> tuple[Path, int]:
+    """Write the movie of slip ``slip`` (default ``RUN/figures/slip_NNN_movie.mp4``, RUN as given);
+    returns (path, frames). ``progress``: a plain line on stderr every few seconds."""
     drained, undrained = open_fork(run_dir, slip, perm)
     try:
         taus = frame_times(drained, undrained)
@@ -221,7 +223,9 @@ def make_movie(run_dir: Path | str, slip: int, perm: float | None = None, out: P
         renderer = FrameRenderer(drained, undrained, title=f"{Path(run_dir).name}, slip {slip}")
         write, close, path = _encoder(out, fps)
         try:
-            for tau in taus:
+            ticker = ItemProgress(f"movie slip {slip}: frames", len(taus), quiet=not progress)
+            for done, tau in enumerate(taus):
+                ticker.update(done)
                 write(renderer.render(float(tau)))
         finally:
             close()

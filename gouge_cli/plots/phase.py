@@ -11,6 +11,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ..analysis.forkpairs import branch_name, perm_text
 from .campaign import campaign_figure
 from .style import DPI, save
 
@@ -96,5 +97,5 @@ def sweep_figure(run_rows: list[dict], keys: list[str], path: Path, title: str =
 
 def pair_histograms(pairs_by_perm: dict, folder: Path) -> list[Path]:
     """:func:`~gouge_cli.plots.campaign.campaign_figure` for each permeability on its own."""
-    return [campaign_figure(pairs, Path(folder) / f"pairs_perm_{perm:g}.png", title=f"κ_c = {perm:g} d²")
+    return [campaign_figure(pairs, Path(folder) / f"pairs_{branch_name(perm)}.png", title=f"κ_c = {perm_text(perm)} d²")
             for perm, pairs in sorted(pairs_by_perm.items())]

@@ -15,6 +15,7 @@ import numpy as np
 from ..analysis.catalog import fit_slip, series_envelope, slip_window, SlipFriction
 from ..analysis.forkpairs import ForkPair
 from ..io.runfile import RunReader
+from ..units import ResultUnits
 from .style import (
     DRAINED,
     FIT,
@@ -66,8 +67,10 @@ def overview_figure(reader: RunReader, catalog: list[dict], path: Path, max_poin
     axes[-1].set_xlabel(LABEL["time"])
     tidy(axes)
     info = reader.info
-    fig.suptitle(f"{info.run_dir.name}: {len(catalog)} slips (shaded)\n{_params_line(reader)}", fontsize=11)
-    fig.subplots_adjust(left=0.11, right=0.97, top=0.92, bottom=0.06, hspace=0.08)
+    fig.suptitle(f"{info.run_dir}: {len(catalog)} slips (shaded)\n{_params_line(reader)}", fontsize=11)
+    fig.text(0.5, 0.008, ResultUnits.of_run(info.config, info.V_s, info.sigma).caption(), ha="center", fontsize=8,
+             color="0.3")
+    fig.subplots_adjust(left=0.11, right=0.97, top=0.92, bottom=0.07, hspace=0.08)
     return save(fig, path)
 
 
@@ -87,7 +90,7 @@ def slip_figure(reader: RunReader, entry: dict, path: Path, pad: float = 1.0) ->
         ax.set_ylabel(LABEL[label])
     fit = fit_slip(reader, entry)
     ax = axes[1]
-    if fit.success:
+    if fit.verdict == "holds":
         tt = np.linspace(max(fit.t0, s["time"][0]), min(fit.t0 + fit.half_period, s["time"][-1]), 200)
         ax.plot(tt - onset, fit.amplitude * np.sin(fit.omega * (tt - fit.t0)) / info.V_s, color=FIT, lw=1.5,
                 ls="--", label=f"Eq. 3 fit: half period {fit.half_period:.4g} t₀, R² = {fit.r2:.2f}, "
@@ -96,18 +99,21 @@ def slip_figure(reader: RunReader, entry: dict, path: Path, pad: float = 1.0) ->
         tp = np.linspace(0.0, min(math.pi / omega, float(t[-1])), 200)
         ax.plot(tp, fit.amplitude * np.sin(omega * tp) / info.V_s, color=PREDICTED, lw=1.2, ls=":",
                 label=f"Eq. 3, π√(m_b/k) = {info.predicted_half_period:.4g} t₀, same amplitude")
-    else:
-        ax.plot([], [], " ", label=f"Eq. 3: no fit ({fit.reason})")
-    ax.legend(loc="upper left", fontsize=8, frameon=True, framealpha=0.85, edgecolor="none")
+        ax.legend(loc="upper left", fontsize=8, frameon=True, framealpha=0.85, edgecolor="none")
     axes[0].axhline(float(entry["static_strength"]), color="0.5", lw=0.7, ls=":")
     axes[0].set_xlim(float(t[0]), float(t[-1]))
     axes[-1].set_xlabel(LABEL["time_onset"])
     tidy(axes)
-    fig.suptitle(f"{info.run_dir.name}, slip {int(entry['number'])}: duration {float(entry['duration']):.4g} t₀, "
-                 f"peak {float(entry['peak_velocity']) / info.V_s:.3g} V_s, "
-                 f"Δτ/σ = {float(entry['stress_drop']):.3g}\n{_params_line(reader)}", fontsize=11)
-    fig.subplots_adjust(left=0.11, right=0.97, top=0.92, bottom=0.06, hspace=0.08)
-    return save(fig, path)
+    units = ResultUnits.of_run(info.config, info.V_s, info.sigma)
+    duration = float(entry["duration"])
+    fig.suptitle(f"{info.run_dir}, slip {int(entry['number'])}: duration {duration:.4g} t₀ "
+                 f"({duration * units.t0_s * 1e6:.3g} µs), peak {float(entry['peak_velocity']) / info.V_s:.3g} V_s, "
+                 f"Δτ/σ = {float(entry['stress_drop']):.3g}\n{_params_line(reader)}"
+                 + ("" if fit.verdict == "holds" else f"\nEq. 3 fit not drawn: {fit.verdict_reason}"), fontsize=10)
+    fig.text(0.5, 0.008, units.caption(), ha="center", fontsize=8, color="0.3")
+    fig.subplots_adjust(left=0.11, right=0.97, top=0.92 if fit.verdict == "holds" else 0.9, bottom=0.07, hspace=0.08)
+    return save(fig, path, metadata={"Title": f"slip {int(entry['number'])}", "Description": json.dumps(
+        {"fit_drawn": fit.verdict == "holds", "verdict": fit.verdict, "reason": fit.verdict_reason})})
 
 
 def pair_figure(drained: RunReader, undrained: RunReader, pair: ForkPair, path: Path) -> Path:
@@ -129,7 +135,7 @@ def pair_figure(drained: RunReader, undrained: RunReader, pair: ForkPair, path: 
             ax.plot(td, _scaled(name, d[name], drained), color=DRAINED, lw=1.0, label="drained")
         if u[name] is not None:
             ax.plot(tu, _scaled(name, u[name], undrained), color=UNDRAINED, lw=1.0,
-                    label=f"undrained ({undrained.info.run_dir.name})")
+                    label=f"κ_c = {undrained.info.run_dir.name.removeprefix('perm_')} d²")
         ax.set_ylabel(LABEL[label])
     axes[0].legend(loc="lower left", fontsize=8, frameon=False)
     ax = axes[4]
@@ -146,17 +152,41 @@ def pair_figure(drained: RunReader, undrained: RunReader, pair: ForkPair, path: 
     axes[-1].set_xlabel(LABEL["time"])
     tidy(axes)
     row = pair.row
-    strength = ("" if not np.isfinite(row["strength_difference"]) else
-                f", S_u − S_d = {row['strength_difference']:+.3g}")
-    extra = f"\n{row['note']}" if row["note"] else ""
-    title = (f"slip {row['slip']}: drained vs {row['branch']} — Type {row['type']}{strength}"
-             f"{' (' + row['criteria'] + ')' if row['criteria'] else ''}{extra}")
-    fig.suptitle(title, fontsize=10)
-    fig.subplots_adjust(left=0.11, right=0.97, top=0.93, bottom=0.05, hspace=0.08)
+    import textwrap
+
+    parts = [f"Slip {row['slip']}: drained (black) against {branch_label(row)} (blue)", pair_verdict(row),
+             *(x for x in (row["fit_reason"], row["note"]) if x)]
+    title = "\n".join(textwrap.fill(p, 115) for p in parts)
+    fig.suptitle(title, fontsize=9, y=0.995)
+    units = ResultUnits.of_run(undrained.info.config, undrained.info.V_s, undrained.info.sigma)
+    fig.text(0.5, 0.006, units.caption(), ha="center", fontsize=8, color="0.3")
+    fig.subplots_adjust(left=0.11, right=0.97, top=0.985 - 0.0125 * (title.count("\n") + 1), bottom=0.055,
+                        hspace=0.08)
     shaded = {"type": row["type"], "slip": row["slip"], "branch": row["branch"],
               "drained": [row["drained_onset"], row["drained_end"]],
               "undrained": [row["undrained_onset"], row["undrained_end"]]}
     return save(fig, path, metadata={"Title": title, "Description": json.dumps(shaded)})
+
+
+_CRITERIA_TEXT = {"subevents": "several sub-events", "restart": "slip stops and restarts",
+                  "creep": "long slow creep", "fit": "Eq. 3 does not fit the undrained slip",
+                  "slow": "slow slip below the trigger"}
+
+
+def pair_verdict(row: dict) -> str:
+    """The pair's type in words (thesis Type I: undrained weaker, II: stronger, -C: complex)."""
+    base = row["base_type"]
+    if base == "none":
+        return "no pair: one branch did not slip"
+    what = {"I": "undrained weaker before slip", "II": "undrained stronger before slip",
+            "tie": "same strength before slip"}[base]
+    what = f"{'Type ' if base != 'tie' else ''}{row['type']} ({what}"
+    if np.isfinite(row["strength_difference"]):
+        what += f", S_u − S_d = {row['strength_difference']:+.3g} τ/σ"
+    what += ")"
+    if row["criteria"]:
+        what += "; complex: " + ", ".join(_CRITERIA_TEXT.get(c, c) for c in row["criteria"].split(","))
+    return what
 
 
 def friction_figure(friction: SlipFriction, V_s: float, path: Path, title: str = "",
@@ -198,3 +228,85 @@ def friction_figure(friction: SlipFriction, V_s: float, path: Path, title: str =
     fig.suptitle((title or f"slip {f.number}") + note, fontsize=10, y=0.98)
     fig.subplots_adjust(left=0.1, right=0.9, top=0.78, bottom=0.11)
     return save(fig, path)
+
+
+def branch_colors(perms) -> dict:
+    """One colour per permeability, from a sequential scale ordered by log kappa_c (the same
+    colour for the same kappa_c in every panel)."""
+    import matplotlib
+
+    perms = sorted(set(float(p) for p in perms))
+    cmap = matplotlib.colormaps["viridis"]
+    if len(perms) == 1:
+        return {perms[0]: UNDRAINED}
+    logs = np.log10(perms)
+    span = logs.max() - logs.min() or 1.0
+    return {p: cmap(0.05 + 0.8 * (lp - logs.min()) / span) for p, lp in zip(perms, logs)}
+
+
+def branch_label(row: dict) -> str:
+    """Legend text of an undrained branch: kappa_c, its Deborah number and drainage regime."""
+    from ..analysis.forkpairs import perm_text
+
+    de = row.get("deborah_slip")
+    de = de if de is not None and np.isfinite(de) else row.get("deborah_mean", float("nan"))
+    return f"κ_c = {perm_text(row['permeability'])} d², De = {de:.3g} ({row['regime']})"
+
+
+def comparison_figure(drained: RunReader, branches: list, path: Path) -> Path:
+    """One slip, the drained branch and every permeability on shared axes: tau/sigma, v_w/V_s and
+    the pore pressure (mean line, min-max band) against time since loading began (second axis: the
+    same time in ms), one colour per kappa_c (:func:`branch_colors`), its Deborah number in the
+    legend. ``branches``: (RunReader, ForkPair) of each undrained branch."""
+    from ..units import ResultUnits
+
+    names = ["time", "tau_over_sigma", "wall_vx", "pressure_mean", "pressure_min", "pressure_max"]
+    info = drained.info
+    units = ResultUnits.of_run(info.config, info.V_s, info.sigma)
+    offset = drained.time_offset()
+    fig, axes = new_figure("pair", 3, 1, sharex=True)
+    d = drained.series(names)
+    axes[0].plot(d["time"] - offset, d["tau_over_sigma"], color=DRAINED, lw=1.1, label="drained (dry)")
+    axes[1].plot(d["time"] - offset, d["wall_vx"] / info.V_s, color=DRAINED, lw=1.1, label="drained (dry)")
+    colors = branch_colors([p.row["permeability"] for _, p in branches])
+    p_max = 0.0
+    for reader, pair in branches:
+        u = reader.series(names)
+        tu = u["time"] - reader.time_offset()
+        c = colors[float(pair.row["permeability"])]
+        label = branch_label(pair.row)
+        axes[0].plot(tu, u["tau_over_sigma"], color=c, lw=1.0, label=label)
+        axes[1].plot(tu, u["wall_vx"] / reader.info.V_s, color=c, lw=1.0, label=label)
+        if u["pressure_mean"] is not None:
+            sig = reader.info.sigma
+            axes[2].fill_between(tu, u["pressure_min"] / sig, u["pressure_max"] / sig, color=c, alpha=0.18, lw=0)
+            axes[2].plot(tu, u["pressure_mean"] / sig, color=c, lw=1.0, label=label)
+            p_max = max(p_max, float(np.nanmax(np.abs(u["pressure_min"] / sig))),
+                        float(np.nanmax(np.abs(u["pressure_max"] / sig))))
+    axes[2].axhline(0.0, color="0.4", lw=0.6)
+    if p_max > 0:
+        axes[2].set_ylim(-1.05 * p_max, 1.05 * p_max)
+    for ax, label in zip(axes, ("tau", "velocity", "pressure")):
+        ax.set_ylabel(LABEL[label])
+    axes[2].set_ylabel("P / σ  (mean; band: min – max)")
+    axes[1].axhline(info.slip_params["start_factor"], color="0.55", lw=0.7, ls=":")
+    axes[0].legend(loc="lower left", fontsize=8, frameon=True, framealpha=0.85, edgecolor="none")
+    axes[-1].set_xlabel(LABEL["time"])
+    scale = units.t0_s * 1e3
+    top = axes[0].secondary_xaxis("top", functions=(lambda t: t * scale, lambda s: s / scale))
+    top.set_xlabel("time since loading began [ms]", fontsize=9)
+    top.tick_params(labelsize=8)
+    tidy(axes)
+    slip = int(info.fork_slip) if info.fork_slip is not None else 0
+    from ..analysis.forkpairs import perm_text
+
+    perms = ", ".join(perm_text(p.row["permeability"]) for _, p in branches)
+    title = f"Slip {slip}: drained branch and every permeability (κ_c = {perms} d²) from the same packing"
+    fig.suptitle(title, fontsize=10.5, y=0.985)
+    fig.text(0.5, 0.008, units.caption() + "; v_w / V_s: dotted line = slip trigger", ha="center", fontsize=8,
+             color="0.3")
+    fig.subplots_adjust(left=0.11, right=0.97, top=0.91, bottom=0.07, hspace=0.08)
+    return save(fig, path, metadata={"Title": title, "Description": json.dumps(
+        {"slip": slip, "branches": [{"branch": p.row["branch"], "permeability": p.row["permeability"],
+                                     "deborah_slip": p.row["deborah_slip"], "regime": p.row["regime"]}
+                                    for _, p in branches]}, allow_nan=True)})

@@ -17,21 +17,18 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..analysis.forkpairs import branch_name
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint
 from ..config import build_config, Config
-from ..errors import ConfigError
+from ..errors import AnalysisError, ConfigError
 from ..driver.slips import lead_time
-from ..io.runfile import RunFile, slip_catalog
+from ..io.runfile import RunFile, RunReader, slip_catalog
 from ..model.preflight import check_config
 from ..errors import RunDirError
 from ..io.rundir import check_run_dir, refuse_if_in_progress, RunLock
 from ..driver.phases import load_phase
 from ..driver.simulation import Simulation
-
-
-def branch_name(perm: float | None) -> str:
-    return "drained" if perm is None else f"perm_{perm:g}"
 
 
 FORK_SLIP_FRAMES = 30     # snapshots per predicted slip duration while a fork slips (output.slip_frames)
@@ -131,6 +128,9 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
              duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
     """Fork the drained branch and one undrained branch per permeability from slip `slip`.
 
+    A finished drained branch is kept when ``perms`` adds branches to an existing fork; an existing
+    branch of the same permeability (or the drained one alone, without ``perms``) needs ``force``.
+
     Returns ``{"run", "slip", "start_time", "branches": {name: {status, dir, wall_seconds, steps,
     first_slip}}, "library_differences_from_parent"}`` (first_slip: the detector's record of the
     branch's first slip; paths relative to the fork directory)."""
@@ -143,22 +143,52 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     if note:
         print(note, file=sys.stderr, flush=True)
     fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
-    branches = [None] + list(perms)
-    for perm in branches:
+    for perm in perms:
         target = fork_dir / branch_name(perm) / "run.h5"
         if target.exists() and not force:
-            raise RunDirError(f"{target} exists; pass --force to run this fork again")
+            raise RunDirError(f"{target} exists; pass --force to run this branch again")
+    drained = _finished_drained(fork_dir) if perms and not force else None
+    if not perms and (fork_dir / "drained" / "run.h5").exists() and not force:
+        raise RunDirError(f"{fork_dir / 'drained' / 'run.h5'} exists; pass --force to run it again")
+    branches = ([] if drained is not None else [None]) + list(perms)
     results = [run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet) for perm in branches]
-    summary = pair_summary(run_dir, slip, ck.time, results)
+    with RunReader(run_dir, allow_running=True) as reader:
+        origin = reader.time_offset()
+    summary = pair_summary(run_dir, slip, ck.time - origin, ([drained] if drained is not None else []) + results,
+                           origin, ck.config.loading.velocity)
     summary["library_differences_from_parent"] = provenance.bit_risks(ck.provenance)
     return summary
 
 
-def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[BranchResult]) -> dict:
-    keys = ("onset_time", "static_strength", "stress_drop", "peak_velocity", "mean_velocity", "duration", "slip")
+def _finished_drained(fork_dir: Path) -> BranchResult | None:
+    """The fork's drained branch when it has finished (kept when --perm adds a branch), else None."""
+    out_dir = fork_dir / "drained"
+    if not (out_dir / "run.h5").is_file():
+        return None
+    try:
+        with RunReader(out_dir) as r:
+            if r.info.status != "finished":
+                return None
+    except AnalysisError:
+        return None
+    catalog = slip_catalog(out_dir)
+    return BranchResult("drained", out_dir, "finished (kept)", 0.0, 0, catalog[0] if catalog else None)
+
+
+def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[BranchResult], origin: float,
+                 V_s: float) -> dict:
+    """What `gouge restart` prints: times in t0 since loading began (``origin``: the stored clock then;
+    ``start_time``: the checkpoint's), velocities in V_s, strengths and drops in tau/sigma."""
     branches = {}
     for r in results:
+        first = None
+        if r.first_slip:
+            f = r.first_slip
+            first = {"onset_time": float(f["onset_time"]) - origin, "duration": float(f["duration"]),
+                     "static_strength": float(f["static_strength"]), "stress_drop": float(f["stress_drop"]),
+                     "slip": float(f["slip"]), "peak_velocity_over_Vs": float(f["peak_velocity"]) / V_s,
+                     "mean_velocity_over_Vs": float(f["mean_velocity"]) / V_s}
         branches[r.name] = {"status": r.status, "dir": r.out_dir.name, "wall_seconds": round(r.wall_seconds, 3),
-                            "steps": r.steps,
-                            "first_slip": {k: r.first_slip[k] for k in keys} if r.first_slip else None}
-    return {"run": "../..", "slip": slip, "start_time": start_time, "branches": branches}
+                            "steps": r.steps, "first_slip": first}
+    return {"run": "../..", "slip": slip, "time_origin": "loading start", "start_time": start_time,
+            "branches": branches}

@@ -34,8 +34,10 @@ def branch_status(branch_dir: Path) -> str:
 def write_pair_json(fork_dir: Path, main: str = "first") -> dict:
     """Classify the fork's pairs and write ``fork_dir/pair.json``; returns what it wrote.
 
-    ``{"slip", "fork_dir", "branches": {name: status}, "definition": {...}, "pairs": [pairs.csv row
-    per undrained branch], "library_differences_from_parent": [...]}`` (library versions that
+    ``{"slip", "fork_dir", "branches": {name: status}, "definition": {...}, "run", "time_origin",
+    "pairs": [pairs.csv row per undrained branch], "library_differences_from_parent": [...]}`` (run:
+    the parent run relative to this file's folder, also in each row; times in t0 since loading
+    began, as everywhere; library versions that
     differ between the parent's checkpoint and the branches: the drained branch may then not
     retrace the parent bit for bit). Raises :class:`~gouge_cli.errors.AnalysisError` when a
     branch is missing or still running.
@@ -50,7 +52,9 @@ def write_pair_json(fork_dir: Path, main: str = "first") -> dict:
         "fork_dir": fork_dir.name,
         "branches": branches,
         "definition": pairs[0].result.definition if pairs else None,
-        "pairs": [p.row for p in pairs],
+        "run": "../..",
+        "time_origin": "loading start",
+        "pairs": [dict(p.row, run="../..") for p in pairs],
         "library_differences_from_parent": risks,
     })
     (fork_dir / "pair.json").write_text(json.dumps(record, indent=2, allow_nan=False))

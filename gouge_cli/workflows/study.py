@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..analysis.report import analyze_run, write_analysis
-from ..analysis.study import STUDY_COLUMNS, study_rows, study_summary, summary_lines, transient_slips
+from ..analysis.forkpairs import perm_text
+from ..analysis.study import STUDY_COLUMNS, study_rows, study_summaries, summary_lines, transient_slips
 from ..io.checkpoint import read_checkpoint
 from ..config import load_config
 from ..errors import ConfigError, StudyInterrupted
@@ -107,7 +108,7 @@ class StudyResult:
     ran: list[dict] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
     rows: list[dict] = field(default_factory=list)
-    summary: dict = field(default_factory=dict)
+    summary: list = field(default_factory=list)      # one study_summary per permeability
     written: dict = field(default_factory=dict)
     loading: str = ""
 
@@ -206,7 +207,7 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
     pairs = [p for p in analysis.pairs if int(p.row["slip"]) in set(chosen)
              and p.row["branch"] in {branch_name(k) for k in perms}]
     result.rows = study_rows(run_dir, pairs, transient)
-    result.summary = study_summary(result.rows)
+    result.summary = study_summaries(result.rows)
     result.written.update(_write_study(run_dir, result, perms, main, pairs if figures else None))
     return result
 
@@ -220,15 +221,21 @@ def _write_study(run_dir: Path, result: StudyResult, perms, main: str, pairs) ->
         w.writeheader()
         for row in result.rows:
             w.writerow(row)
-    summary = {"run": str(run_dir), "perms": list(perms), "main": main, "slips": result.slips,
-               "transient_slips": result.transient, "summary": result.summary,
-               "side_by_side": [list(x) for x in summary_lines(result.summary)]}
+    summary = {"run": str(Path(run_dir).resolve()), "perms": list(perms), "main": main, "slips": result.slips,
+               "transient_slips": result.transient, "per_permeability": result.summary,
+               "side_by_side": {perm_text(g["permeability"]): [list(x) for x in summary_lines(g)]
+                                for g in result.summary}}
     (out / "summary.json").write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False))
-    lines = [f"# Study of {run_dir}", "", f"kappa_c: {', '.join(f'{p:g}' for p in perms)}; compared events: "
+    lines = [f"# Study of {run_dir}", "", f"kappa_c: {', '.join(perm_text(p) for p in perms)}; compared events: "
              f"{main}; slips {', '.join(map(str, result.slips))}; transient (left out): "
              f"{', '.join(map(str, result.transient)) or 'none'}", "",
-             "| quantity | this study | thesis |", "|---|---|---|"]
-    lines += [f"| {a} | {b} | {c} |" for a, b, c in summary_lines(result.summary)]
+             "Permeabilities are never pooled: one summary per kappa_c.", ""]
+    for g in result.summary:
+        lines += [f"## kappa_c = {perm_text(g['permeability'])} d^2 "
+                  f"({', '.join(f'{k} {v}' for k, v in g['regimes'].items())})", "",
+                  "| quantity | this study | thesis |", "|---|---|---|"]
+        lines += [f"| {a} | {b} | {c} |" for a, b, c in summary_lines(g)]
+        lines.append("")
     lines += ["", "| " + " | ".join(STUDY_COLUMNS[:-1]) + " |", "|" + "---|" * (len(STUDY_COLUMNS) - 1)]
     for r in result.rows:
         lines.append("| " + " | ".join(_cell(r[c]) for c in STUDY_COLUMNS[:-1]) + " |")

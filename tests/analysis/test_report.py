@@ -95,7 +95,8 @@ def test_catalog_finds_planted_slips(planted_run):
         assert row["static_strength"] == pytest.approx(mu_s, abs=2e-4)
         # lo = 2 V_s crossings sit asin(2 V_s / A) / omega inside the half period
         assert row["duration"] == pytest.approx(HALF_PERIOD, rel=5e-3)
-        assert row["onset_time"] - 100.0 == pytest.approx(t_on, abs=2 * DT)
+        assert row["onset_clock"] - 100.0 == pytest.approx(t_on, abs=2 * DT)      # stored clock
+        assert row["onset_time"] == pytest.approx(row["onset_clock"] - 100.0, abs=1e-9)   # since loading (load_start_time 100)
         assert row["slip"] == pytest.approx(2 * amp, rel=1e-3)
         assert row["stress_drop"] == pytest.approx(2 * (mu_s - MU_D), abs=2e-3)
         assert row["peak_velocity_over_Vs"] == pytest.approx(amp * 0.5 / V_S, rel=1e-3)
@@ -163,8 +164,15 @@ def test_pair_types_from_planted_strengths(run_with_forks):
     assert by_branch["perm_1e-05"]["permeability"] == 1e-5
     # stronger packing, bigger drop: the Eq. 3 velocity scales with mu_s - mu_d
     assert by_branch["perm_1e-05"]["peak_velocity_ratio"] == pytest.approx(0.14 / 0.10, rel=1e-2)
+    # two permeabilities: two separate summaries, never one pooled over both
     summary = FP.campaign(pairs)
-    assert summary["n_type_I"] == 1 and summary["n_type_II"] == 1 and summary["n_complex"] == 0
+    assert summary["n"] == 2 and [g["permeability"] for g in summary["per_permeability"]] == [1e-5, 1e-4][::-1] \
+        or [g["permeability"] for g in summary["per_permeability"]] == [1e-5, 1e-4]
+    by_perm = {g["permeability"]: g for g in summary["per_permeability"]}
+    assert set(by_perm) == {1e-5, 1e-4} and all(g["n"] == 1 for g in by_perm.values())
+    assert (by_perm[1e-5]["n_type_II"], by_perm[1e-5]["n_type_I"]) == (1, 0)
+    assert (by_perm[1e-4]["n_type_I"], by_perm[1e-4]["n_type_II"]) == (1, 0)
+    assert by_perm[1e-5]["ratios"]["peak_velocity_ratio"]["mean"] == pytest.approx(0.14 / 0.10, rel=1e-2)
 
 
 def test_analyze_and_write(run_with_forks):
@@ -179,7 +187,8 @@ def test_analyze_and_write(run_with_forks):
     with h5py.File(run_with_forks / "run.h5", "r") as h5:
         assert h5["analysis/catalog/static_strength"].shape == (3,)
         assert h5["analysis/pairs/type"].asstr()[...].tolist() == ["II", "I"]
-        assert json.loads(h5["analysis"].attrs["summary"])["campaign"]["n_type_II"] == 1
+        groups = json.loads(h5["analysis"].attrs["summary"])["campaign"]["per_permeability"]
+        assert [g["n_type_II"] for g in groups] == [1, 0]      # 1e-5 (Type II), then 1e-4 (Type I)
     R.write_analysis(analysis)          # a second write replaces /analysis
     summary = json.loads(written["summary"].read_text())
     assert summary["fit_summary"]["half_period"]["mean"] == pytest.approx(HALF_PERIOD, rel=2e-3)

@@ -61,7 +61,7 @@ def test_analyze_writes_tables(forked_run):
     with h5py.File(forked_run / "run.h5", "r") as h5:
         n_slips = len(h5["slips"])
         assert h5["analysis/catalog/number"].shape == (n_slips,)
-        assert h5["analysis/catalog/onset_since_loading"].attrs["unit"] == "t0"
+        assert h5["analysis/catalog/onset_time"].attrs["unit"] == "t0"
         undescribed = []
         h5.visititems(lambda name, obj: undescribed.append(name)
                       if isinstance(obj, h5py.Dataset) and "unit" not in obj.attrs else None)
@@ -76,7 +76,7 @@ def test_analyze_writes_tables(forked_run):
     assert all(float(r["predicted_half_period"]) > 0 for r in rows)
     header, rows = _rows(forked_run / "analysis" / "pairs.csv")
     assert header == list(PAIR_COLUMNS) and len(rows) == 1
-    assert rows[0]["branch"] == "perm_0.001" and int(rows[0]["slip"]) == 2
+    assert rows[0]["branch"] == "perm_1e-03" and int(rows[0]["slip"]) == 2
     assert rows[0]["type"] in ("I", "II", "I-C", "II-C", "tie", "tie-C", "none")
 
 
@@ -85,7 +85,7 @@ def test_analyze_json_and_bad_input(forked_run, tmp_path):
     assert result.exit_code == 0, result.output
     data = json.loads(result.output)
     assert data["runs"][0]["parameters"]["notch"] is False
-    assert data["campaign"]["n"] == 1
+    assert data["campaign"]["n"] == 1 and len(data["campaign"]["per_permeability"]) == 1
     result = gouge("analyze", tmp_path)
     assert result.exit_code == EXIT_BAD_INPUT and "not a gouge run directory" in result.output
 
@@ -109,17 +109,17 @@ def test_plot_run_and_slip(forked_run, tmp_path):
     result = gouge("plot", forked_run, "--slip", 2, "--out", out)
     assert result.exit_code == 0, result.output
     names = {p.name for p in out.glob("*.png")}
-    expected = {"overview.png", "slip_002.png", "slip_002_friction.png", "slip_002_pair_perm_0.001.png",
-                "slip_002_snapshot_perm_0.001.png"}
+    expected = {"overview.png", "slip_002.png", "slip_002_friction.png", "slip_002_pair_perm_1e-03.png",
+                "slip_002_snapshot_perm_1e-03.png"}
     assert expected <= names, names
     _check_png(out / "slip_002.png", FIGSIZE["slip"])
     _check_png(out / "slip_002_friction.png", FIGSIZE["friction"])
-    _check_png(out / "slip_002_pair_perm_0.001.png", FIGSIZE["pair"])
+    _check_png(out / "slip_002_pair_perm_1e-03.png", FIGSIZE["pair"])
     # the undrained snapshot has a pressure field: colorbar makes it wider than the dry one
-    wet = mpimg.imread(out / "slip_002_snapshot_perm_0.001.png")
+    wet = mpimg.imread(out / "slip_002_snapshot_perm_1e-03.png")
     dry = mpimg.imread(snaps[0])
     sizes = set()
-    with h5py.File(forked_run / "forks/slip_002/perm_0.001/run.h5", "r") as h5:
+    with h5py.File(forked_run / "forks/slip_002/perm_1e-03/run.h5", "r") as h5:
         width = float(h5.attrs["width"])
         for grp in h5["snapshots"].values():
             assert "pressure" in grp

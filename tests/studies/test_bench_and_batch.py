@@ -111,6 +111,6 @@ def test_batch_script_forks_every_slip(tmp_path):
     assert done.returncode == 0, done.stderr
     lines = (run / "forks" / "summary.jsonl").read_text().splitlines()
     assert [json.loads(line)["slip"] for line in lines] == kept
-    assert all(set(json.loads(line)["branches"]) == {"drained", "perm_0.001"} for line in lines)
+    assert all(set(json.loads(line)["branches"]) == {"drained", "perm_1e-03"} for line in lines)
     again = subprocess.run(["bash", str(script), str(run), "1e-3"], capture_output=True, text=True, env=env)
     assert again.returncode == 0 and "already forked" in again.stdout

@@ -171,7 +171,7 @@ def test_point_on_a_worker_is_bitwise_gouge_run_and_restart(campaign, folder):
     pdir, serial, slip = forked
     result = gouge("restart", serial, "--slip", slip, "--perm", "1e-3", "--duration", 800, "--quiet")
     assert result.exit_code == 0, result.output
-    for branch in ("drained", "perm_0.001"):
+    for branch in ("drained", "perm_1e-03"):
         a = series(pdir / "forks" / f"slip_{slip:03d}" / branch / "run.h5")
         b = series(serial / "forks" / f"slip_{slip:03d}" / branch / "run.h5")
         for name in a:
@@ -199,7 +199,7 @@ def test_table_and_phase_diagram(campaign):
         assert n == len(inside) and int(c["n_type_II"]) == sum(r["base_type"] == "II" for r in inside)
         if n:
             assert float(c["frac_complex"]) == pytest.approx(sum(r["complex"] == "True" for r in inside) / n)
-    for name in ("phase_diagram.png", "slip_statistics.png", "pairs_perm_0.001.png"):
+    for name in ("phase_diagram.png", "slip_statistics.png", "pairs_perm_1e-03.png"):
         assert (root / "figures" / name).stat().st_size > 10_000
     assert any(line.startswith("phase cell permeability=0.001") for line in campaign["log"])
 

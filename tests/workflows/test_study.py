@@ -86,17 +86,19 @@ def test_study_end_to_end_idempotent_and_consistent(study_run):
                 assert a == pytest.approx(b, rel=1e-12) and a == pytest.approx(float(c), rel=1e-12)
         assert (run_dir / "study" / "figures" / f"friction_slip_{n:03d}.png").is_file()      # Eq. 7, Fig. 17
         png = Image.open(run_dir / "study" / "figures" / f"pair_slip_{n:03d}_perm_1e-05.png")
-        assert f"Type {p['type']}" in png.text["Title"]
+        assert p["type"] in png.text["Title"] and f"De = " in png.text["Title"]
         shaded = json.loads(png.text["Description"])
         assert shaded["type"] == p["type"]
         if p["drained_onset"] is not None:
             assert shaded["drained"][0] == pytest.approx(p["drained_onset"], rel=1e-12)
     summary = json.loads((run_dir / "study" / "summary.json").read_text())
-    assert summary["summary"]["n_rows"] == len(slips)
-    assert any(line[0].startswith("Type II") and line[2] == "30 (20)" for line in summary["side_by_side"])
+    (group,) = summary["per_permeability"]                       # one permeability: one summary
+    assert group["n_rows"] == len(slips) and group["permeability"] == 1e-5
+    side = summary["side_by_side"]["1e-05"]
+    assert any(line[0].startswith("Type II") and line[2] == "30 (20)" for line in side)
     notched = [float(table[n]["drained_fit_r2_notched"]) for n in slips]    # the diagnostic refit, per drained slip
     assert all(math.isnan(x) or x <= 1.0 for x in notched) and any(math.isfinite(x) for x in notched)
-    assert any("notched" in line[0] for line in summary["side_by_side"])
+    assert any("notched" in line[0] for line in side)
 
     # second invocation: nothing runs, nothing is rewritten
     again = gouge("study", run_dir, "--perm", "1e-5", "--slips", arg, "--no-figures")
@@ -113,7 +115,7 @@ def test_study_end_to_end_idempotent_and_consistent(study_run):
     assert more.exit_code == 0, more.output
     after = _branches(run_dir)
     changed = {k for k in after if before.get(k) != after[k]}
-    assert changed == {victim} | {f"slip_{n:03d}/perm_0.001" for n in slips}
+    assert changed == {victim} | {f"slip_{n:03d}/perm_1e-03" for n in slips}
 
 
 def test_study_bad_input(study_run):
