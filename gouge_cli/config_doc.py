@@ -110,7 +110,7 @@ def commented_defaults() -> str:
     fluid_rows += _lines(FluidConfig, FluidConfig().model_dump(mode="json"), 1)
     width = max(len(r[0]) for r in rows + fluid_rows) + 2
     head = [f"# gouge {__version__}: every config key with its default, unit, allowed range and meaning.",
-            "# Units are dimensionless (physics.md section 1): length d, stress E, density rho_s,",
+            "# Units are dimensionless (docs/physics/units.md): length d, stress E, density rho_s,",
             "# time t0 = d / sqrt(E / rho_s), velocity v0 = d / t0; keys marked 'or SI' also take a",
             "# string with an SI unit, e.g. normal_stress: 24 MPa. Unknown keys are refused."]
     body = [f"{text:<{width}}# {note}" if note else text for text, note in rows]
