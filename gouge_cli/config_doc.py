@@ -159,3 +159,30 @@ def json_schema() -> dict:
     schema["$id"] = SCHEMA_ID
     schema["title"] = f"gouge run config (gouge {__version__})"
     return schema
+
+
+def key_rows() -> list[dict]:
+    """Every config key as a row (the docs' reference table): section, section_doc, key (dotted),
+    default, unit, range, meaning (with the SI units a dimensional key also takes)."""
+    rows = []
+
+    def walk(model: type[BaseModel], values: dict, prefix: str, section: str, section_doc: str):
+        for name, field in model.model_fields.items():
+            sub = _section_model(field)
+            if sub is not None:
+                doc = (sub.__doc__ or "").strip().splitlines()[0] if sub.__doc__ else ""
+                if field.description:
+                    doc = f"{doc} {field.description}."
+                sub_values = values.get(name) or sub().model_dump(mode="json")
+                walk(sub, sub_values, f"{prefix}{name}.", f"{prefix}{name}", doc)
+                continue
+            unit, text = split_description(field.description)
+            dim = _dimension(field)
+            if dim:
+                text = f"{text} (or SI: {', '.join(si_units(dim))})"
+            rows.append({"section": section, "section_doc": section_doc, "key": prefix + name,
+                         "default": _scalar(values.get(name)), "unit": unit, "range": _range_text(field),
+                         "meaning": text})
+
+    walk(Config, Config().to_dict(), "", "", (Config.__doc__ or "").strip().splitlines()[0])
+    return rows

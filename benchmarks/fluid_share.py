@@ -1,7 +1,7 @@
 """The undrained fluid share of a step at the thesis step, steadier than the bench's paired share.
 
-    .venv/bin/python scripts/fluid_share.py THREADS [REPEATS STEPS COPIES] [SOLVER ...]
-    e.g. scripts/fluid_share.py 1 30 300 4 implicit auto
+    .venv/bin/python benchmarks/fluid_share.py THREADS [REPEATS STEPS COPIES] [SOLVER ...]
+    e.g. benchmarks/fluid_share.py 1 30 300 4 implicit auto
     (GOUGE_SHARE_VERBOSE=1 also prints each copy's fastest repeat)
 
 The bench's 10,000-grain sheared layer (runs/bench/cache) at the dt of thesis Run 24 (0.09 t0, a

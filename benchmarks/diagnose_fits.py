@@ -1,7 +1,7 @@
 """Why do a run's drained slips fail the Eq. 3 fit targets? One row per non-transient slip and a
-figure of the worst cases (the study scene's diagnosis in README "The study scene").
+figure of the worst cases (the study scene's diagnosis: docs/validation.md, "The study scene").
 
-    .venv/bin/python scripts/diagnose_fits.py RUN_DIR [FIGURE.png] [--worst 8]
+    .venv/bin/python benchmarks/diagnose_fits.py RUN_DIR [FIGURE.png] [--worst 8]
 
 Per slip: stress drop, peak [V_s], measured duration (1.5 V_s crossings) over the median, the
 Eq. 3 fit exactly as `gouge study` makes it (R^2, fitted half period T_fit, m_eff / m_b =
