@@ -12,8 +12,9 @@ Reference (reST, used in ``docs/reference/*.rst``):
 Tutorials (MyST, used in ``docs/tutorials/*.md``):
 
 ``{gouge-tutorial} examples/NN_name.sh``: a literate shell script. ``# %% [markdown]`` starts a text
-cell (its lines lose their leading ``# ``), ``# %%`` a code cell. The script runs once per build
-in a scratch directory holding links to ``configs/`` and ``examples/``, with ``gouge`` as
+cell (its lines lose their leading ``# ``), ``# %%`` a code cell. The script runs once (until it
+changes) in a scratch directory that the tutorials share, in page order (:func:`tutorial_dir`),
+holding links to ``configs/`` and ``examples/``, with ``gouge`` as
 ``python -m gouge_cli.cli`` of this checkout; each code cell is shown with its output. A text cell's
 ``![alt](path)`` of a file the script wrote is copied into the docs. By default the scene is
 reduced: ``gouge run`` gets ``$GOUGE_EXAMPLE_SET`` appended (see :data:`REDUCED`); set
@@ -40,7 +41,7 @@ from docutils.statemachine import StringList
 from sphinx.util.nodes import nested_parse_with_titles
 
 ROOT = Path(__file__).resolve().parents[2]
-REDUCED = "--set run.duration=40000"          # the demo's first ~3 slips instead of ~11
+REDUCED = "--set run.duration=60000"          # the demo's first slips (~3) instead of ~11
 CELL = "@@gouge-cell@@"
 
 
@@ -289,6 +290,12 @@ def run_tutorial(script: Path, workdir: Path, full: bool = False, timeout: float
     return [o.rstrip("\n") for o in outs]
 
 
+def tutorial_dir(outdir) -> Path:
+    """The scratch directory the tutorials share (in order: a later one may use an earlier one's
+    runs): ``tutorial_runs/`` beside the HTML output."""
+    return Path(outdir).resolve().parent / "tutorial_runs"
+
+
 def _shorten(text: str, limit: int = 60) -> str:
     lines = text.splitlines()
     if len(lines) <= limit:
@@ -305,20 +312,22 @@ class TutorialDirective(Directive):
         env.note_dependency(str(script))
         full = os.environ.get("GOUGE_DOCS_FULL") == "1"
         key = hashlib.sha256((script.read_text() + str(full)).encode()).hexdigest()[:12]
-        work = Path(env.app.outdir).parent / "tutorial_runs" / script.stem
-        stamp = work / f".done-{key}.json"
+        work = tutorial_dir(env.app.outdir)
+        stamp = work / f".{script.stem}-{key}.json"
         if stamp.is_file():
             outputs = json.loads(stamp.read_text())
         else:
-            shutil.rmtree(work, ignore_errors=True)
             outputs = run_tutorial(script, work, full)
             stamp.write_text(json.dumps(outputs))
         gen = Path(env.srcdir) / "_generated" / script.stem
         parts, i = [], 0
         mode = "full scene" if full else f"reduced scene (`gouge run ... {REDUCED}`)"
-        parts.append(f":::{{note}}\nThis page is `{self.arguments[0]}`, run when the docs were built, on the "
-                     f"{mode}; the outputs below are that run's.\n:::\n")
+        note = (f":::{{note}}\nThis page is `{self.arguments[0]}`, run when the docs were built, on the "
+                f"{mode}; the outputs below are that run's.\n:::\n")
         for kind, text in split_cells(script.read_text()):
+            if note and (kind == "code" or parts):
+                parts.append(note)
+                note = None
             if kind == "markdown":
                 def image(m):
                     src = work / m.group(2)
