@@ -49,7 +49,7 @@ gouge plot runs/first
 # The run file is plain HDF5: every series carries its unit and meaning ({ref}`ref-series`), so
 # any HDF5 reader can pick it up:
 # %%
-python3 - <<'PY'
+python - <<'PY'
 import h5py
 with h5py.File("runs/first/run.h5", "r") as f:
     tau = f["series/tau_over_sigma"]

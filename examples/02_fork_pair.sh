@@ -15,7 +15,7 @@ test -f runs/first/run.h5 || gouge run configs/demo.yaml --out runs/first --quie
 # `pair.json`, the verdict on the pair; the command prints a summary of both.
 # %%
 gouge restart runs/first --slip 2 --perm 1e-5 > restart.json
-python3 -c "import json; r = json.load(open('restart.json')); print(json.dumps(r['pair']['pairs'][0], indent=1)[:1500])"
+python -c "import json; r = json.load(open('restart.json')); print(json.dumps(r['pair']['pairs'][0], indent=1)[:1500])"
 # %% [markdown]
 # ## Reading the pair
 #

@@ -13,7 +13,8 @@ Tutorials (MyST, used in ``docs/tutorials/*.md``):
 
 ``{gouge-tutorial} examples/NN_name.sh``: a literate shell script. ``# %% [markdown]`` starts a text
 cell (its lines lose their leading ``# ``), ``# %%`` a code cell. The script runs once (until it
-changes) in a scratch directory that the tutorials share, in page order (:func:`tutorial_dir`),
+changes; then every tutorial runs again, in page order) in a scratch directory they share
+(:func:`tutorial_dir`),
 holding links to ``configs/`` and ``examples/``, with ``gouge`` as
 ``python -m gouge_cli.cli`` of this checkout; each code cell is shown with its output. A text cell's
 ``![alt](path)`` of a file the script wrote is copied into the docs. By default the scene is
@@ -23,8 +24,6 @@ reduced: ``gouge run`` gets ``$GOUGE_EXAMPLE_SET`` appended (see :data:`REDUCED`
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 import re
 import shutil
@@ -270,6 +269,7 @@ def run_tutorial(script: Path, workdir: Path, full: bool = False, timeout: float
             link.symlink_to(ROOT / name)
     preamble = textwrap.dedent(f"""\
         set -euo pipefail
+        export PATH="{Path(sys.executable).parent}:$PATH"
         gouge() {{
           if [ "${{1:-}}" = run ] && [ -n "${{GOUGE_EXAMPLE_SET:-}}" ]; then
             "{sys.executable}" -m gouge_cli.cli "$@" $GOUGE_EXAMPLE_SET
@@ -311,14 +311,11 @@ class TutorialDirective(Directive):
         script = ROOT / self.arguments[0]
         env.note_dependency(str(script))
         full = os.environ.get("GOUGE_DOCS_FULL") == "1"
-        key = hashlib.sha256((script.read_text() + str(full)).encode()).hexdigest()[:12]
         work = tutorial_dir(env.app.outdir)
-        stamp = work / f".{script.stem}-{key}.json"
-        if stamp.is_file():
-            outputs = json.loads(stamp.read_text())
-        else:
+        try:
             outputs = run_tutorial(script, work, full)
-            stamp.write_text(json.dumps(outputs))
+        except (RuntimeError, subprocess.TimeoutExpired) as err:
+            raise self.error(str(err)) from None
         gen = Path(env.srcdir) / "_generated" / script.stem
         parts, i = [], 0
         mode = "full scene" if full else f"reduced scene (`gouge run ... {REDUCED}`)"
@@ -346,7 +343,18 @@ class TutorialDirective(Directive):
         return _parse(self, "\n".join(parts))
 
 
+def _tutorials_together(app, env, docnames):
+    """If any tutorial page is to be read, read them all, in order, from an empty scratch directory
+    (a later tutorial may use an earlier one's runs)."""
+    pages = sorted(d for d in env.found_docs if d.startswith("tutorials/") and d != "tutorials/index")
+    if not any(d in docnames for d in pages):
+        return
+    shutil.rmtree(tutorial_dir(app.outdir), ignore_errors=True)
+    docnames[:] = sorted(set(docnames) | set(pages))
+
+
 def setup(app):
+    app.connect("env-before-read-docs", _tutorials_together)
     app.add_directive("gouge-cli", CliDirective)
     app.add_directive("gouge-config", ConfigDirective)
     app.add_directive("gouge-file", FileDirective)
