@@ -275,7 +275,8 @@ def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool =
             blocks["pressure_grid"] = [p if p is not None else _empty_like(model) for p in grid]
         if out is None:
             if info.is_fork:
-                base = Path(info.parent_run) if info.parent_run else info.run_dir.parent.parent.parent
+                # parent_run is stored relative to the branch directory (or absolute)
+                base = info.run_dir / info.parent_run if info.parent_run else info.run_dir.parent.parent.parent
                 out = base / "export" / f"slip_{info.fork_slip:03d}_{info.branch}.vtkhdf"
             else:
                 out = info.run_dir / "export" / f"{info.run_dir.name}.vtkhdf"
