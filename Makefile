@@ -43,7 +43,8 @@ bench: $(STAMP)
 	$(BIN)/gouge bench
 
 # The documentation site into docs/_build/html: warnings are errors, every cross-reference is
-# checked, and the tutorials (examples/*.sh) run on a reduced scene (GOUGE_DOCS_FULL=1: as written).
+# checked, and the tutorials (examples/*.sh) run on a reduced scene (GOUGE_DOCS_FULL=1: as written;
+# GOUGE_DOCS_SKIP_TUTORIALS=1: pages without running them, a quick check of the prose).
 docs: $(STAMP)
 	$(BIN)/python -m sphinx -W --keep-going -n -q -b html docs docs/_build/html
 

@@ -19,7 +19,8 @@ holding links to ``configs/`` and ``examples/``, with ``gouge`` as
 ``python -m gouge_cli.cli`` of this checkout; each code cell is shown with its output. A text cell's
 ``![alt](path)`` of a file the script wrote is copied into the docs. By default the scene is
 reduced: ``gouge run`` gets ``$GOUGE_EXAMPLE_SET`` appended (see :data:`REDUCED`); set
-``GOUGE_DOCS_FULL=1`` to run the tutorials as written. A failing cell fails the build.
+``GOUGE_DOCS_FULL=1`` to run the tutorials as written, ``GOUGE_DOCS_SKIP_TUTORIALS=1`` to build
+the pages without running them (a quick check of the prose). A failing cell fails the build.
 """
 
 from __future__ import annotations
@@ -312,21 +313,30 @@ class TutorialDirective(Directive):
         env.note_dependency(str(script))
         full = os.environ.get("GOUGE_DOCS_FULL") == "1"
         work = tutorial_dir(env.app.outdir)
-        try:
-            outputs = run_tutorial(script, work, full)
-        except (RuntimeError, subprocess.TimeoutExpired) as err:
-            raise self.error(str(err)) from None
+        skip = os.environ.get("GOUGE_DOCS_SKIP_TUTORIALS") == "1"
+        if skip:
+            outputs = ["" for kind, _ in split_cells(script.read_text()) if kind == "code"]
+        else:
+            try:
+                outputs = run_tutorial(script, work, full)
+            except (RuntimeError, subprocess.TimeoutExpired) as err:
+                raise self.error(str(err)) from None
         gen = Path(env.srcdir) / "_generated" / script.stem
         parts, i = [], 0
         mode = "full scene" if full else f"reduced scene (`gouge run ... {REDUCED}`)"
         note = (f":::{{note}}\nThis page is `{self.arguments[0]}`, run when the docs were built, on the "
                 f"{mode}; the outputs below are that run's.\n:::\n")
+        if skip:
+            note = (f":::{{note}}\nThis page is `{self.arguments[0]}`; this build did not run it "
+                    "(GOUGE_DOCS_SKIP_TUTORIALS=1), so it shows no outputs.\n:::\n")
         for kind, text in split_cells(script.read_text()):
             if note and (kind == "code" or parts):
                 parts.append(note)
                 note = None
             if kind == "markdown":
                 def image(m):
+                    if skip:
+                        return f"*(figure `{m.group(2)}`, written when the tutorial runs)*"
                     src = work / m.group(2)
                     if not src.is_file():
                         raise RuntimeError(f"{script.name}: image {m.group(2)} was not written by the tutorial")
