@@ -118,3 +118,21 @@ def test_tutorial_ran_on_its_reduced_scene(site, script):
     elif script.stem.startswith("05"):
         assert list((first / "export").glob("*.vtkhdf"))
         assert list((first / "figures").glob("slip_002_movie.*"))
+
+
+def test_key_rows_cover_every_config_key_once():
+    """The config reference's rows: every leaf key of the defaults (the fluid section included), once."""
+    from gouge_cli.config import Config, FluidConfig
+    from gouge_cli.config_doc import key_rows
+
+    def leaves(d, prefix=""):
+        for k, v in d.items():
+            if isinstance(v, dict):
+                yield from leaves(v, f"{prefix}{k}.")
+            elif not (k == "fluid" and v is None):
+                yield prefix + k
+
+    expected = set(leaves(Config().to_dict())) | {f"fluid.{k}" for k in FluidConfig().model_dump(mode="json")}
+    keys = [r["key"] for r in key_rows()]
+    assert len(keys) == len(set(keys)) and set(keys) == expected
+    assert all(r["meaning"] for r in key_rows())
