@@ -38,6 +38,7 @@ for temporal collections (also for files written by VTK's own vtkHDFWriter), not
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -276,7 +277,8 @@ def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool =
         if out is None:
             if info.is_fork:
                 # parent_run is stored relative to the branch directory (or absolute)
-                base = info.run_dir / info.parent_run if info.parent_run else info.run_dir.parent.parent.parent
+                base = (Path(os.path.normpath(info.run_dir / info.parent_run)) if info.parent_run
+                        else info.run_dir.parent.parent.parent)
                 out = base / "export" / f"slip_{info.fork_slip:03d}_{info.branch}.vtkhdf"
             else:
                 out = info.run_dir / "export" / f"{info.run_dir.name}.vtkhdf"
