@@ -35,7 +35,8 @@ ls -la runs/first/export
 # %%
 gouge movie runs/first --slip 2 --perm 1e-5
 # %% [markdown]
-# A frame of the same kind of movie, slip 4 of the full demo:
+# A frame of the same kind of movie, slip 4 of the full demo (the whole movie:
+# {download}`demo_slip4_movie.mp4 </figures/demo_slip4_movie.mp4>`):
 #
 # ```{image} /figures/demo_slip4_movie_frame.png
 # :alt: a frame of the demo's slip-4 movie
