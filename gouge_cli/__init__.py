@@ -4,7 +4,7 @@ The Python API (``import gouge_cli as gouge``): open_run, open_study, open_campa
 run, restart, study -- see gouge_cli.api. They are imported on first use (PEP 562), so ``import gouge_cli`` stays light.
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 # numba's cache folder is chosen (per digest of the kernel sources) when gouge is imported
 from .kernels import NUMBA_CACHE  # noqa: E402,F401

@@ -1,7 +1,7 @@
 """Run configuration: pydantic models loaded from YAML, with dotted overrides.
 
 Every field has a default, a unit and a range. Dimensional fields accept a plain
-dimensionless number (scales of physics.md section 1) or an SI string such as
+dimensionless number (scales of docs/physics/units.md) or an SI string such as
 ``"24 MPa"``. Unknown keys, wrong types and out-of-range values raise
 :class:`ConfigError` whose message names the key, the value and what is allowed.
 """
@@ -106,7 +106,7 @@ class PackingConfig(_Section):
 
 
 class CompactionConfig(_Section):
-    """Settling under the normal stress alone before the driver starts (physics.md section 3)."""
+    """Settling under the normal stress alone before the driver starts (docs/physics/walls.md)."""
 
     damping: float = Field(0.01, ge=0, le=1, description="background viscous rate on free grains while settling [1/t0]")
     min_time: Time = Field(500.0, ge=0, description="settle at least this long [t0]")
@@ -134,7 +134,7 @@ class LoadingConfig(_Section):
 
 
 class NumericsConfig(_Section):
-    """Time step, neighbour list and threads (physics.md section 5)."""
+    """Time step, neighbour list and threads (docs/physics/timestep.md)."""
 
     dt: Optional[Time] = Field(None, gt=0, description="time step [t0]; default dt_safety * stability bound")
     dt_safety: float = Field(0.1, gt=0, le=1.0, description="fraction of the stability bound used as dt [-]")
@@ -210,7 +210,7 @@ class SlipsConfig(_Section):
 
 
 class FluidConfig(_Section):
-    """Pore fluid on a Goren pressure grid (thesis Eqs. 14-20, physics.md section 4)."""
+    """Pore fluid on a Goren pressure grid (thesis Eqs. 14-20, docs/physics/fluid.md)."""
 
     permeability: Permeability = Field(
         1e-5, gt=0, description="Carman-Kozeny prefactor kappa_c [d^2] (thesis 'Permeability')"

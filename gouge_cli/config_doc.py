@@ -110,7 +110,7 @@ def commented_defaults() -> str:
     fluid_rows += _lines(FluidConfig, FluidConfig().model_dump(mode="json"), 1)
     width = max(len(r[0]) for r in rows + fluid_rows) + 2
     head = [f"# gouge {__version__}: every config key with its default, unit, allowed range and meaning.",
-            "# Units are dimensionless (physics.md section 1): length d, stress E, density rho_s,",
+            "# Units are dimensionless (docs/physics/units.md): length d, stress E, density rho_s,",
             "# time t0 = d / sqrt(E / rho_s), velocity v0 = d / t0; keys marked 'or SI' also take a",
             "# string with an SI unit, e.g. normal_stress: 24 MPa. Unknown keys are refused."]
     body = [f"{text:<{width}}# {note}" if note else text for text, note in rows]
@@ -159,3 +159,30 @@ def json_schema() -> dict:
     schema["$id"] = SCHEMA_ID
     schema["title"] = f"gouge run config (gouge {__version__})"
     return schema
+
+
+def key_rows() -> list[dict]:
+    """Every config key as a row (the docs' reference table): section, section_doc, key (dotted),
+    default, unit, range, meaning (with the SI units a dimensional key also takes)."""
+    rows = []
+
+    def walk(model: type[BaseModel], values: dict, prefix: str, section: str, section_doc: str):
+        for name, field in model.model_fields.items():
+            sub = _section_model(field)
+            if sub is not None:
+                doc = (sub.__doc__ or "").strip().splitlines()[0] if sub.__doc__ else ""
+                if field.description:
+                    doc = f"{doc} {field.description}."
+                sub_values = values.get(name) or sub().model_dump(mode="json")
+                walk(sub, sub_values, f"{prefix}{name}.", f"{prefix}{name}", doc)
+                continue
+            unit, text = split_description(field.description)
+            dim = _dimension(field)
+            if dim:
+                text = f"{text} (or SI: {', '.join(si_units(dim))})"
+            rows.append({"section": section, "section_doc": section_doc, "key": prefix + name,
+                         "default": _scalar(values.get(name)), "unit": unit, "range": _range_text(field),
+                         "meaning": text})
+
+    walk(Config, Config().to_dict(), "", "", (Config.__doc__ or "").strip().splitlines()[0])
+    return rows

@@ -1,4 +1,4 @@
-"""Scales between SI and gouge's dimensionless units (physics.md section 1).
+"""Scales between SI and gouge's dimensionless units (docs/physics/units.md).
 
 Internally d = E = rho_s = 1. A config value may be a plain number (already
 dimensionless) or a string with an SI unit, e.g. ``"24 MPa"`` or ``"5e-4 m"``;

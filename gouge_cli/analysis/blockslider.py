@@ -1,6 +1,6 @@
 """Spring-block slider: thesis Eqs. 2-3 and the fit of a slip's velocity to Eq. 3.
 
-Per-unit-length form (physics.md section 3): wall mass ``m`` per length, spring
+Per-unit-length form (docs/physics/walls.md): wall mass ``m`` per length, spring
 constant ``k`` per length, normal stress ``sigma`` (the normal force N of the
 thesis per unit length), friction drop ``dmu = mu_s - mu_d``. With the loading
 during slip neglected, Eq. 3 reads

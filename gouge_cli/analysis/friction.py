@@ -11,7 +11,7 @@ with t and x measured from the slip onset, where the spring force is
 ``sigma mu_s``, the loading term ``k V_s t`` dropped in Eqs. 6-7, and the
 acceleration ``a = (V_w(t + dt) - V_w(t - dt)) / (2 dt)``. Here we keep the
 loading term and use the spring force itself, ``tau(t) = k (V_s t - x(t))``
-(physics.md section 3; it equals ``sigma mu_s + k V_s t - k x`` from the
+(docs/physics/walls.md; it equals ``sigma mu_s + k V_s t - k x`` from the
 onset), so
 
     R(t) = mu_d(t) (sigma - P*(t)) = tau(t) - m_b a(t)        (Eq. 6)

@@ -4,7 +4,7 @@ as RUN/analysis/*.csv, summary.json and /analysis in run.h5 (through io.runfile)
 
 Reads only: ``RUN/run.h5`` (io.runfile.RunReader) and the forks under
 ``RUN/forks/slip_NNN/{drained,perm_K}/run.h5``. All quantities are dimensionless (length d,
-stress E, time t0; physics.md section 1). Errors are gouge_cli.errors.AnalysisError (subclasses
+stress E, time t0; docs/physics/units.md). Errors are gouge_cli.errors.AnalysisError (subclasses
 name the case); the CLI turns them into exit code 2.
 """
 

@@ -202,7 +202,8 @@ def bench(
     repeats: int = typer.Option(3, help="repeats (min/median/max reported)"),
     dt: float = typer.Option(0.89, help="time step [t0] (LAMMPS deck default)"),
     skin: float = typer.Option(0.2, help="Verlet skin [d]"),
-    lammps: bool = typer.Option(True, help="also time LAMMPS (shared/bench deck) where lmp is installed"),
+    lammps: bool = typer.Option(True, help="also time LAMMPS (the deck in benchmarks/lammps) where lmp is "
+                                "installed; says why when it cannot"),
     lammps_max: int = typer.Option(40000, help="largest N timed in LAMMPS (its set-up of 160,000 grains "
                                    "takes about 20 minutes)"),
     perm: float = typer.Option(1e-5, "--perm", help="also time the undrained 10,000-grain scene (implicit "
@@ -240,6 +241,14 @@ def bench(
                       f"{r['bytes_per_grain']:.0f}" if r["bytes_per_grain"] else "",
                       {None: "", True: "yes", False: "NO"}[r["identical_to_1_thread"]], ratio)
     out.print(table)
+    lam = results.get("lammps", {})
+    if lam.get("missing"):
+        reasons = sorted({m["reason"] for m in lam["missing"]})
+        sizes_missing = sorted({m["n_grains"] for m in lam["missing"]})
+        out.print(f"LAMMPS rows missing (N {', '.join(map(str, sizes_missing))}): {'; '.join(reasons)}",
+                  highlight=False)
+    elif not lam.get("requested", True):
+        out.print("LAMMPS not timed (--no-lammps)", highlight=False)
     for s in results.get("scaling", []):
         for t, ratio in s["paired_ratio"].items():
             out.print(f"N {s['n_grains']}: {t} threads / fewest, median of the per-repeat ratios (thread counts take "

@@ -1,4 +1,4 @@
-"""Stick-phase inertia (density) scaling of loading runs (physics.md section 8, issue 19).
+"""Stick-phase inertia (density) scaling of loading runs (docs/physics/stick_scaling.md, issue 19).
 
 While a loading run sticks, the mass and moment of inertia of every grain and the mass of the
 top wall are multiplied by lambda (``numerics.stick_scaling``); the step is the true step times

@@ -38,6 +38,7 @@ for temporal collections (also for files written by VTK's own vtkHDFWriter), not
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 

@@ -2,7 +2,7 @@
 
 HDF5 datasets carry ``unit`` and ``description`` attributes. Attributes cannot carry
 attributes, so each group with attributes of its own also holds ``attribute_units``: JSON
-``{name: [unit, description]}``. Units are the dimensionless scales of physics.md section 1
+``{name: [unit, description]}``. Units are the dimensionless scales of docs/physics/units.md
 (length d, stress E, time t0 = d / sqrt(E / rho_s), velocity v0 = d / t0); the SI size of
 each is the run file's ``scales`` attribute.
 

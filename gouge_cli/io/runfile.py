@@ -56,7 +56,7 @@ from ..kernels import layout as L
 from ..kernels import measure as M
 from .rundir import open_run_file
 
-# name -> (unit, description); units are the dimensionless scales of physics.md section 1
+# name -> (unit, description); units are the dimensionless scales of docs/physics/units.md
 SERIES = {
     "time": ("t0", "simulated clock since the start of compaction (commands and figures report "
                    "time - (time[0] - load_time[0]): since loading began)"),

@@ -1,6 +1,6 @@
 """numba kernels only: arrays and scalars in, status codes out; no allocation, no exceptions, no
 imports from the rest of gouge. Named indices of every shared array: layout.py. One home per
-equation: contact.py (Eqs. 8-11), step.py (velocity Verlet, physics.md 2-3), deposit.py (App. E),
+equation: contact.py (Eqs. 8-11), step.py (velocity Verlet), deposit.py (App. E),
 pressure.py (Eqs. 14-20), drag.py (Eqs. 12-13), fluid_update.py (their order), coupled.py
 (step + fluid), measure.py (observables), neighbors.py reorder.py (lists, numbering), lanes.py
 (vector adds with the scalar bits), probe.py (the bench's machine probe)."""

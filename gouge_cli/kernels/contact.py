@@ -1,9 +1,9 @@
-"""Hertz-Mindlin contact law for one pair of discs (thesis Eqs. 8-11, physics.md section 2).
+"""Hertz-Mindlin contact law for one pair of discs (thesis Eqs. 8-11, docs/physics/contacts.md).
 
 Convention: n points from grain i to grain j, t = (-n_z, n_x). The pair record
 holds the force ON j (the force on i is its negative) and the torque on each grain.
 
-Lever arms [choice, departs from physics.md]: the tangential force acts at the contact
+Lever arms [choice, departs from the thesis; docs/physics/contacts.md]: the tangential force acts at the contact
 point, a_i = R_i - xi/2 from centre i and a_j = R_j - xi/2 from centre j, so a_i + a_j = r
 and the pair's torques balance the moment of its forces: angular momentum is conserved
 exactly (with arms R_i, R_j each contact would inject a net torque xi F_s). The same arms

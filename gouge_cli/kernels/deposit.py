@@ -1,5 +1,5 @@
 """Grain -> grid deposit of the pore-fluid model: solid fraction s, solid velocity and grad s
-(thesis Appendix E, the solid fraction of Eq. 14; physics.md section 4).
+(thesis Appendix E, the solid fraction of Eq. 14; docs/physics/fluid.md).
 
 Grid
 ----

@@ -1,4 +1,4 @@
-"""Pore-fluid kernels on the Goren pressure grid (thesis Eqs. 12, 14-20; physics.md section 4).
+"""Pore-fluid kernels on the Goren pressure grid (thesis Eqs. 12, 14-20; docs/physics/fluid.md).
 
 Pure compute (``error_model="numpy"``: IEEE inf/NaN instead of ZeroDivisionError, so loops
 vectorise), no allocation: every array is allocated once by :class:`gouge_cli.model.fluid.FluidGrid`

@@ -1,6 +1,6 @@
 """Pore pressure on the Goren grid: the undrained source from solid mass conservation (Eqs. 14-17),
 the pressure equation (Eq. 18) with Carman-Kozeny permeability (Eq. 20) and its diffusion
-solved implicitly (conjugate gradients) or explicitly (FTCS); physics.md section 4.
+solved implicitly (conjugate gradients) or explicitly (FTCS); docs/physics/fluid.md.
 
 Grid: :mod:`gouge_cli.kernels.deposit`; arrays and indices: :mod:`gouge_cli.kernels.layout`.
 
@@ -28,7 +28,7 @@ Diffusion then advances P* by dt_f with the (1 + beta P) factors lagged at P^n
 (Picard): capacity C_c = beta phi_c, face conductances
 T = (1 + beta P)_face kappa_face / (eta h^2), with the arithmetic mean of
 (1 + beta P) and the harmonic mean of kappa (Carman-Kozeny,
-kappa = kappa_c phi^3 / (1 - phi)^2, phi clamped to [phi_min, phi_max], physics.md;
+kappa = kappa_c phi^3 / (1 - phi)^2, phi clamped to [phi_min, phi_max], docs/physics/fluid.md;
 the thesis's printed (1 + 2 phi)^3 is an extraction error). A wall face is half
 a cell from the boundary-cell centre: T_b = (1 + beta P_cell / 2) kappa_cell 2 / (eta dz^2).
 
@@ -98,7 +98,7 @@ def undrained_source(P, s, s_old, ux, uz_rel, grad_s_x, grad_s_z, dt_f, beta, s_
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def permeability_field(s, kappa_c, phi_min, phi_max, permeability, capacity, beta):
-    """Carman-Kozeny permeability (physics.md; thesis Eq. 20 corrected) and capacity.
+    """Carman-Kozeny permeability (docs/physics/fluid.md; thesis Eq. 20 corrected) and capacity.
 
     permeability : out, kappa_c phi^3 / (1 - phi)^2 [d^2];  capacity : out, beta phi [1/E]
     with phi = 1 - s clamped to [phi_min, phi_max].

@@ -1,4 +1,4 @@
-"""The time-step loop: velocity Verlet for grains and the top-wall body (physics.md sections 2-3).
+"""The time-step loop: velocity Verlet for grains and the top-wall body (docs/physics/walls.md).
 
 One step (``_step``):
   1. top wall: half kick with last step's force, drift; its grains take its velocity

@@ -1,4 +1,4 @@
-"""The pore-pressure grid of a wet scene (thesis Eqs. 12, 14-20; physics.md section 4).
+"""The pore-pressure grid of a wet scene (thesis Eqs. 12, 14-20; docs/physics/fluid.md).
 
 :class:`FluidGrid` owns every array the fluid kernels need, allocated once, and
 the parameters from :class:`gouge_cli.config.FluidConfig`. The engine calls, from

@@ -1,4 +1,4 @@
-"""Seeded loose packing between two rough walls (physics.md section 3).
+"""Seeded loose packing between two rough walls (docs/physics/walls.md).
 
 Each wall is one row of grains (diameters from the same distribution) glued to a
 rigid body; free grains start on a jittered square lattice with no overlaps and

@@ -1,6 +1,6 @@
 """All evolving state of a scene as flat numpy arrays (structure of arrays).
 
-Grains are discs in the x-z plane with sphere mass and inertia (physics.md section 1).
+Grains are discs in the x-z plane with sphere mass and inertia (docs/physics/units.md).
 ``body``: 0 free grain, 1 bottom-wall grain (fixed), 2 top-wall grain (moves with the top body).
 Everything a restart needs to continue bit for bit is in :meth:`State.arrays` (the
 neighbour list too, since it fixes the order of force sums). Every array has one dtype and C

@@ -1,4 +1,4 @@
-"""Time-step bound from the stiffest contact mode (physics.md section 5).
+"""Time-step bound from the stiffest contact mode (docs/physics/timestep.md).
 
 The stiffest mode is tangential-rotational: for two discs with sphere inertia
 I = m D^2/10 the effective mass at the contact point is m/7. Its stiffness is the

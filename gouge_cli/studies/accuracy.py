@@ -1,6 +1,6 @@
 """Accuracy ladders: run one scene at a ladder of numerical settings, time each run and
 measure its error against the finest setting; the same for analytic cases with known
-solutions, so the order of each scheme is measured (physics.md sections 5 and 7).
+solutions, so the order of each scheme is measured (docs/physics/timestep.md and docs/validation.md).
 
 Scene ladders start every level from the same state (a checkpoint written by ``gouge run``
 before a slip, or one made here by compacting and loading the scene until its first slip)

@@ -1,6 +1,6 @@
 """`gouge bench`: grain-steps per second on the sheared layer, side by side with LAMMPS.
 
-The scene mirrors ``shared/bench/lammps`` (width 200 sqrt(N/1e4) d, one rough row of wall
+The scene is that of the LAMMPS deck in ``benchmarks/lammps`` (width 200 sqrt(N/1e4) d, one rough row of wall
 grains at each side, diameters uniform in [0.8, 1.2], E = 1, nu = 0.2, mu = 0.5,
 sigma = 3e-4 E, top wall dragged at 1e-3 v0 by a stiff spring, dt and skin as given):
 compaction, ~0.3 strain of pre-shear, then only the steady sheared phase is timed.
@@ -13,7 +13,8 @@ step (NRT statistics: two advances of different length from the same state), the
 share of an undrained step, the contact pass on the first m grains of the largest packing
 (cost per grain against working-set size, at the same kind of rows and pairs), and the
 projected wall time of one loading cycle and of one slip of the thesis Run 24 scene
-(physics.md section 6) at the rates measured here.
+(docs/physics/units.md, "Scale of real work") at the rates measured here. Where LAMMPS cannot
+be timed (no ``lmp``, no deck, a failed run), the results say why under ``lammps``.
 """
 
 from __future__ import annotations
@@ -46,7 +47,7 @@ CACHE = Path("runs/bench/cache")
 DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "kernels/reorder.py", "kernels/layout.py",
                "model/packing.py", "model/params.py", "driver/simulation.py", "model/state.py", "config.py",
                "model/timestep.py", "model/portable.py")     # (and bench_config below)
-RUN24_CYCLE = 1.6e7     # [t0] one loading cycle of thesis Run 24 (physics.md section 6)
+RUN24_CYCLE = 1.6e7     # [t0] one loading cycle of thesis Run 24 (docs/physics/units.md)
 
 
 @dataclass
@@ -173,26 +174,47 @@ def paired_scaling(rates: dict[int, list[float]]) -> dict[int, float]:
     return {t: median_ratio(r, rates[base]) for t, r in rates.items() if t != base}
 
 
+LAMMPS_INSTALL = "apt-get install lammps (and openmpi-bin for 2+ ranks); or build LAMMPS with its GRANULAR package"
+
+
 def lammps_script() -> Path | None:
+    """The deck's driver: $GOUGE_LAMMPS_BENCH, else benchmarks/lammps/run.sh of this checkout."""
     candidates = [os.environ.get("GOUGE_LAMMPS_BENCH", ""),
-                  Path(__file__).resolve().parents[2] / "shared" / "bench" / "lammps" / "run_lammps.sh",
-                  Path(__file__).resolve().parents[3] / "shared" / "bench" / "lammps" / "run_lammps.sh"]
+                  Path(__file__).resolve().parents[2] / "benchmarks" / "lammps" / "run.sh"]
     for c in candidates:
         if c and Path(c).is_file():
             return Path(c)
     return None
 
 
-def time_lammps(n_grains: int, ranks: int, steps: int, dt: float, skin: float, style: str) -> float | None:
-    script = lammps_script()
-    if script is None or shutil.which("lmp") is None:
-        return None
+def lammps_missing(ranks: int = 1) -> str | None:
+    """Why LAMMPS cannot be timed here (None when it can): no deck, no `lmp`, no `mpirun`."""
+    if lammps_script() is None:
+        return ("the LAMMPS deck benchmarks/lammps/run.sh is not in this installation "
+                "(run from a checkout, or set GOUGE_LAMMPS_BENCH to its path)")
+    if shutil.which("lmp") is None:
+        return f"lmp is not on PATH: {LAMMPS_INSTALL}"
     if ranks > 1 and shutil.which("mpirun") is None:
-        return None
-    proc = subprocess.run(["bash", str(script), str(n_grains), str(ranks), str(steps), str(dt), str(skin), style],
-                          capture_output=True, text=True, timeout=1800)
+        return f"mpirun is not on PATH (needed for {ranks} ranks): apt-get install openmpi-bin"
+    return None
+
+
+def time_lammps(n_grains: int, ranks: int, steps: int, dt: float, skin: float,
+                style: str) -> tuple[float | None, str | None]:
+    """(grain-steps per second, None), or (None, why LAMMPS gave no rate)."""
+    reason = lammps_missing(ranks)
+    if reason:
+        return None, reason
+    try:
+        proc = subprocess.run(["bash", str(lammps_script()), str(n_grains), str(ranks), str(steps), str(dt),
+                               str(skin), style], capture_output=True, text=True, timeout=1800)
+    except subprocess.TimeoutExpired:
+        return None, "LAMMPS took more than 30 minutes"
     match = re.search(r"grain_steps_per_s=([\d.eE+-]+)", proc.stdout)
-    return float(match.group(1)) if match else None
+    if match:
+        return float(match.group(1)), None
+    tail = (proc.stderr.strip() or proc.stdout.strip()).splitlines()[-3:]
+    return None, f"LAMMPS failed (exit {proc.returncode}): {' | '.join(tail) or 'no output'}"
 
 
 def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability: float, threads: int,
@@ -449,6 +471,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
     fluid_parts = []
     scaling = []
     run24 = None
+    lammps_notes: list[dict] = []
     run24_dt = choose_dt(run24_config())
     for n in sizes:
         sim, start = prepare(n, dt, skin, cache)
@@ -487,15 +510,21 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
         if lammps and n <= lammps_max:
             for style in lammps_styles:
                 for t in threads:
-                    rate = time_lammps(n, t, n_steps, dt, skin, style)
+                    rate, reason = time_lammps(n, t, n_steps, dt, skin, style)
                     if rate is not None:
                         rows.append(BenchRow(f"lammps-{style}", n, t, n_steps, rate, rate, rate))
+                    else:
+                        lammps_notes.append({"code": f"lammps-{style}", "n_grains": n, "threads": t,
+                                             "reason": reason})
     return {
         "machine": {"cpus": os.cpu_count(), "numba_threads": all_threads},
         "provenance": provenance.collect(all_threads),
         "dt": dt, "skin": skin,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
         "rows": [asdict(r) for r in rows],
+        "lammps": {"timed": lammps and any(r.code.startswith("lammps") for r in rows),
+                   "requested": lammps, "max_grains": lammps_max, "missing": lammps_notes,
+                   "install": LAMMPS_INSTALL},
         "fluid": fluid,
         "fluid_profile_us": fluid_parts,
         "profile_us": profiles,

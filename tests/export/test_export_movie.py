@@ -278,3 +278,23 @@ def test_export_fork_exports_each_branch(runs):
     one = gouge("export", run, "--fork", "slip_001/perm_1e-05", "--out", runs / "one.vtkhdf")
     assert one.exit_code == 0 and (runs / "one.vtkhdf").is_file()
     assert gouge("export", run, "--fork", "slip_001", "--out", runs / "two.vtkhdf").exit_code == EXIT_BAD_INPUT
+
+
+def test_export_of_a_fork_lands_in_its_run_whatever_the_working_directory(runs, monkeypatch, tmp_path):
+    """A real fork stores parent_run relative to the branch directory ("../../.."): the export goes to
+    RUN/export, not to that path taken from the working directory."""
+    import h5py
+
+    run = _fake_fork(runs)
+    branch = run / "forks" / "slip_001" / "perm_1e-05"
+    with h5py.File(branch / "run.h5", "r+") as h5:
+        h5.attrs["parent_run"] = "../../.."
+        h5.attrs["fork_slip"] = 1
+        h5.attrs["branch"] = "perm_1e-05"
+    elsewhere = tmp_path / "a" / "b" / "c"
+    elsewhere.mkdir(parents=True)
+    monkeypatch.chdir(elsewhere)
+    result = gouge("export", run, "--fork", "slip_001/perm_1e-05")
+    assert result.exit_code == 0, result.output
+    assert (run / "export" / "slip_001_perm_1e-05.vtkhdf").is_file()
+    assert not (tmp_path / "export").exists()

@@ -1,0 +1,35 @@
+"""Sphinx configuration of gouge's documentation (`make docs`; warnings are errors, references checked)."""
+
+import os
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).parent / "_ext"))
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+from gouge_cli import __version__  # noqa: E402
+
+project = "gouge"
+author = "the gouge developers"
+copyright = "the gouge developers"
+version = release = __version__
+
+extensions = ["myst_parser", "sphinx.ext.autodoc", "sphinx.ext.napoleon", "sphinx.ext.mathjax", "gouge_docs"]
+myst_enable_extensions = ["dollarmath", "colon_fence", "deflist"]
+myst_heading_anchors = 3
+source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
+exclude_patterns = ["_build", "_generated", "Thumbs.db", ".DS_Store"]
+nitpicky = True
+# the Python API page documents gouge's own objects; types from other packages are not linked
+nitpick_ignore_regex = [(r"py:.*", r"(numpy|np|h5py|pathlib|typing|collections|pydantic|typer|click)\..*"),
+                        (r"py:class", r"(Path|ndarray|optional|array-like|callable)")]
+autodoc_typehints = "none"
+autodoc_member_order = "bysource"
+
+html_theme = "furo"
+html_title = f"gouge {__version__}"
+html_static_path = []
+html_show_sourcelink = False
+smartquotes = False      # keep --option and "quotes" as typed
