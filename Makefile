@@ -33,11 +33,12 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/gouge run configs/demo.yaml --force
 
+# Two numba threads, so that the tests comparing 1 and 2 threads run (with one they are skipped, -rs says why).
 test: $(STAMP)
-	$(BIN)/python -m pytest -q
+	NUMBA_NUM_THREADS=2 $(BIN)/python -m pytest -q
 
 validate: $(STAMP)
-	$(BIN)/python -m pytest -q -m validation
+	NUMBA_NUM_THREADS=2 $(BIN)/python -m pytest -q -m validation
 
 bench: $(STAMP)
 	$(BIN)/gouge bench

@@ -83,19 +83,17 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
     """fluid_solve (serial, grid only) while the threads run step 2 of the next step, the grains'
     kicks and drift (move_range), each grain on its own: the bits of one after the other.
     Every thread moves its own part of the grains (kernels.step.kick_drift's: the ones it holds
-    in cache). If pending, the deposit's finish (deposit_finish: collect and expansion, ~10 us
-    at 10,000 grains) must precede the solve: thread 1 takes it (fetch_add on a claim counter)
+    in cache). If pending, the deposit's finish (deposit_finish: collect and expansion) must
+    precede the solve: thread 1 takes it (fetch_add on a claim counter)
     before its own part, while thread 0 moves its own; thread 0 then waits for it (or, if no
     other thread claimed it yet, does it itself: no thread ever waits on one that has not
     started) and solves. On one thread: solve, then move every grain. Returns how many
     grains are now past skin/2; out: int64 scratch (>= threads + 3: the lists' cell_count),
     out[0] = fluid_solve's status.
-    [In the loop at 10,000 grains on two threads, thread 0 moves its part in ~7 us, waits until
-    ~10 (thread 1's finish) and solves until ~24; the region takes 27-30 us, against 29-30 when
-    thread 0 finished and solved while the others moved its grains in chunks (~3x slower per
-    grain from the other core's cache; README stop 34). Arrays, not the grains/lists records:
-    unpacked from tuples inside this parallel function, the two tasks ran ~1.7x slower than one
-    after the other.]"""
+    [Each thread keeps its own grains: having the other threads move thread 0's grains in chunks
+    while it finished and solved was slower (those grains sit in the other core's cache). Arrays,
+    not the grains/lists records: unpacked from tuples inside this parallel function, the two
+    tasks ran slower than one after the other.]"""
     n = x.shape[0]
     tasks = max(min(int(params[THREADS]), n), 1)
     claim = tasks + 1

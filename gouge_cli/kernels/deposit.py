@@ -240,10 +240,9 @@ def _deposit_grouped(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s,
                      corners, partial, grain_kick, serial, finish):
     """deposit's fast form: cells and moments in DEPOSIT_GROUPS fixed groups, group g into
     partial[g] (in parallel unless serial), the shared columns summed in group order, then
-    expanded per cell. The same sums in the same order either way.
-    [One thread: the groups through one scratch buffer, each added to partial[0] at once (to
-    touch half the scratch), cost 61-62 us at 10,000 grains; a buffer per group and only the
-    shared columns added, 59 (AMD EPYC Zen 4).]"""
+    expanded per cell. The same sums in the same order either way. (One thread also uses a
+    buffer per group and adds only the shared columns: a single scratch buffer, each group
+    added to partial[0] at once, was no faster.)"""
     nx, nz = s.shape
     if serial:
         for g in range(DEPOSIT_GROUPS):
@@ -460,7 +459,7 @@ def _moments_range(first, last, moments, corners, nz):
         a10 = a10s[k]
         a01 = a01s[k]
         a11 = a11s[k]
-        add4(flat, r + np.uint64(M_S), a00, a10, a01, a11)           # (4-lane vector adds: 2x faster, same bits)
+        add4(flat, r + np.uint64(M_S), a00, a10, a01, a11)           # (4-lane vector adds, same bits)
         add4_scaled(flat, r + np.uint64(M_U), a00, a10, a01, a11, us[k])
         add4_scaled(flat, r + np.uint64(M_W), a00, a10, a01, a11, ws[k])
         add2(flat, r + np.uint64(M_G), (a00 + a01) * dfz[k], (a10 + a11) * dfz[k])
@@ -473,7 +472,7 @@ def _flag_columns(first, last, cell, moments, nz):
     every grain first:last (cell: the corners row CR_CELL): offsets from the first grain's
     column, taken into (-nx/2, nx/2] around it, and their least and greatest. The arc may hold
     columns no grain added to (they stay zero); it is one vector pass (int32 columns, integer
-    min and max), where a flag store per grain cost ~10 us per update at 10,000 grains."""
+    min and max), cheaper than a flag store per grain."""
     nx = moments.shape[0] // nz
     if last <= first:
         return
@@ -511,7 +510,7 @@ def _expand_column(records, i, nx, nz, inv_dx, inv_area, solid, momentum_x, mome
     from the moment records of the grains whose cell c00 is this one (share 00), the one to its
     left (10), below (01), left-below (11), each column's in partial[_source] after _collect;
     records: partial as one flat array. [Unsigned offsets (no negative-index checks), the slots
-    as uint64 constants (uint64 + int64 is float64 in numba): 7.1 -> 6.4 us at 80 x 19 cells.]"""
+    as uint64 constants (uint64 + int64 is float64 in numba).]"""
     il = i - 1 if i > 0 else nx - 1
     m = np.uint64(N_MOMENTS)
     s0, s1, s2, s3 = np.uint64(M_S), np.uint64(M_S + 1), np.uint64(M_S + 2), np.uint64(M_S + 3)

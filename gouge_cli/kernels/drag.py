@@ -134,11 +134,10 @@ def grain_drag_at(corners, n, nz, pairs, drag_x, drag_z):
     density as interleaved pairs (drag_density_pairs): the same values, without recomputing
     areas and weights, x and z in the two lanes of one vector sum (kernels.lanes). Cell c00
     from the bits of the coded row CR_CELL (kernels.layout.CELL_BITS); c10 = c00 + nz, less
-    nx nz past the last column. [Two float -> int conversions per grain (c00 and c10 stored as
-    floats) cost ~26 % of the loop at 10,000 grains; with AVX2 code the signed prange index
-    (negative-index checks) doubled it: 31 -> 15 us on one thread with both gone. A parallel
-    loop on one thread too: a plain loop through an inlined per-grain helper that takes the
-    arrays was ~10x slower (numba reference-counts them per grain).]"""
+    nx nz past the last column. [No float -> int conversion per grain (the cell is read as an
+    integer) and an unsigned loop index (no negative-index checks): both were a large share of
+    the loop. A parallel loop on one thread too: a plain loop through an inlined per-grain helper
+    that takes the arrays is much slower (numba reference-counts them per grain).]"""
     cells = corners[CR_CELL].view(np.int64)
     a00, a10, a01, a11 = corners[CR_A00], corners[CR_A10], corners[CR_A01], corners[CR_A11]
     column = np.uint64(2 * nz)

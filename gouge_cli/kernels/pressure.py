@@ -46,7 +46,7 @@ a cell from the boundary-cell centre: T_b = (1 + beta P_cell / 2) kappa_cell 2 /
   backward Euler otherwise. There Heun errs by ~x^3/6 per step against backward Euler's
   ~x^2/2: 0.0185 against 0.060 at the threshold x = 0.5 (exp(-0.5) = 0.6065), 0.0013
   against 0.0146 at x = 0.2. So the explicit step is the more accurate, and it saves the
-  conjugate gradients (~27 us of ~40 per update at 10,000 grains). The undrained thesis
+  conjugate gradients (most of an implicit update's cost). The undrained thesis
   scenes (kappa_c = 1e-5) sit at dt_f ~ 0.05 dt_max; kappa_c >~ 1e-4 goes implicit.
 """
 
@@ -223,7 +223,7 @@ def explicit_bound(capacity, tx, tz, tb, rates=None):
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
 def _row(d, p, tx_east, p_east, tx_west, p_west, tz_up, p_up, tz_down, p_down):
     """One row of the operator, in the order of the terms. Scalars only: numba may reference-count
-    the arrays of an inlined helper at every call of a plain loop (measured ~10x on the drag)."""
+    the arrays of an inlined helper at every call of a plain loop (kernels.drag.grain_drag_at)."""
     return (d * p - tx_east * p_east - tx_west * p_west) - tz_up * p_up - tz_down * p_down
 
 

@@ -3,7 +3,7 @@
 The force pass walks grain rows in number order and reads each neighbour's data; with
 neighbours a few numbers apart that data is in cache. Shear mixes the packing's initial
 numbering (after one layer width of shear at 10,000 grains the 90th percentile of |j - i|
-grows from 29 to 770 and the step slows by ~25 %), so the grains are re-numbered every
+grows from 29 to 770 and the step slows down), so the grains are re-numbered every
 few rebuilds: strips along x (strip_width: STRIP d, narrower in tall layers so that a strip
 holds at most about STRIP_GRAINS grains), then rows BIN d high, keeping the current order
 inside a bin (a stable counting sort, deterministic). The grain's original number travels
@@ -24,7 +24,7 @@ STRIP = 16.0            # [d] widest numbering strip, and the packing's initial 
 STRIP_MIN = 2.0         # [d] narrowest
 STRIP_GRAINS = 800.0    # grains per strip at most, down to STRIP_MIN: a grain's neighbours in the next
                         # strip stay a cache-sized window of numbers away in tall layers (160,000
-                        # grains: 4 d strips; 2.5-8 d measured 8-24 % faster than 16 d there)
+                        # grains: 4 d strips)
 BIN = 1.0               # [d] height of a row inside a strip
 
 

@@ -176,12 +176,12 @@ def contact_forces(grains, lists, pairs, drag_x, drag_z, params):
     grains, lists, pairs: kernels.layout.Grains, Lists, Pairs.
 
     Two passes, each split into nb equal parts, PARTS_PER_THREAD per thread when there are
-    several (smaller parts measured ~10 % faster on two threads; no part reads what another
+    several (smaller parts balance the threads better; no part reads what another
     part of the same pass writes): the law of every listed pair (law_pass) into pairs.pair_*,
     then the sum per grain (sum_pass) in the one fixed order of _sum_range. Every pair's result
     and every sum are the same for any nb: same bits on any thread count. [Summing by pulling
-    replaced a scatter of each pair to its second grain, whose read-modify-writes cost ~45 % of
-    the pass. The passes are separate parallel functions: numba fuses adjacent prange loops
+    replaced a scatter of each pair to its second grain, whose read-modify-writes were a large
+    share of the pass. The passes are separate parallel functions: numba fuses adjacent prange loops
     of equal range, which would let a part sum pairs another part has not yet computed.]"""
     n = grains.x.shape[0]
     if lists.layout[L_BUILT] < 0:
@@ -272,7 +272,7 @@ def closed_velocity(body, vx, vz, ax, az, half, damp, wall_vx, wall_vz):
     """(vx, vz) [v0] of a grain once the second half kick it owes is applied: what _kick (free
     grains, acceleration ax, az = force * inv_mass) and _set_wall_grain_velocity (top-wall
     grains, wall velocity) would store, same bits; bottom-wall grains keep theirs. Scalars
-    only: a per-grain call with array arguments costs ~90 ns in reference counting."""
+    only: a per-grain call with array arguments costs reference counting."""
     if body == FREE:
         return _half_kick(vx, ax, half, damp), _half_kick(vz, az, half, damp)
     if body == TOP:
@@ -288,7 +288,7 @@ def _move_one(i, x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_ine
     it then lies farther than sqrt(reach2) from its position at the last list build. The kick
     is computed for every grain and selected (a wall grain stores its velocity back unchanged):
     a store under a branch needs masked stores to vectorise, which AVX-512 has and AVX2 code
-    generation declined (kick pass ~48 against ~28 us per step at 10,000 grains)."""
+    generation declines."""
     half = 0.5 * dt
     free = body[i] == 0
     u0 = vx[i]
@@ -329,7 +329,7 @@ def move_range(first, last, x, z, vx, vz, spin, force_x, force_z, torque, inv_ma
     """_move_one for grains first:last on this thread; returns how many lie farther than skin/2
     from their build positions. (Unsigned bounds: no negative-index checks in the loop; called
     from parallel functions only: in a plain njit function the inlined array arguments cost
-    reference counting per grain, ~5x slower.)"""
+    reference counting per grain, several times slower.)"""
     dt = params[DT]
     width = params[WIDTH]
     damp = params[BG_DAMPING]
@@ -348,8 +348,8 @@ def kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inert
     """Half kick (two if double) and drift of every grain; returns how many grains lie farther
     than skin/2 from their build positions (the list must be rebuilt before forces).
     Grains in params[THREADS] equal parts (move_range); late: (N,) int64 scratch, one count per
-    part. [This replaced a prange over grains with per-grain flags summed serially, which took
-    28 us on two threads against 20 us on one at 10,000 grains; this takes 12 us.]"""
+    part. [This replaced a prange over grains with per-grain flags summed serially, which was
+    slower on two threads than on one.]"""
     n = x.shape[0]
     nb = min(max(int(params[THREADS]), 1), max(n, 1))
     for b in prange(nb):

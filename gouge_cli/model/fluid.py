@@ -23,7 +23,7 @@ from ..kernels import fluid_update as KF
 def aligned_zeros(shape: tuple, align: int = 64) -> np.ndarray:
     """Zeroed float64 array whose data starts on an `align`-byte boundary (numpy gives 16): the
     deposit's 128-byte moment records then lie on whole cache lines, so no vector add splits
-    across two (~3 us per update at 10,000 grains)."""
+    across two."""
     size = int(np.prod(shape))
     buffer = np.zeros(size + align // 8)
     start = (-buffer.ctypes.data % align) // 8

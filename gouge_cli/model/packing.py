@@ -6,7 +6,7 @@ are then compacted under the normal stress (:func:`gouge_cli.driver.simulation.c
 
 Grain numbering: strip by strip (STRIP d wide columns along x), bottom to top within a strip.
 Neighbours then have nearby numbers, so the force pass works in a small window of memory
-(+15-20 % grain-steps/s at 40,000 grains over row-by-row numbering). As the layer shears the
+(faster than row-by-row numbering in wide layers). As the layer shears the
 grains are re-numbered the same way (kernels.reorder, numerics.sort_every).
 """
 

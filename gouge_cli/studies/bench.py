@@ -146,7 +146,7 @@ def time_gouge(sim: Simulation, start: dict, threads: int | list[int], steps: in
 
 class _Probe:
     """kernels.probe.stream_probe over two float64 arrays of `n_bytes` together, in as many fixed
-    parts as numba has threads, ~0.1 s per call on one thread."""
+    parts as numba has threads."""
 
     def __init__(self, n_bytes: int):
         n = max(n_bytes // 16, 1024)

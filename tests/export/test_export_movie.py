@@ -45,9 +45,16 @@ def runs(tmp_path_factory):
     return root
 
 
-def _read_vtkhdf(path, times):
-    """[{block: vtkPolyData} per time step] through vtkHDFReader: the time steps it announces,
-    then each step by SetStep (the time of the output it gives is checked too)."""
+def clock_tolerance(steps, *times) -> float:
+    """How far apart two clocks that each add dt once per step may drift in `steps` steps: every
+    addition rounds by at most half an ulp of its result (the larger clock's, times[...]), two
+    clocks, plus a few roundings of the subtractions that compare them."""
+    return (steps + 4) * float(np.spacing(max(abs(float(t)) for t in times)))
+
+
+def _read_vtkhdf(path, times, tol):
+    """[{block: vtkPolyData} per time step] through vtkHDFReader: the time steps it announces
+    (within tol of times), then each step by SetStep (the time of the output it gives is checked too)."""
     vtk = pytest.importorskip("vtk")
     from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline as SDDP
 
@@ -55,7 +62,7 @@ def _read_vtkhdf(path, times):
     reader.SetFileName(str(path))
     reader.UpdateInformation()
     steps = np.array(reader.GetOutputInformation(0).Get(SDDP.TIME_STEPS()))
-    assert np.allclose(steps, times, rtol=0, atol=1e-9) and reader.GetNumberOfSteps() == len(times)
+    assert np.all(np.abs(steps - times) <= tol) and reader.GetNumberOfSteps() == len(times)
     out = []
     for k, t in enumerate(steps):
         reader.SetStep(k)
@@ -117,9 +124,13 @@ def test_export_reads_back_through_vtk(runs):
         snaps = [{k: v[...] for k, v in h5["snapshots"][n].items()} for n in names]
         geometry = [dict(h5["snapshots"][n]["pressure"].attrs) for n in names]
         times = np.array([h5["snapshots"][n].attrs["time"] - origin for n in names])
+        # the export's times are the drive clock (load_time), ours the main clock minus its value
+        # when loading began: two sums of dt that drift apart by round-off
+        tol = clock_tolerance(max(h5["snapshots"][n].attrs["step"] for n in names),
+                              *(h5["snapshots"][n].attrs["time"] for n in names))
         width, sigma = h5.attrs["width"], SCENE.get("loading", {}).get("normal_stress", 3e-4)
-    assert len(names) >= 5 and times[0] == pytest.approx(0.0, abs=1e-9)
-    data = _read_vtkhdf(path, times)
+    assert len(names) >= 5 and abs(times[0]) <= tol
+    data = _read_vtkhdf(path, times, tol)
     assert len(data) == len(snaps)
     for blocks, snap, geo in zip(data, snaps, geometry):
         assert set(blocks) == {"grains", "contacts", "walls", "pressure_grid"}
@@ -204,7 +215,8 @@ def test_every_dataset_and_attribute_is_described(runs):
         zb, zt = snap["z"][snap["body"][...] == 1].mean(), snap["z"][snap["body"][...] == 2].mean()
         assert p.attrs["origin"][1] == pytest.approx(zb, abs=1e-6)
         assert p.attrs["origin"][1] + nz * p.attrs["spacing"][1] == pytest.approx(zt, abs=0.05)
-        assert snap.attrs["load_time"] == pytest.approx(snap.attrs["time"] - h5.attrs["load_start_time"], abs=1e-9)
+        tol = clock_tolerance(snap.attrs["step"], snap.attrs["time"])      # two clocks, each a sum of dt
+        assert abs(snap.attrs["load_time"] - (snap.attrs["time"] - h5.attrs["load_start_time"])) <= tol
 
 
 def _fake_fork(runs):
@@ -228,24 +240,33 @@ def test_movie_frame_and_encoding(runs):
         renderer.close()
         assert frame.shape == (FRAME_PX[1], FRAME_PX[0], 3) and frame.dtype == np.uint8
         assert frame.std() > 10                                   # something was drawn
-        taus = frame_times(drained, undrained)
-        assert np.all(np.diff(taus) > 0) and taus.size >= 5
+        taus = frame_times(drained, undrained, pad=0.15)
+        # the rule (how many frames there are depends on where the slip falls in the run): the
+        # snapshots of both branches from 0.15 spans before the onset, merged closer than a third
+        # of their median spacing, so every such snapshot lies within that third of a frame
+        every = np.sort(np.concatenate([drained.tau, undrained.tau]))
+        third = np.median(np.diff(every)) / 3
+        kept = every[every >= -0.15 * max(float(every.max()), 1.0)]
+        assert taus.size >= 1 and taus[0] == kept[0] and np.all(np.isin(taus, kept))
+        assert np.all(np.diff(taus) > third)
+        assert all(np.abs(taus - t).min() <= third for t in kept)
     finally:
         drained.reader.close()
         undrained.reader.close()
+    wanted = min(4, taus.size)
     path, frames = make_movie(run, 1, 1e-5, runs / "m.mp4", max_frames=4)
-    assert path.suffix == ".mp4" and frames == 4 and 1e3 < path.stat().st_size < 2e6
+    assert path.suffix == ".mp4" and frames == wanted and 1e3 < path.stat().st_size < 2e6
     import imageio_ffmpeg
 
     reader = imageio_ffmpeg.read_frames(str(path))
     meta = next(reader)
     assert tuple(meta["size"]) == FRAME_PX
-    assert sum(1 for _ in reader) == 4
+    assert sum(1 for _ in reader) == wanted
     gif, frames = make_movie(run, 1, None, runs / "m.gif", max_frames=2)      # the fallback format
     from PIL import Image
 
     with Image.open(gif) as im:
-        assert gif.suffix == ".gif" and im.n_frames == 2 and im.size == FRAME_PX
+        assert gif.suffix == ".gif" and im.n_frames == frames == min(2, taus.size) and im.size == FRAME_PX
     bad = gouge("movie", run, "--slip", 2)
     assert bad.exit_code == EXIT_BAD_INPUT and ("no fork of slip 2" in bad.output or "no slip number 2" in bad.output)
 

@@ -8,6 +8,7 @@ import numpy as np
 from numba import njit, prange
 
 from gouge_cli.kernels.atomics import fetch_add
+from needs import two_threads
 
 
 @njit
@@ -33,15 +34,22 @@ def test_fetch_add_returns_the_old_value():
     assert list(counter) == [7, 13, 3]
 
 
-def test_chunks_are_taken_once_each_on_every_thread_count():
-    """200 rounds of 20,000 single items: with a plain (non-atomic) add, two threads racing on the
-    counter take some items twice and the per-task counts sum to more than the items."""
-    threads = numba.config.NUMBA_NUM_THREADS
+@two_threads
+def test_chunks_are_taken_once_each_by_racing_threads():
+    """200 rounds of 20,000 single items taken by 2 threads at once: with a plain (non-atomic)
+    add, the threads racing on the counter take some items twice and the per-task counts sum to
+    more than the items (a race needs two threads: skipped on one)."""
+    threads = 2
     size = 20_000
-    for _ in range(200):
-        counter = np.zeros(2 + threads, np.int64)
-        taken = np.zeros(size, np.int64)
-        _claim_all(threads, size, counter, taken)
-        assert (taken == 1).all()
-        assert counter[2:].sum() == size
-        assert counter[0] == size + threads          # each task's last claim overshoots by one
+    before = numba.get_num_threads()
+    numba.set_num_threads(threads)
+    try:
+        for _ in range(200):
+            counter = np.zeros(2 + threads, np.int64)
+            taken = np.zeros(size, np.int64)
+            _claim_all(threads, size, counter, taken)
+            assert (taken == 1).all()
+            assert counter[2:].sum() == size
+            assert counter[0] == size + threads          # each task's last claim overshoots by one
+    finally:
+        numba.set_num_threads(before)
