@@ -273,13 +273,18 @@ def main(argv=None):
     ap.add_argument("--no-lammps", action="store_true")
     ap.add_argument("--concurrent", type=int, default=8, help="runs side by side (0: skip)")
     ap.add_argument("--concurrent-threads", type=int, default=2)
-    ap.add_argument("--concurrent-size", type=int, default=10000)
+    ap.add_argument("--concurrent-size", type=int, default=None, help="grains per side-by-side run (default: the "
+                    "smallest of --sizes)")
     ap.add_argument("--seconds", type=float, default=15.0, help="steady shear timed per side-by-side run")
     ap.add_argument("--summarize-only", action="store_true", help="re-read $OUT's JSON and write the summary")
+    ap.add_argument("--reuse-bench", action="store_true", help="take $OUT/bench.json from an earlier run, measure "
+                    "the rest")
     ap.add_argument("--worker", type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--index", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--prepare", action="store_true", help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.concurrent_size is None:
+        args.concurrent_size = min(int(v) for v in args.sizes.split(","))
     if args.worker:
         return worker(args.worker, args.index, args.concurrent_size, args.concurrent_threads, args.seconds)
     if args.prepare:
@@ -294,7 +299,7 @@ def main(argv=None):
         conc_file = out / "concurrent.json"
         conc = json.loads(conc_file.read_text()) if conc_file.is_file() else None
     else:
-        bench = run_bench(args, out)
+        bench = json.loads((out / "bench.json").read_text()) if args.reuse_bench else run_bench(args, out)
         print(f"bench done after {time.time() - t0:.0f} s", flush=True)
         conc = run_concurrent(args, out) if args.concurrent > 0 else None
     record, text = summarize(bench, conc)
