@@ -103,7 +103,7 @@ def side_by_side(count: int, args, folder: Path) -> list[dict]:
                                "--concurrent-size", str(args.concurrent_size),
                                "--concurrent-threads", str(args.concurrent_threads), "--seconds", str(args.seconds)],
                               env=env) for i in range(count)]
-    deadline = time.time() + 600
+    deadline = time.time() + 1800                   # (a loaded machine starts processes slowly)
     while sum((folder / f"ready_{i}").exists() for i in range(count)) < count:
         if any(p.poll() not in (None, 0) for p in procs) or time.time() > deadline:
             for p in procs:
