@@ -517,7 +517,9 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
                         lammps_notes.append({"code": f"lammps-{style}", "n_grains": n, "threads": t,
                                              "reason": reason})
     return {
-        "machine": {"cpus": os.cpu_count(), "numba_threads": all_threads},
+        "machine": {"cpus": os.cpu_count(), "numba_threads": all_threads, "threads": threads,
+                    "numba_cpu_name": os.environ.get("NUMBA_CPU_NAME") or "host",
+                    "numba_cpu_features": os.environ.get("NUMBA_CPU_FEATURES") or "host"},
         "provenance": provenance.collect(all_threads),
         "dt": dt, "skin": skin,
         "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
