@@ -345,19 +345,19 @@ class CampaignReport:
 
 
 def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = False,
-                 retry_failed: bool = False, log=print) -> CampaignReport:
+                 retry_failed: bool = False, max_points: int | None = None, log=print) -> CampaignReport:
     """Run what is left of a campaign on Dask and write its table and figures.
 
     ``client``: a ``distributed.Client`` to use; otherwise one is opened for ``cluster``
     (:class:`~gouge_cli.workflows.executors.ClusterOptions`, default a LocalCluster) only when
     something is left to run. Raises :class:`CampaignConflict` when results exist with other
-    settings and ``force`` is not given.
+    settings and ``force`` is not given. ``max_points``: overrides the spec's limit on the sweep's size.
     """
     from .executors import ClusterOptions, open_client
 
     t_start = time.perf_counter()
     spec_path = Path(spec_path)
-    spec = load_spec(spec_path)
+    spec = load_spec(spec_path, max_points)
     s = survey(spec, spec_path)
     conflicts = s.by_state("conflict")
     if conflicts and not force:
