@@ -10,8 +10,10 @@ one pair definition of :mod:`gouge_cli.analysis.pairs`.
 
 from __future__ import annotations
 
+import errno
 import math
 import os
+import shlex
 import sys
 import time
 from dataclasses import dataclass
@@ -20,7 +22,7 @@ from pathlib import Path
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint
 from ..config import build_config, Config
-from ..errors import ConfigError
+from ..errors import ConfigError, NoSpaceError
 from ..driver.slips import lead_time
 from ..io.runfile import RunFile, slip_catalog
 from ..model.preflight import check_config
@@ -28,6 +30,8 @@ from ..errors import RunDirError
 from ..io.rundir import check_run_dir, refuse_if_in_progress, RunLock
 from ..driver.phases import load_phase
 from ..driver.simulation import Simulation
+from .pairs import branch_status
+from .run import stopped_by_os_error
 
 
 def branch_name(perm: float | None) -> str:
@@ -116,19 +120,40 @@ def _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_
         "fork_slip": slip, "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
         "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
         "end_time": ck.time + duration}, threads=sim.threads)
-    writer.append(sim.observe())
     step0 = sim.state.step
-    status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
-                                  label=f"slip {slip} {name}", checkpoints=False,
-                                  stop_after_slip=stop_after_slip)
+    try:
+        writer.append(sim.observe())
+        status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
+                                      label=f"slip {slip} {name}", checkpoints=False,
+                                      stop_after_slip=stop_after_slip)
+    except (OSError, RuntimeError) as err:      # e.g. a full disk: the branch is left 'failed: ...'
+        raise stopped_by_os_error(writer, err) from None
     writer.close(status, provenance.sim_hash(sim))
     first = recorder.slips[0] if recorder.slips else None
     return BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first)
 
 
+def restart_command(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
+                    duration: float | None = None) -> str:
+    """The `gouge restart` command line that runs this fork (named in the messages of a stopped one)."""
+    args = ["gouge", "restart", str(run_dir), "--slip", str(slip)]
+    for perm in perms:
+        args += ["--perm", f"{perm:g}"]
+    for o in overrides or []:
+        args += ["--set", o]
+    if duration is not None:
+        args += ["--duration", f"{duration:g}"]
+    return shlex.join(args)
+
+
 def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
              duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
     """Fork the drained branch and one undrained branch per permeability from slip `slip`.
+
+    A fork whose branches all finished is refused without ``force``; one with a branch not
+    finished (interrupted, stopped by a full disk, killed) is run again whole, without ``force``.
+    A branch stopped by Ctrl-C stops the fork (KeyboardInterrupt, naming the command that finishes
+    it; no later branch runs); a full disk raises :class:`~gouge_cli.errors.NoSpaceError` naming it.
 
     Returns ``{"run", "slip", "start_time", "branches": {name: {status, dir, wall_seconds, steps,
     first_slip}}, "library_differences_from_parent"}`` (first_slip: the detector's record of the
@@ -143,11 +168,23 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         print(note, file=sys.stderr, flush=True)
     fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
     branches = [None] + list(perms)
+    done = [fork_dir / branch_name(p) for p in branches if branch_status(fork_dir / branch_name(p)) == "finished"]
+    if done and len(done) == len(branches) and not force:
+        raise RunDirError(f"{done[0] / 'run.h5'} exists (finished); pass --force to run this fork again")
+    command = restart_command(run_dir, slip, perms, overrides, duration)
+    results = []
     for perm in branches:
-        target = fork_dir / branch_name(perm) / "run.h5"
-        if target.exists() and not force:
-            raise RunDirError(f"{target} exists; pass --force to run this fork again")
-    results = [run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet) for perm in branches]
+        try:
+            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet)
+        except OSError as exc:
+            if exc.errno != errno.ENOSPC:
+                raise
+            raise NoSpaceError(exc.filename or str(run_dir), f"run `{command}` again: the fork's branches are "
+                               "run again (no --force needed)") from None
+        if r.status == "interrupted":
+            raise KeyboardInterrupt(f"interrupted: branch {r.name} of slip {slip} stopped; no pair was classified. "
+                                    f"Run `{command}` again to finish the fork (no --force needed)")
+        results.append(r)
     summary = pair_summary(run_dir, slip, ck.time, results)
     summary["library_differences_from_parent"] = provenance.bit_risks(ck.provenance)
     return summary
