@@ -15,6 +15,8 @@ from ..errors import ExecutorError
 import contextlib
 import logging
 import os
+import signal
+import threading
 from dataclasses import dataclass, field
 
 
@@ -83,6 +85,7 @@ def slurm_cluster(opts: ClusterOptions):
         from dask_jobqueue import SLURMCluster
     except ImportError:
         raise ExecutorError("--slurm needs dask-jobqueue: pip install 'gouge[cluster]'") from None
+    _keep_ctrl_c()
     per_worker = opts.threads_per_task * opts.tasks_per_worker
     processes = max(1, opts.slurm_cores // per_worker)
     env = worker_env(opts.threads_per_task)
@@ -93,6 +96,15 @@ def slurm_cluster(opts: ClusterOptions):
                   job_script_prologue=[f"export {k}={v}" for k, v in env.items()],
                   worker_extra_args=_lifetime_args(opts.slurm_walltime))
     return SLURMCluster(**kwargs)
+
+
+def _keep_ctrl_c():
+    """dask-jobqueue's import sets SIGINT to ``sys.exit()`` (exit 0, nothing said): put Python's
+    KeyboardInterrupt back, so that Ctrl-C stops a campaign with exit 130 and its jobs cancelled."""
+    handler = signal.getsignal(signal.SIGINT)
+    if getattr(handler, "__module__", "").startswith("dask_jobqueue") and \
+            threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _lifetime_args(walltime: str) -> list[str]:
