@@ -61,8 +61,8 @@ def describe_os_error(exc: OSError, where: str | None = None) -> tuple[str, int]
     path = exc.filename or where or "a file"
     code = exc.errno
     if code == errno.ENOSPC or "No space left on device" in str(exc):
-        return (f"no space left on device while writing {path}; free some space and `gouge resume` "
-                "(the last good checkpoint is kept)", EXIT_PHYSICS)
+        then = getattr(exc, "next_step", None) or "`gouge resume` (the last good checkpoint is kept)"
+        return f"no space left on device while writing {path}; free some space and {then}", EXIT_PHYSICS
     if code in (errno.EACCES, errno.EPERM, errno.EROFS):
         return f"permission denied: {path} cannot be written or read (read-only directory or file?)", EXIT_BAD_INPUT
     if code == errno.EISDIR:
@@ -89,7 +89,7 @@ def describe(exc: BaseException, where: str | None = None) -> tuple[str, int] | 
     """(message, exit code) for an error the user can act on, or None for a bug (let it raise).
     `where`: the run directory or file the command was working on."""
     if isinstance(exc, KeyboardInterrupt):
-        return "interrupted", EXIT_INTERRUPTED
+        return str(exc) or "interrupted", EXIT_INTERRUPTED
     if isinstance(exc, PhysicsFailure):
         return f"physics failure: {exc}", exc.exit_code
     if isinstance(exc, InputError):
@@ -99,6 +99,15 @@ def describe(exc: BaseException, where: str | None = None) -> tuple[str, int] | 
     if isinstance(exc, OSError):
         return describe_os_error(exc, where)
     return None
+
+
+class NoSpaceError(OSError):
+    """A full disk (ENOSPC) stopped a command; ``next_step`` says what continues the work once
+    space is freed (named in the message instead of `gouge resume`)."""
+
+    def __init__(self, path: str, next_step: str):
+        super().__init__(errno.ENOSPC, os.strerror(errno.ENOSPC), path)
+        self.next_step = next_step
 
 
 class PhysicsError(PhysicsFailure):

@@ -109,12 +109,21 @@ def pair_definition(info: RunInfo, main: str = "first") -> PairDefinition:
 
 
 
+def _refuse_interrupted(info, fork_dir: Path):
+    """An interrupted branch ends before its window: its pair is not classified."""
+    if info.status == "interrupted":
+        raise AnalysisError(f"{info.run_dir} was interrupted before its end; its pair is not classified. Run "
+                            f"`gouge restart {fork_dir.parent.parent} --slip {_slip_number(fork_dir)} --perm K` "
+                            "(or `gouge study`) again to finish it")
+
+
 def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
     """Classify every undrained branch of ``RUN/forks/slip_NNN`` against its drained branch.
 
     Uses :func:`~gouge_cli.analysis.pairs.classify_pair` with :func:`pair_definition` (the run's
     detector thresholds; ``main``: "first" or "largest"). Raises :class:`RunStillRunningError`
-    when a branch is still running and :class:`NotARunError` when the drained branch is missing.
+    when a branch is still running, :class:`AnalysisError` when one was interrupted, and
+    :class:`NotARunError` when the drained branch is missing.
     """
     fork_dir = Path(fork_dir)
     drained_dir, undrained_dirs = fork_branches(fork_dir)
@@ -123,11 +132,13 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
     pairs = []
     with RunReader(drained_dir) as d:
         info = d.info
+        _refuse_interrupted(info, fork_dir)
         origin = d.time_offset()           # the branches carry the parent's loading clock on
         drained = wall_series(d)
         definition = pair_definition(info, main)
         for udir in undrained_dirs:
             with RunReader(udir) as u:
+                _refuse_interrupted(u.info, fork_dir)
                 undrained = wall_series(u)
                 ds = u.series(["time", "deborah"])
                 uinfo = u.info

@@ -40,6 +40,8 @@ def register(app: typer.Typer):
         slurm_jobs: int = typer.Option(1, "--slurm-jobs", help="SLURM jobs to start"),
         slurm_extra: List[str] = typer.Option([], "--slurm-directive", help="extra #SBATCH directive; repeatable"),
         retries: int = typer.Option(3, "--retries", help="Dask retries of a piece that raised"),
+        max_points: Optional[int] = typer.Option(None, "--max-points", help="refuse a sweep of more points than "
+                                                 "this (default: the spec's max_points, 10,000 unless set)"),
     ):
         """Run a parameter sweep (runs, or studies = run + forks of every slip) on Dask; idempotent."""
         from ..workflows.campaign import run_campaign, status_lines, survey
@@ -48,13 +50,13 @@ def register(app: typer.Typer):
 
         try:
             if status:
-                for line in status_lines(survey(load_spec(spec), spec)):
+                for line in status_lines(survey(load_spec(spec, max_points), spec)):
                     out.print(line, highlight=False)
                 return
             opts = ClusterOptions(threads, tasks_per_worker, workers, scheduler, slurm, slurm_cores, slurm_memory,
                                   slurm_walltime, slurm_queue, slurm_account, slurm_jobs, list(slurm_extra),
                                   retries).check()
-            report = run_campaign(spec, cluster=opts, force=force, retry_failed=retry_failed,
+            report = run_campaign(spec, cluster=opts, force=force, retry_failed=retry_failed, max_points=max_points,
                                   log=lambda m: out.print(m, highlight=False))
         except KeyboardInterrupt:
             out.print("interrupted: run the same command again to resume (finished pieces are kept)")

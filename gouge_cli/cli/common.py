@@ -11,7 +11,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from ..errors import EXIT_BAD_INPUT, InputError, PhysicsFailure, bounded, describe
+from ..errors import EXIT_BAD_INPUT, ConfigError, InputError, PhysicsFailure, bounded, describe
 
 
 _WIDE = None if sys.stdout.isatty() else 200
@@ -30,6 +30,26 @@ def fail(message: str, code: int = EXIT_BAD_INPUT):
     err.print(f"[bold red]error:[/] {escape(bounded(message))}", highlight=False)
     raise typer.Exit(code)
 
+
+
+def interactive() -> bool:
+    """Whether a person at a terminal can answer a question (stdin is a terminal)."""
+    return sys.stdin.isatty()
+
+
+def confirm_long(yes: bool):
+    """``confirm(note)`` for a long run (gouge_cli.workflows.run.run_scene): True with --yes; on a
+    terminal, the user's answer; off a terminal, a ConfigError asking for --yes (exit 2)."""
+
+    def confirm(note: str) -> bool:
+        if yes:
+            return True
+        if interactive():
+            return typer.confirm(f"{note.removeprefix('note: ')}. Start it?", default=False, err=True)
+        raise ConfigError(f"not started (nothing was written): {note.removeprefix('note: ')}; pass --yes to "
+                          "start it where no terminal can confirm it")
+
+    return confirm
 
 
 def guarded(command):

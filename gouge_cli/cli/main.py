@@ -40,13 +40,16 @@ def run(
     set_: List[str] = typer.Option([], "--set", help="override, e.g. --set loading.velocity=2e-5"),
     force: bool = typer.Option(False, "--force", help="overwrite an existing run directory"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
+    yes: bool = typer.Option(False, "--yes", help="start a run estimated above 1 h without asking (needed "
+                             "where no terminal can confirm it)"),
 ):
     """Compact the packing, then shear it under the spring until config.run.duration."""
     from ..workflows.run import default_run_dir, run_scene
+    from .common import confirm_long
 
     cfg = load_config(config, set_)
     target = out_dir or default_run_dir(cfg)
-    result = run_scene(cfg, target, force=force, quiet=quiet)
+    result = run_scene(cfg, target, force=force, quiet=quiet, confirm=confirm_long(yes))
     out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s, "
               f"{result.grain_steps_per_second / 1e6:.2f} M grain-steps/s)", highlight=False)
     if result.status == "interrupted":

@@ -35,6 +35,7 @@ def register(app: typer.Typer) -> None:
         set_: List[str] = typer.Option([], "--set", help="config override for the loading run"),
         figures: bool = typer.Option(True, "--figures/--no-figures", help="draw RUN/study/figures"),
         quiet: bool = typer.Option(False, "--quiet"),
+        yes: bool = typer.Option(False, "--yes", help="start a loading run estimated above 1 h without asking"),
     ):
         """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
         from ..analysis.forkpairs import perm_text
@@ -43,7 +44,7 @@ def register(app: typer.Typer) -> None:
         from ..workflows.study import parse_slips, run_study
         from .analysis_cmds import _table
         from ..errors import EXIT_INTERRUPTED
-        from .common import fail, out
+        from .common import confirm_long, fail, out
 
         try:
             wanted = parse_slips(slips)
@@ -54,7 +55,7 @@ def register(app: typer.Typer) -> None:
         say = (lambda m: None) if quiet else (lambda m: out.print(m, highlight=False))
         try:
             result = run_study(target, perm, wanted, main=main, jobs=jobs, out=out_dir, overrides=set_,
-                               quiet=quiet, figures=figures, on_progress=say)
+                               quiet=quiet, figures=figures, on_progress=say, confirm=confirm_long(yes))
         except StudyInterrupted as e:
             fail(str(e), EXIT_INTERRUPTED)
         out.print(_table(f"study of {result.run_dir} ({len(result.rows)} pairs; full table in study/table.csv)",

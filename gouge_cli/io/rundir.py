@@ -8,7 +8,9 @@ lock when the process dies (even by kill -9), so a lock file whose lock is free 
 simply taken over. ``gouge run --out DIR`` uses DIR if it is missing or empty, or if it is a gouge
 run (``--force`` then removes only the entries of OWNED, never anything else); any other
 directory, a regular file, or a run whose lock is held is refused. A campaign point directory's
-``point.yaml`` and ``ledger/`` (CAMPAIGN_ENTRIES) count as empty.
+``point.yaml`` and ``ledger/`` (CAMPAIGN_ENTRIES) count as empty, and so does a start killed
+before its first checkpoint (:func:`killed_start`: nothing in it to resume or keep), which a new
+run replaces without ``--force``.
 """
 
 from __future__ import annotations
@@ -119,6 +121,22 @@ def is_gouge_run(run_dir: Path) -> bool:
         return False
 
 
+def killed_start(run_dir: Path) -> bool:
+    """True for a run killed before its first checkpoint: its lock is free, it has no
+    checkpoints, forks or analysis, and its run.h5 is missing, unreadable or still 'running'."""
+    run_dir = Path(run_dir)
+    if holder(run_dir) is not None or (run_dir / "checkpoints" / "latest.h5").exists() or \
+            any(run_dir.glob("checkpoints/slip_*.h5")) or any((run_dir / d).exists() for d in ("forks", "analysis")):
+        return False
+    if not (run_dir / "run.h5").exists():
+        return True
+    try:
+        with h5py.File(run_dir / "run.h5", "r") as h5:
+            return str(h5.attrs.get("status", "running")) == "running"
+    except OSError:         # cut short while it was created
+        return True
+
+
 def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
     """Make out_dir ready for a new run and return its lock (module doc for the rules)."""
     out_dir = Path(out_dir)
@@ -130,7 +148,7 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
         shown = ", ".join(entries[:5]) + (", ..." if len(entries) > 5 else "")
         raise RunDirError(f"{out_dir} is not empty and is not a gouge run directory (it holds {shown}); "
                           "nothing was changed: choose a new or empty --out")
-    if [e for e in entries if e != LOCK_NAME] and not force:       # refused before the lock: nothing changes
+    if [e for e in entries if e != LOCK_NAME] and not force and not killed_start(out_dir):   # refused before the lock
         if (who := holder(out_dir)) is not None:
             raise RunDirError(f"{out_dir} is in use by a gouge process in progress ({who}); nothing was changed")
         raise RunDirError(f"{out_dir} already holds a run; choose another --out, another name (--set name=...), "

@@ -18,7 +18,11 @@
 * numerics.device: gpu needs numba-cuda and a CUDA device (kernels.gpu.availability);
 * the run length: (compaction.max_time + run.duration) / dt steps of n_grains grains, estimated at
   RATE grain-steps per second per thread; above MAX_HOURS it is refused, above NOTE_HOURS the
-  estimate is returned as a note to print.
+  estimate is returned as a note to print;
+* every derived quantity above (contact stiffness, grain mass, reference overlap, step bound,
+  dashpot frequency, step, step count, hours) is a finite positive number: an over- or underflow
+  (e.g. material.youngs_modulus: 1e308, packing.diameter_min: 1e-300) is refused naming the keys
+  of DERIVED_FROM whose own value, put back to its default, makes every quantity finite.
 """
 
 from __future__ import annotations
@@ -26,7 +30,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..config import Config
+from ..config import Config, build_config
 from ..errors import ConfigError
 from .packing import packing_layout
 from .timestep import choose_dt, contact_constants, stability_bound
@@ -34,6 +38,21 @@ from .timestep import choose_dt, contact_constants, stability_bound
 RATE = 2e7              # grain-steps per second and thread, about (README Speed: 1.5-3.5e7)
 NOTE_HOURS = 1.0
 MAX_HOURS = 1e5         # eleven years on one thread
+#: Keys the derived quantities of the checks come from (searched for the culprit of a non-finite one).
+DERIVED_FROM = ("material.youngs_modulus", "material.poisson_ratio", "material.tangential_stiffness_factor",
+                "material.density", "material.damping", "packing.diameter_min", "packing.diameter_max",
+                "packing.wall_spacing", "packing.n_grains", "loading.normal_stress", "loading.wall_mass",
+                "numerics.dt", "numerics.dt_safety", "compaction.max_time", "run.duration")
+
+
+class _NonFinite(ArithmeticError):
+    """A derived quantity is not a finite positive number (its name is the message)."""
+
+
+def _finite(name: str, value: float) -> float:
+    if not (math.isfinite(value) and value > 0):
+        raise _NonFinite(f"{name} = {value:g}")
+    return value
 
 
 @dataclass(frozen=True)
@@ -49,16 +68,16 @@ def _pair_normal_mode(config: Config) -> tuple[float, float]:
     bound = stability_bound(config)
     c_normal, _ = contact_constants(config)
     d_min = config.packing.diameter_min
-    k_n = 1.5 * c_normal * math.sqrt(0.5 * d_min * bound.reference_overlap)
-    mass = config.material.density * math.pi * d_min ** 3 / 6.0
-    return k_n, math.sqrt(k_n / (0.5 * mass))
+    k_n = _finite("the normal stiffness k_n", 1.5 * c_normal * math.sqrt(0.5 * d_min * bound.reference_overlap))
+    mass = _finite("the smallest grain's mass", config.material.density * math.pi * d_min ** 3 / 6.0)
+    return k_n, _finite("the normal frequency omega", math.sqrt(k_n / (0.5 * mass)))
 
 
 def damped_step_bound(config: Config) -> float:
     """Largest stable dt [t0] of the damped normal mode (module doc)."""
     _, omega = _pair_normal_mode(config)
     zeta = config.material.damping / (2.0 * omega)
-    return 2.0 / omega * (math.sqrt(1.0 + zeta * zeta) - zeta)
+    return _finite("the damped step bound", 2.0 / omega * (math.sqrt(1.0 + zeta * zeta) - zeta))
 
 
 def min_wall_mass(config: Config, dt: float) -> float:
@@ -69,7 +88,52 @@ def min_wall_mass(config: Config, dt: float) -> float:
 
 def check_config(config: Config, threads: int = 1) -> Preflight:
     """Raise ConfigError naming the key when `config` cannot run; else the step and an estimate."""
-    dt = choose_dt(config)
+    try:
+        return _check(config, threads)
+    except (ArithmeticError, ValueError) as exc:      # ValueError: math domain error
+        if isinstance(exc, ConfigError):
+            raise
+        raise ConfigError(_non_finite(config, exc)) from None
+
+
+def _derived(config: Config) -> None:
+    """The derived quantities of the stability bound, each checked finite and positive."""
+    c_normal, c_tangential = contact_constants(config)
+    _finite("the Hertz constant c_n", c_normal)
+    _finite("the Mindlin constant c_t", c_tangential)
+    b = stability_bound(config)
+    _finite("the reference overlap", b.reference_overlap)
+    _finite("the stability bound on the step", b.bound)
+
+
+def _non_finite(config: Config, exc: BaseException) -> str:
+    """The message for an over- or underflow: the keys whose default value cures it, with their values."""
+    defaults = build_config({}).to_dict()
+    data = config.to_dict()
+    culprits = []
+    for key in DERIVED_FROM:
+        section, name = key.split(".")
+        value = data[section][name]
+        if value == defaults[section][name]:
+            continue
+        trial = {**data, section: {**data[section], name: defaults[section][name]}}
+        try:
+            _check(build_config(trial), 1)
+        except (ArithmeticError, ValueError) as again:
+            if not isinstance(again, ConfigError):
+                continue
+        culprits.append(f"{key} = {value:g}")
+    what = str(exc) if isinstance(exc, _NonFinite) else f"a derived quantity ({type(exc).__name__}: {exc})"
+    named = " and ".join(culprits) or "one of " + ", ".join(
+        f"{k} = {data[k.split('.')[0]][k.split('.')[1]]}" for k in DERIVED_FROM)
+    return (f"{named}: {what} is not a finite positive number (over- or underflow); values are dimensionless "
+            "(units: scales, see `gouge config --defaults`): give a value within a few orders of magnitude of the "
+            "default")
+
+
+def _check(config: Config, threads: int) -> Preflight:
+    _derived(config)
+    dt = _finite("the step dt", choose_dt(config))
     packing_layout(config)
     limit = damped_step_bound(config)
     if dt > limit:
@@ -89,8 +153,8 @@ def check_config(config: Config, threads: int = 1) -> Preflight:
         reason = availability()
         if reason:
             raise ConfigError(f"numerics.device = gpu cannot run here: {reason}; use numerics.device: cpu")
-    steps = (config.compaction.max_time + config.run.duration) / dt
-    hours = steps * config.packing.n_grains / RATE / 3600.0
+    steps = _finite("the number of steps", (config.compaction.max_time + config.run.duration) / dt)
+    hours = _finite("the estimated run time", steps * config.packing.n_grains / RATE / 3600.0)
     per = max(1, threads)
     estimate = (f"{steps:.3g} steps of {config.packing.n_grains} grains: about {hours / per:.3g} h at "
                 f"{RATE:.0e} grain-steps/s per thread on {per} thread(s)")

@@ -6,7 +6,7 @@ Layout of ``<out>/<name>/``::
     <point>/                    a gouge run directory (config.yaml, run.h5, checkpoints/, forks/)
       point.yaml                state point: overrides, resolved config, base, reproducing command
       ledger/run.json           one record per piece: state (running | done | failed | error),
-      ledger/fork_NNN.json      settings it ran with, host, pid, attempts, cause, result
+      ledger/fork_NNN.json      settings it ran with, host, pid (and slurm_job), attempts, cause, result
     table.csv  phase_diagram.csv  figures/
 
 A *piece* is one Dask task: "advance this run to completion" or "fork slip N of this run at the
@@ -26,6 +26,7 @@ import json
 import os
 import shutil
 import socket
+import subprocess
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -110,6 +111,8 @@ def _task(ledger: Path, settings: dict, body) -> dict:
     previous = read_ledger(ledger) or {}
     record = {"state": "running", "settings": settings, "host": socket.gethostname(), "pid": os.getpid(),
               "attempts": int(previous.get("attempts", 0)) + 1, "started": time.time()}
+    if os.environ.get("SLURM_JOB_ID"):      # a worker started as a SLURM job (--slurm)
+        record["slurm_job"] = os.environ["SLURM_JOB_ID"]
     _write_json(ledger, record)
     t0 = time.perf_counter()
     try:
@@ -238,6 +241,27 @@ class Survey:
         return self.root / name
 
 
+def _worker_gone(record: dict) -> bool:
+    """Whether the worker of a 'running' ledger record is known to be gone: its process on this
+    host, or else its SLURM job (ended: walltime, scancel), no longer exists."""
+    if record.get("host") == socket.gethostname():
+        return not pid_alive(int(record.get("pid", 0)))
+    if record.get("slurm_job"):
+        return slurm_job_alive(str(record["slurm_job"])) is False
+    return False
+
+
+def slurm_job_alive(job: str) -> bool | None:
+    """Whether SLURM job ``job`` is pending or running (``squeue``); None when squeue cannot tell."""
+    try:
+        out = subprocess.run(["squeue", "-h", "-j", job, "-o", "%T"], capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.TimeoutExpired):
+        return None
+    if out.returncode != 0:
+        return False if "Invalid job id" in out.stderr else None
+    return bool(out.stdout.strip())
+
+
 def _piece_state(piece: Piece, ledger: Path, settings: dict, output: Path) -> PieceState:
     record = read_ledger(ledger)
     if record is None:
@@ -251,7 +275,7 @@ def _piece_state(piece: Piece, ledger: Path, settings: dict, output: Path) -> Pi
         {k: v for k, v in settings.items() if k != "permeabilities"})
     state = record.get("state")
     if state == "running":
-        if record.get("host") == socket.gethostname() and not pid_alive(int(record.get("pid", 0))):
+        if _worker_gone(record):
             state, detail = "interrupted", f"worker lost after attempt {record.get('attempts')}; resumes"
         else:
             detail = f"on {record.get('host')} pid {record.get('pid')}, attempt {record.get('attempts')}"
@@ -345,19 +369,19 @@ class CampaignReport:
 
 
 def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = False,
-                 retry_failed: bool = False, log=print) -> CampaignReport:
+                 retry_failed: bool = False, max_points: int | None = None, log=print) -> CampaignReport:
     """Run what is left of a campaign on Dask and write its table and figures.
 
     ``client``: a ``distributed.Client`` to use; otherwise one is opened for ``cluster``
     (:class:`~gouge_cli.workflows.executors.ClusterOptions`, default a LocalCluster) only when
     something is left to run. Raises :class:`CampaignConflict` when results exist with other
-    settings and ``force`` is not given.
+    settings and ``force`` is not given. ``max_points``: overrides the spec's limit on the sweep's size.
     """
     from .executors import ClusterOptions, open_client
 
     t_start = time.perf_counter()
     spec_path = Path(spec_path)
-    spec = load_spec(spec_path)
+    spec = load_spec(spec_path, max_points)
     s = survey(spec, spec_path)
     conflicts = s.by_state("conflict")
     if conflicts and not force:

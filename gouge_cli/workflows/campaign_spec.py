@@ -11,14 +11,19 @@ A spec names a base config, a sweep and what to do at each point::
       points:                        # and/or explicit points (each a mapping of dotted overrides)
         - {loading.velocity: 2.0e-5}
       seeds: [1, 2]                  # every point once per seed (default: the base config's seed)
+    max_points: 10000                # refuse a larger sweep (counted before it is expanded)
     action: study                    # run | study (run, then fork every slip kept with a checkpoint)
     study: {permeabilities: [1.0e-5, 1.0e-3], duration: null}
     phase: {x: permeability, y: loading.normal_stress}   # axes of the phase diagram
 
 Validated by pydantic models with ``extra="forbid"`` (unknown keys are refused, naming them);
-every point's config is validated too, so a bad override stops the campaign before anything
-runs. A point's directory name is derived from its overrides but never read back: what a point
-contains is in its state-point file (see :mod:`gouge_cli.workflows.campaign`).
+an empty ``sweep``, ``sweep.grid`` or ``sweep.points`` is refused, naming it. The sweep is counted
+before it is expanded, (grid product + listed points) x seeds, and refused above ``max_points``
+(top-level key, default MAX_POINTS; ``gouge campaign --max-points N`` overrides it). Every point's
+config is validated and pre-flighted (:func:`~gouge_cli.model.preflight.check_config`) too, so a
+bad override stops the campaign before anything runs. A point's directory name is derived from
+its overrides but never read back: what a point contains is in its state-point file (see
+:mod:`gouge_cli.workflows.campaign`).
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import math
 import re
 import shlex
 from dataclasses import dataclass
@@ -37,6 +43,11 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from ..config import Config, find_config, load_config
 from ..errors import ConfigError, SpecError
+from ..model.preflight import check_config
+
+
+#: Most sweep points a campaign expands unless its spec's ``max_points`` (or --max-points) says otherwise.
+MAX_POINTS = 10_000
 
 
 class _Section(BaseModel):
@@ -71,6 +82,8 @@ class Sweep(_Section):
     @field_validator("grid")
     @classmethod
     def _grid(cls, grid):
+        if not grid:
+            raise ValueError("empty: give at least one dotted key with its values, or leave grid out")
         _check_keys(grid, "sweep.grid")
         for key, values in grid.items():
             if not values:
@@ -80,7 +93,11 @@ class Sweep(_Section):
     @field_validator("points")
     @classmethod
     def _points(cls, points):
+        if not points:
+            raise ValueError("empty: list at least one point (a mapping of dotted keys), or leave points out")
         for i, p in enumerate(points):
+            if not p:
+                raise ValueError(f"sweep.points[{i}]: empty point; give at least one dotted key")
             _check_keys(p, f"sweep.points[{i}]")
         return [{k: _plain(v) for k, v in p.items()} for p in points]
 
@@ -90,6 +107,18 @@ class Sweep(_Section):
         if any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
             raise ValueError("sweep.seeds: distinct non-negative integers")
         return seeds
+
+    @model_validator(mode="after")
+    def _not_empty(self):
+        if not (self.grid or self.points or self.seeds):
+            raise ValueError("empty sweep: give sweep.grid, sweep.points or sweep.seeds")
+        return self
+
+    def size(self) -> int:
+        """Points of the sweep, counted without expanding it: (grid product + points) x seeds
+        (points that coincide are run once, so the campaign may have fewer)."""
+        grid = math.prod(len(values) for values in self.grid.values()) if self.grid else 0
+        return ((grid + len(self.points)) or 1) * max(1, len(self.seeds))
 
 
 class Study(_Section):
@@ -114,7 +143,8 @@ class CampaignSpec(_Section):
     name: str = Field(..., pattern=r"^[A-Za-z0-9_.-]+$", description="campaign name; output under <out>/<name>/")
     base: str = Field(..., description="base config: a path or a scene name")
     set: dict[str, Any] = Field(default_factory=dict, description="dotted overrides at every point")
-    sweep: Sweep = Sweep()
+    sweep: Sweep = Field(..., description="grid, points and/or seeds: what varies between points")
+    max_points: int = Field(MAX_POINTS, ge=1, description="refuse sweeps of more points than this")
     action: Literal["run", "study"] = "run"
     study: Optional[Study] = None
     out: str = Field("campaigns", description="folder holding <name>/")
@@ -171,11 +201,30 @@ def _format(err: ValidationError, path: Path) -> str:
             lines.append(f"{key}: required")
         else:
             lines.append(f"{key}: {e['msg'].removeprefix('Value error, ')}")
-    return f"invalid campaign file {path}:\n  " + "\n  ".join(lines) + \
-        "\n  (keys: name, base, set, sweep {grid, points, seeds}, action, study {permeabilities, duration}, out, phase {x, y})"
+    return (f"invalid campaign file {path}:\n  " + "\n  ".join(lines) +
+            "\n  (keys: name, base, set, sweep {grid, points, seeds}, max_points, action, "
+            "study {permeabilities, duration}, out, phase {x, y})")
 
 
-def load_spec(path: str | Path) -> CampaignSpec:
+def check_size(spec: CampaignSpec, path: Path, max_points: int | None = None) -> int:
+    """The sweep's point count; SpecError with the count when it exceeds ``max_points``
+    (default: the spec's own ``max_points``)."""
+    limit = spec.max_points if max_points is None else max_points
+    n = spec.sweep.size()
+    if n > limit:
+        grid = " x ".join(str(len(v)) for v in spec.sweep.grid.values())
+        parts = ([f"grid {grid}"] if grid else []) + ([f"{len(spec.sweep.points)} listed points"]
+                                                      if spec.sweep.points else [])
+        seeds = f", each x {len(spec.sweep.seeds)} seeds" if len(spec.sweep.seeds) > 1 else ""
+        raise SpecError(f"{path}: sweep: {n:,} points ({' + '.join(parts) or 'base'}{seeds}) exceed max_points = "
+                        f"{limit:,}; nothing was run. Sweep fewer values, or raise the limit (max_points: N in the "
+                        "spec, or --max-points N)")
+    return n
+
+
+def load_spec(path: str | Path, max_points: int | None = None) -> CampaignSpec:
+    """The validated spec (SpecError naming the key otherwise), its sweep counted and held to
+    ``max_points`` (default: the spec's, see :func:`check_size`) before anything is expanded."""
     path = Path(path)
     if not path.is_file():
         raise SpecError(f"campaign file {path} does not exist")
@@ -186,9 +235,13 @@ def load_spec(path: str | Path) -> CampaignSpec:
     if not isinstance(data, dict):
         raise SpecError(f"{path}: the top level must be a mapping (name, base, sweep, ...)")
     try:
-        return CampaignSpec.model_validate(data)
+        spec = CampaignSpec.model_validate(data)
     except ValidationError as err:
         raise SpecError(_format(err, path)) from None
+    if max_points is not None and max_points < 1:
+        raise SpecError(f"--max-points {max_points}: give a positive number")
+    check_size(spec, path, max_points)
+    return spec
 
 
 def base_path(spec: CampaignSpec, spec_path: Path) -> Path:
@@ -228,6 +281,7 @@ def expand(spec: CampaignSpec, spec_path: Path) -> list[Point]:
             seen.add(name)
             try:
                 config = load_config(base, {**spec.set, **overrides, "name": name})
+                check_config(config)
             except ConfigError as exc:
                 raise SpecError(f"sweep point {overrides} (base {base}): {exc}") from None
             points.append(Point(name, overrides, config, base, dict(spec.set)))

@@ -15,6 +15,8 @@ from ..errors import ExecutorError
 import contextlib
 import logging
 import os
+import signal
+import threading
 from dataclasses import dataclass, field
 
 
@@ -75,12 +77,15 @@ def local_cluster(opts: ClusterOptions):
 
 def slurm_cluster(opts: ClusterOptions):
     """A dask-jobqueue ``SLURMCluster``: each job holds ``slurm_cores`` cores, split into worker
-    processes of ``threads_per_task x tasks_per_worker`` cores; workers retire 5 minutes before the
-    walltime so that their tasks move on (and resume from their checkpoints) elsewhere."""
+    processes of ``threads_per_task x tasks_per_worker`` cores; workers retire before the walltime
+    (:func:`_lifetime`) so that their tasks move on (and resume from their checkpoints) elsewhere.
+    :func:`open_client` keeps ``slurm_jobs`` jobs alive: a job that ends (walltime, ``scancel``,
+    node failure) is replaced by a new one."""
     try:
         from dask_jobqueue import SLURMCluster
     except ImportError:
         raise ExecutorError("--slurm needs dask-jobqueue: pip install 'gouge[cluster]'") from None
+    _keep_ctrl_c()
     per_worker = opts.threads_per_task * opts.tasks_per_worker
     processes = max(1, opts.slurm_cores // per_worker)
     env = worker_env(opts.threads_per_task)
@@ -89,18 +94,40 @@ def slurm_cluster(opts: ClusterOptions):
                   job_cpu=opts.slurm_cores, job_mem=opts.slurm_memory.upper().removesuffix("B"),
                   job_extra_directives=list(opts.slurm_extra),
                   job_script_prologue=[f"export {k}={v}" for k, v in env.items()],
-                  worker_extra_args=["--lifetime", _lifetime(opts.slurm_walltime), "--lifetime-stagger", "2m"])
+                  worker_extra_args=_lifetime_args(opts.slurm_walltime))
     return SLURMCluster(**kwargs)
 
 
-def _lifetime(walltime: str) -> str:
-    """Walltime [[D-]HH:]MM:SS less 5 minutes (at least 1 minute), as seconds for ``--lifetime``."""
-    days, _, clock = walltime.rpartition("-")
-    parts = [int(p) for p in clock.split(":")]
+def _keep_ctrl_c():
+    """dask-jobqueue's import sets SIGINT to ``sys.exit()`` (exit 0, nothing said): put Python's
+    KeyboardInterrupt back, so that Ctrl-C stops a campaign with exit 130 and its jobs cancelled."""
+    handler = signal.getsignal(signal.SIGINT)
+    if getattr(handler, "__module__", "").startswith("dask_jobqueue") and \
+            threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def _lifetime_args(walltime: str) -> list[str]:
+    """Dask worker options retiring a worker 5 minutes (+- 2) before the walltime; none for a
+    walltime of 10 minutes or less, where SLURM's time limit itself ends the job (its pieces
+    resume from their checkpoints in the next job)."""
+    lifetime = _lifetime(walltime)
+    return [] if lifetime is None else ["--lifetime", lifetime, "--lifetime-stagger", "2m"]
+
+
+def _lifetime(walltime: str) -> str | None:
+    """Walltime [[D-]HH:]MM:SS less 5 minutes, as seconds for ``--lifetime``; None for 10 minutes or less."""
+    try:
+        days, _, clock = walltime.rpartition("-")
+        parts = [int(p) for p in clock.split(":")]
+        if not 1 <= len(parts) <= 3 or min(parts) < 0:
+            raise ValueError
+    except ValueError:
+        raise ExecutorError(f"--slurm-walltime {walltime!r}: give [[D-]HH:]MM:SS, e.g. 24:00:00") from None
     while len(parts) < 3:
         parts.insert(0, 0)
     seconds = (int(days or 0) * 24 + parts[0]) * 3600 + parts[1] * 60 + parts[2]
-    return f"{max(60, seconds - 300)}s"
+    return f"{seconds - 300}s" if seconds > 600 else None
 
 
 def _worker_threads() -> tuple[int, int]:
@@ -139,8 +166,8 @@ def open_client(opts: ClusterOptions):
         return
     cluster = slurm_cluster(opts) if opts.slurm else local_cluster(opts)
     try:
-        if opts.slurm:
-            cluster.scale(jobs=opts.slurm_jobs)
+        if opts.slurm:      # adaptive between equal bounds: a job that ended is replaced
+            cluster.adapt(minimum_jobs=opts.slurm_jobs, maximum_jobs=opts.slurm_jobs)
         with Client(cluster) as client:
             yield client
     finally:

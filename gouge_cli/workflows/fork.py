@@ -10,8 +10,10 @@ one pair definition of :mod:`gouge_cli.analysis.pairs`.
 
 from __future__ import annotations
 
+import errno
 import math
 import os
+import shlex
 import sys
 import time
 from dataclasses import dataclass
@@ -21,7 +23,7 @@ from ..analysis.forkpairs import branch_name
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint
 from ..config import build_config, Config
-from ..errors import AnalysisError, ConfigError
+from ..errors import AnalysisError, ConfigError, NoSpaceError
 from ..driver.slips import lead_time
 from ..io.runfile import RunFile, RunReader, slip_catalog
 from ..model.preflight import check_config
@@ -29,6 +31,8 @@ from ..errors import RunDirError
 from ..io.rundir import check_run_dir, refuse_if_in_progress, RunLock
 from ..driver.phases import load_phase
 from ..driver.simulation import Simulation
+from .pairs import branch_status
+from .run import stopped_by_os_error
 
 
 FORK_SLIP_FRAMES = 30     # snapshots per predicted slip duration while a fork slips (output.slip_frames)
@@ -114,22 +118,41 @@ def _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_
         "fork_slip": slip, "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
         "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
         "end_time": ck.time + duration}, threads=sim.threads)
-    writer.append(sim.observe())
     step0 = sim.state.step
-    status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
-                                  label=f"slip {slip} {name}", checkpoints=False,
-                                  stop_after_slip=stop_after_slip)
+    try:
+        writer.append(sim.observe())
+        status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
+                                      label=f"slip {slip} {name}", checkpoints=False,
+                                      stop_after_slip=stop_after_slip)
+    except (OSError, RuntimeError) as err:      # e.g. a full disk: the branch is left 'failed: ...'
+        raise stopped_by_os_error(writer, err) from None
     writer.close(status, provenance.sim_hash(sim))
     first = recorder.slips[0] if recorder.slips else None
     return BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first)
+
+
+def restart_command(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
+                    duration: float | None = None) -> str:
+    """The `gouge restart` command line that runs this fork (named in the messages of a stopped one)."""
+    args = ["gouge", "restart", str(run_dir), "--slip", str(slip)]
+    for perm in perms:
+        args += ["--perm", f"{perm:g}"]
+    for o in overrides or []:
+        args += ["--set", o]
+    if duration is not None:
+        args += ["--duration", f"{duration:g}"]
+    return shlex.join(args)
 
 
 def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
              duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
     """Fork the drained branch and one undrained branch per permeability from slip `slip`.
 
-    A finished drained branch is kept when ``perms`` adds branches to an existing fork; an existing
+    A finished drained branch is kept when ``perms`` adds branches to an existing fork; a finished
     branch of the same permeability (or the drained one alone, without ``perms``) needs ``force``.
+    A branch not finished (interrupted, stopped by a full disk, killed) is run again without ``force``.
+    A branch stopped by Ctrl-C stops the fork (KeyboardInterrupt, naming the command that finishes
+    it; no later branch runs); a full disk raises :class:`~gouge_cli.errors.NoSpaceError` naming it.
 
     Returns ``{"run", "slip", "start_time", "branches": {name: {status, dir, wall_seconds, steps,
     first_slip}}, "library_differences_from_parent"}`` (first_slip: the detector's record of the
@@ -144,14 +167,27 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         print(note, file=sys.stderr, flush=True)
     fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
     for perm in perms:
-        target = fork_dir / branch_name(perm) / "run.h5"
-        if target.exists() and not force:
-            raise RunDirError(f"{target} exists; pass --force to run this branch again")
+        target = fork_dir / branch_name(perm)
+        if branch_status(target) == "finished" and not force:
+            raise RunDirError(f"{target / 'run.h5'} exists (finished); pass --force to run this branch again")
     drained = _finished_drained(fork_dir) if perms and not force else None
-    if not perms and (fork_dir / "drained" / "run.h5").exists() and not force:
-        raise RunDirError(f"{fork_dir / 'drained' / 'run.h5'} exists; pass --force to run it again")
+    if not perms and branch_status(fork_dir / "drained") == "finished" and not force:
+        raise RunDirError(f"{fork_dir / 'drained' / 'run.h5'} exists (finished); pass --force to run it again")
     branches = ([] if drained is not None else [None]) + list(perms)
-    results = [run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet) for perm in branches]
+    command = restart_command(run_dir, slip, perms, overrides, duration)
+    results = []
+    for perm in branches:
+        try:
+            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet)
+        except OSError as exc:
+            if exc.errno != errno.ENOSPC:
+                raise
+            raise NoSpaceError(exc.filename or str(run_dir), f"run `{command}` again: the fork's branches are "
+                               "run again (no --force needed)") from None
+        if r.status == "interrupted":
+            raise KeyboardInterrupt(f"interrupted: branch {r.name} of slip {slip} stopped; no pair was classified. "
+                                    f"Run `{command}` again to finish the fork (no --force needed)")
+        results.append(r)
     with RunReader(run_dir, allow_running=True) as reader:
         origin = reader.time_offset()
     summary = pair_summary(run_dir, slip, ck.time - origin, ([drained] if drained is not None else []) + results,

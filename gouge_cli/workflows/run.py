@@ -12,7 +12,7 @@ from pathlib import Path
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint, remove_stale_temps
 from ..config import Config, dump_config, load_config
-from ..errors import hdf5_os_error
+from ..errors import ConfigError, hdf5_os_error
 from ..kernels import layout as L
 from ..io.runfile import RunFile
 from ..model.params import choose_threads
@@ -74,19 +74,26 @@ def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=
         writer.close(f"failed: {err}", provenance.sim_hash(sim))
         raise
     except (OSError, RuntimeError) as err:      # e.g. the disk is full (rundir.ensure_space): stop cleanly
-        cause = hdf5_os_error(err, str(writer.path)) if not isinstance(err, OSError) else err
-        if cause is None:
-            raise
-        try:
-            writer.close(f"failed: {cause.strerror or cause}")
-        except (OSError, RuntimeError):
-            pass
-        raise cause from None
+        raise stopped_by_os_error(writer, err) from None
     writer.close(status, provenance.sim_hash(sim))
     wall = time.perf_counter() - t_start
     steps = sim.state.step - steps0
     return RunResult(out_dir, status, steps, wall, steps * n / max(wall, 1e-9), sim,
                      recorder.slips if recorder else [])
+
+
+def stopped_by_os_error(writer: RunFile, err: BaseException) -> BaseException:
+    """A file operation failed while a run or branch went (e.g. a full disk): close its run file
+    with status 'failed: <cause>' (not 'finished', so it is run or resumed again) and return the
+    OSError to raise; ``err`` itself when it is no file error."""
+    cause = err if isinstance(err, OSError) else hdf5_os_error(err, str(writer.path))
+    if cause is None:
+        return err
+    try:
+        writer.close(f"failed: {cause.strerror or cause}")
+    except (OSError, RuntimeError):
+        pass
+    return cause
 
 
 def _new_run(config: Config, out_dir: Path, live, quiet, label) -> RunResult:
@@ -106,12 +113,16 @@ def _fresh_run_file(sim: Simulation, out_dir: Path) -> RunFile:
 
 
 def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | None = None,
-              quiet: bool = False) -> RunResult:
+              quiet: bool = False, confirm=None) -> RunResult:
     """Compact, then load for config.run.duration, writing out_dir/{config.yaml, run.h5,
     checkpoints/}. The config is checked whole (preflight) and the directory locked before
-    anything is written. Ctrl-C stops cleanly (status 'interrupted', outputs flushed)."""
+    anything is written. Ctrl-C stops cleanly (status 'interrupted', outputs flushed).
+    ``confirm(note)``: asked before a long run (preflight's note) starts; False refuses it
+    (ConfigError) with nothing written."""
     out_dir = Path(out_dir)
     pre = check_config(config, choose_threads(config.numerics.threads, config.packing.n_grains))
+    if pre.note and confirm is not None and not confirm(pre.note):
+        raise ConfigError(f"not started (nothing was written): {pre.note.removeprefix('note: ')}")
     if pre.note:
         print(pre.note, file=sys.stderr, flush=True)
     with prepare_run_dir(out_dir, force):
@@ -151,4 +162,4 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
                       resume_from=ck)
 
 
-__all__ = ["RunResult", "default_run_dir", "run_scene", "resume_run"]
+__all__ = ["RunResult", "default_run_dir", "run_scene", "resume_run", "stopped_by_os_error"]

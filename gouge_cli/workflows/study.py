@@ -10,7 +10,7 @@ Steps (each skipped when its output is already there, so the study is idempotent
 3. Branches: drained and one undrained branch per ``--perm`` of every slip, all with the same
    window (:func:`study_window`); with ``--main first`` a branch stops as soon as its first slip
    (at the trigger) ends, with ``--main largest`` it runs the whole window. Independent tasks (:func:`branch_task`) in a process pool
-   with one numba thread each. A branch whose ``run.h5`` has status 'finished' is skipped; any
+   with one numba thread each, whose workers end when the study's process dies (:mod:`.watchdog`). A branch whose ``run.h5`` has status 'finished' is skipped; any
    other (interrupted, running, failed, missing) is run again from the slip's checkpoint
    (branches write no checkpoints of their own). A new ``--perm`` adds only its branches.
 4. ``pair.json`` per fork, ``RUN/analysis`` (``gouge analyze``), and ``RUN/study``:
@@ -43,6 +43,7 @@ from ..io.rundir import check_run_dir
 from .run import default_run_dir, resume_run, run_scene
 from ..io.filedoc import json_safe
 from .pairs import branch_status, write_pair_json
+from .watchdog import follow_parent
 
 __all__ = ["EXTRA_STRENGTH", "StudyResult", "parse_slips", "study_window", "branch_task", "plan_branches",
            "run_study"]
@@ -81,6 +82,13 @@ def _one_thread():
     os.environ["NUMBA_NUM_THREADS"] = "1"
 
 
+def _pool_worker(parent_pid: int):
+    """Initializer of the pool's workers: one numba thread, and the worker ends with the study
+    (:func:`~gouge_cli.workflows.watchdog.follow_parent`: no orphans when the study is killed)."""
+    follow_parent(parent_pid)
+    _one_thread()
+
+
 def branch_task(run_dir: str, slip: int, perm: float | None, duration: float, stop_after_slip: bool = True) -> dict:
     """The per-fork step: run one branch of one slip (fresh) and report it. Picklable arguments and
     result, one numba thread, so any executor (this process pool, a Dask cluster) can call it."""
@@ -113,7 +121,8 @@ class StudyResult:
     loading: str = ""
 
 
-def _loading_run(target: Path, out: Path | None, overrides: list[str] | None, quiet: bool) -> tuple[Path, str]:
+def _loading_run(target: Path, out: Path | None, overrides: list[str] | None, quiet: bool,
+                 confirm=None) -> tuple[Path, str]:
     """Step 1: the run directory, running or resuming the loading run when needed."""
     target = Path(target)
     if target.is_dir():
@@ -128,7 +137,7 @@ def _loading_run(target: Path, out: Path | None, overrides: list[str] | None, qu
         if (run_dir / "checkpoints" / "latest.h5").is_file():
             _finished(resume_run(run_dir, quiet=quiet), run_dir)
             return run_dir, f"resumed ({status})"
-    _finished(run_scene(cfg, run_dir, force=h5.is_file(), quiet=quiet), run_dir)
+    _finished(run_scene(cfg, run_dir, force=h5.is_file(), quiet=quiet, confirm=confirm), run_dir)
     return run_dir, "ran"
 
 
@@ -174,15 +183,16 @@ def _select(run_dir: Path, wanted: list[int] | None) -> tuple[list[int], set[int
 
 def run_study(target: Path, perms: list[float], slips: list[int] | None = None, main: str = "first",
               jobs: int | None = None, out: Path | None = None, overrides: list[str] | None = None,
-              quiet: bool = False, figures: bool = True, on_progress=None) -> StudyResult:
-    """Run steps 1-4 (see the module docstring); returns what was run, skipped and found."""
+              quiet: bool = False, figures: bool = True, on_progress=None, confirm=None) -> StudyResult:
+    """Run steps 1-4 (see the module docstring); returns what was run, skipped and found.
+    ``confirm``: asked before a long loading run starts (:func:`~gouge_cli.workflows.run.run_scene`)."""
     if not perms:
         raise ConfigError("give at least one --perm K (kappa_c in d^2, e.g. --perm 1e-5)")
     check_perms(perms)
     if main not in ("first", "largest"):
         raise ConfigError(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
     say = on_progress or (lambda msg: None)
-    run_dir, how = _loading_run(target, out, overrides, quiet)
+    run_dir, how = _loading_run(target, out, overrides, quiet, confirm)
     say(f"loading run {run_dir}: {how}")
     chosen, transient = _select(run_dir, slips)
     result = StudyResult(run_dir, chosen, sorted(transient), loading=how)
@@ -191,7 +201,8 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
     if todo:
         workers = max(1, min(jobs or os.cpu_count() or 1, len(todo)))
         ctx = multiprocessing.get_context("spawn")
-        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_one_thread) as pool:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_pool_worker,
+                                 initargs=(os.getpid(),)) as pool:
             futures = [pool.submit(branch_task, str(run_dir), s, p, w, main == "first") for s, p, w in todo]
             for fut in as_completed(futures):
                 rec = fut.result()
