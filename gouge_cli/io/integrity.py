@@ -140,13 +140,23 @@ def read(ds, selection=Ellipsis) -> np.ndarray:
         raise DamagedFileError(f"{where}: cannot be read, damaged data ({_short(err)})") from None
 
 
+def all_objects(h5) -> dict:
+    """{path: object} of an open file's root and every group and dataset below it."""
+    objects = {"/": h5}
+
+    def visit(name, obj):
+        objects["/" + name] = obj      # (returns None: visititems stops at the first other value)
+
+    h5.visititems(visit)
+    return objects
+
+
 def content_digest(h5, skip: tuple = ("checksum",), arrays: dict | None = None) -> str:
     """SHA-256 (hex) over everything an HDF5 file holds: every group's and dataset's path and
     attributes (but those named in `skip` on the root) and every dataset's dtype, shape and
     bytes. `arrays` ({path: array}): data already read, used instead of reading it again."""
     h = hashlib.sha256()
-    objects = {"/": h5}
-    h5.visititems(lambda name, obj: objects.setdefault("/" + name, obj))
+    objects = all_objects(h5)
     for path in sorted(objects):
         obj = objects[path]
         h.update(f"[{path}]".encode("utf-8", "surrogatepass"))

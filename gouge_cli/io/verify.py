@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import DamagedFileError, InputError
 from .checkpoint import read_checkpoint
-from .integrity import check_seal, damaged_rows, read, stored_seal
+from .integrity import all_objects, check_seal, damaged_rows, read, stored_seal
 from .runfile import attr_value, checked_time
 
 
@@ -81,7 +81,7 @@ def run_file_problems(path: Path) -> tuple[list[Problem], bool]:
             return [Problem("/", str(err))], True
         objects = {"/": h5}
         try:
-            h5.visititems(lambda name, obj: objects.setdefault("/" + name, obj))
+            objects = all_objects(h5)
         except (OSError, RuntimeError, KeyError, ValueError) as err:
             problems.append(Problem("/", f"its structure cannot be walked ({str(err).splitlines()[0][:160]})"))
         for name, obj in sorted(objects.items()):
