@@ -157,9 +157,11 @@ def _refuse_damaged(path: Path, time: float, step: int, slips: int) -> None:
     """DamagedFileError naming what is damaged in the part of run.h5 a resume keeps (nothing is run)."""
     damaged = continued_problems(path, time, step, slips)
     if damaged:
-        listed = "; ".join(p.message for p in damaged[:3]) + (f"; and {len(damaged) - 3} more" if len(damaged) > 3 else "")
-        raise DamagedFileError(f"{path} holds damaged data before the checkpoint the run would continue from, so "
-                               f"nothing was resumed: {listed}. `gouge verify {path.parent}` lists what recomputes it")
+        listed = ", ".join(p.object + (f" rows {p.rows[0]}-{p.rows[1]}" if p.rows else "") for p in damaged[:3])
+        more = f" and {len(damaged) - 3} more" if len(damaged) > 3 else ""
+        raise DamagedFileError(f"{path} holds damaged data before the checkpoint the run would continue from "
+                               f"({listed}{more}), so nothing was resumed; `gouge verify {path.parent}` says what "
+                               "recomputes it")
 
 
 __all__ = ["RunResult", "default_run_dir", "run_scene", "resume_run"]

@@ -260,8 +260,9 @@ def test_verify_reports_flips_in_every_file(run, tmp_path):
 
 
 def test_run_file_flips_are_refused_or_change_nothing(run, tmp_path):
-    """A sample of flips in run.h5: `gouge slips --json` and `gouge analyze --json` exit 2 naming
-    run.h5, or print exactly what they print for the sound file."""
+    """A sample of flips in run.h5 (and one in a series and one in a slip's onset_time, which
+    they read): `gouge slips --json` and `gouge analyze --json` exit 2 naming run.h5, or print
+    exactly what they print for the sound file."""
     run_dir, _ = run
     work = tmp_path / "run"
     shutil.copytree(run_dir, work, ignore=shutil.ignore_patterns("forks"))
@@ -270,7 +271,14 @@ def test_run_file_flips_are_refused_or_change_nothing(run, tmp_path):
     reference = {cmd: r.output.replace(str(work), "RUN") for cmd, r in reference.items()}
     rng = random.Random(f"{SEED}-consumers")
     detected = harmless = 0
-    for what, offset, bit in list(plants(work / "run.h5", rng, datasets=5, attrs=5)):
+    planted = list(plants(work / "run.h5", rng, datasets=5, attrs=5))
+    _, offset, size = next(x for x in dataset_spans(work / "run.h5") if x[0] == "/series/wall_vx")
+    planted.append(("dataset /series/wall_vx", offset + rng.randrange(size), rng.randrange(8)))
+    slip = slip_catalog(work)[0]["number"]
+    at = plant_in_attribute(work / "run.h5", f"/slips/{slip:03d}", "onset_time", rng)
+    flip(work / "run.h5", *at)
+    planted.append((f"attribute /slips/{slip:03d}:onset_time", *at))
+    for what, offset, bit in planted:
         trial = tmp_path / f"trial{offset}_{bit}"
         shutil.copytree(work, trial)
         flip(trial / "run.h5", offset, bit)
@@ -284,7 +292,7 @@ def test_run_file_flips_are_refused_or_change_nothing(run, tmp_path):
                 assert result.output.replace(str(trial), "RUN") == reference[cmd], (what, cmd)
                 harmless += 1
         shutil.rmtree(trial)
-    assert detected and detected + harmless == 20
+    assert detected >= 3 and detected + harmless == 2 * len(planted)     # wall_vx: analyze; onset_time: both
 
 
 def _flip_text(path: Path, old: bytes, new: bytes):
@@ -355,7 +363,8 @@ def test_series_flip_names_dataset_and_rows(run, tmp_path):
     _, offset, size = next(s for s in dataset_spans(work / "run.h5") if s[0] == "/series/wall_vx")
     flip(work / "run.h5", offset + 8 * 7 + 2, 5)               # inside row 7's value
     result = gouge("analyze", work, "--json")
-    refused(result, "series/wall_vx", "rows 0-")
+    refused(result, "series/wall_vx", "fail their checksum")
+    assert re.search(r"rows \d+-\d+ \(of \d+\)", result.output)       # the rows it read, in the damaged chunk
     with RunReader(work) as reader:                           # the other series stay usable
         assert reader.series(["wall_x"])["wall_x"].size == reader.info.n_samples
 
