@@ -177,3 +177,8 @@ class MovieError(AnalysisError):
 
 class ExportError(AnalysisError):
     """The run cannot be exported as asked (no snapshots, no such fork)."""
+
+
+class DamagedFileError(InputError):
+    """A file whose data or attributes fail their checksum, or cannot be read (exit 2); the message
+    names the file, the dataset or attribute and, for series, the rows. Nothing is computed from it."""

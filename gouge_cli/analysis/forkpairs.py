@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import AnalysisError, NotARunError
+from ..errors import AnalysisError, DamagedFileError, NotARunError
 from ..io.runfile import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
 from .pairs import DRAINED_DE, UNDRAINED_DE, PairDefinition, PairResult, campaign_summary, classify_pair, regime  # noqa: F401
@@ -208,13 +208,13 @@ def _slip_number(fork_dir: Path) -> int:
 
 def run_pairs(run_dir: Path, strict: bool = False, main: str = "first") -> tuple[list[ForkPair], list[str]]:
     """All pairs under ``RUN/forks`` (compared events chosen by ``main``). Returns (pairs, skipped):
-    a fork that cannot be classified (still running, incomplete) is skipped with its reason, or
+    a fork that cannot be classified (still running, incomplete, damaged) is skipped with its reason, or
     raises when ``strict``."""
     pairs, skipped = [], []
     for fork in fork_dirs(run_dir):
         try:
             pairs.extend(classify_fork(fork, main))
-        except AnalysisError as exc:
+        except (AnalysisError, DamagedFileError) as exc:      # a damaged branch is skipped, named
             if strict:
                 raise
             skipped.append(str(exc))

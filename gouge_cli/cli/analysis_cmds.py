@@ -175,7 +175,7 @@ def register(app: typer.Typer) -> None:
         from ..analysis.forkpairs import campaign
         from ..analysis.report import write_analysis
         from ..api import analyze as analyze_run
-        from ..errors import AnalysisError
+        from ..errors import AnalysisError, DamagedFileError
         from ..errors import describe_os_error
         from ..errors import EXIT_BAD_INPUT
         from .common import err, fail, out
@@ -185,8 +185,8 @@ def register(app: typer.Typer) -> None:
             try:
                 analysis = analyze_run(run_dir, notch=notch, main=_main(main), write=False)
                 written = write_analysis(analysis)
-            except (AnalysisError, OSError) as exc:
-                exc = exc if isinstance(exc, AnalysisError) else describe_os_error(exc, str(run_dir))[0]
+            except (AnalysisError, DamagedFileError, OSError) as exc:
+                exc = exc if not isinstance(exc, OSError) else describe_os_error(exc, str(run_dir))[0]
                 failed.append(str(exc))
                 if not as_json:
                     from rich.markup import escape

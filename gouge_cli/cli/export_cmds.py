@@ -44,7 +44,7 @@ def register(app: typer.Typer) -> None:
     ):
         """Write a run's (or fork branch's) snapshots as one time-dependent VTKHDF file for ParaView:
         grains, contacts (normal and tangential force), walls, pressure grid; time in t0 since loading began."""
-        from ..errors import AnalysisError
+        from ..errors import AnalysisError, DamagedFileError
         from ..export.vtkhdf import export_run
         from .common import fail, out as console
 
@@ -60,7 +60,7 @@ def register(app: typer.Typer) -> None:
                 console.print(f"{', '.join(map(str, result.paths))}: {result.times.size} steps, t = {result.times[0]:.6g} .. "
                               f"{result.times[-1]:.6g} t0 since loading began (last step: {counts} points)",
                               highlight=False)
-        except AnalysisError as exc:
+        except (AnalysisError, DamagedFileError) as exc:
             fail(str(exc))
 
     @app.command()
@@ -75,13 +75,13 @@ def register(app: typer.Typer) -> None:
     ):
         """MP4 of one slip, drained and undrained side by side from the same packing: force chains,
         pore pressure P/sigma on a fixed colour scale, time since onset, v_w/V_s with a moving marker."""
-        from ..errors import AnalysisError
+        from ..errors import AnalysisError, DamagedFileError
         from ..plots.movie import make_movie
         from .common import fail, out as console
 
         try:
             path, frames = make_movie(run_dir, slip, perm, out, fps=fps)      # progress lines on stderr
-        except AnalysisError as exc:
+        except (AnalysisError, DamagedFileError) as exc:
             fail(str(exc))
         console.print(f"{path}: {frames} frames at {fps} fps ({path.stat().st_size / 1e6:.2f} MB)", highlight=False)
 

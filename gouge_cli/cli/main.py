@@ -340,6 +340,7 @@ from .campaign_cmds import register as _register_campaign
 _register_campaign(app)
 from .study_cmds import register as _register_study
 _register_study(app)
+from .verify_cmds import register as _register_verify; _register_verify(app)  # noqa: E402, E702
 
 
 def main():

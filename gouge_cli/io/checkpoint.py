@@ -4,8 +4,11 @@ A checkpoint is an HDF5 file: datasets ``state/<name>`` (see State.EVOLVING) and
 ``fluid/<name>``; states attached to it (the slip recorder's pre-slip ring, see events.py) under
 ``attached/<key>/{state,fluid}/<name>`` with their own ``extra`` attribute; attributes
 ``config`` (YAML of the validated config), ``extra`` (JSON: detector state, slip number, parent
-run, ...), ``provenance`` (JSON, see :mod:`gouge_cli.io.provenance`) and ``checksum`` (SHA-256 over
-every dataset's name, dtype, shape and bytes). It is written to a temporary file in the same
+run, ...), ``provenance`` (JSON, see :mod:`gouge_cli.io.provenance`) and ``checksum``:
+``sha256-v2:`` and the SHA-256 over everything else the file holds, every dataset's path,
+dtype, shape and bytes and every attribute of every group and dataset (config and extra
+included; :func:`gouge_cli.io.integrity.content_digest`). A checkpoint written before that
+(a bare hex digest, over the datasets alone) is still read, its datasets checked. It is written to a temporary file in the same
 directory and renamed over the target, so a crash never leaves a half-written checkpoint behind; a
 temporary file left by a killed writer (``.NAME.tmpPID`` of a process no longer alive) is
 removed by the next write of that checkpoint.
@@ -25,8 +28,9 @@ import yaml
 from .. import __version__
 from . import provenance
 from ..config import build_config, Config, dump_config
-from ..errors import CheckpointError, ConfigError
+from ..errors import CheckpointError, ConfigError, DamagedFileError
 from .filedoc import document_checkpoint
+from .integrity import content_digest
 from .rundir import pid_alive
 
 
@@ -104,8 +108,10 @@ def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
             h5.attrs["extra"] = json.dumps(checkpoint.extra, default=_plain)
             h5.attrs["version"] = __version__
             h5.attrs["provenance"] = provenance.dumps(checkpoint.provenance or provenance.collect())
-            h5.attrs["checksum"] = provenance.state_digest(groups)
+            h5.attrs["checksum"] = ""          # set below; named in attribute_units
             document_checkpoint(h5)
+            arrays = {f"/{group}/{name}": arr for group, named in groups.items() for name, arr in named.items()}
+            h5.attrs["checksum"] = DIGEST_PREFIX + content_digest(h5, arrays=arrays)
         with open(tmp, "rb") as f:
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -113,6 +119,23 @@ def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
         if tmp.exists():
             tmp.unlink()
     return path.stat().st_size
+
+
+DIGEST_PREFIX = "sha256-v2:"
+
+
+def _verify(h5, path: Path, groups: dict, checksum) -> None:
+    """CheckpointError unless `checksum` matches the file (`groups`: its datasets, already read)."""
+    checksum = checksum.decode() if isinstance(checksum, bytes) else str(checksum)
+    if checksum.startswith(DIGEST_PREFIX):
+        arrays = {f"/{group}/{name}": arr for group, named in groups.items() for name, arr in named.items()}
+        if content_digest(h5, arrays=arrays) != checksum[len(DIGEST_PREFIX):]:
+            raise CheckpointError(f"checkpoint {path} is corrupt: its contents (datasets, config, extra or other "
+                                  "attributes) do not match its checksum; nothing was computed from it")
+        return
+    if len(checksum) != 64 or provenance.state_digest(dict(groups, fluid=groups.get("fluid", {}))) != checksum:
+        raise CheckpointError(f"checkpoint {path} is corrupt: its checksum does not match its contents; nothing "
+                              "was computed from it")
 
 
 def read_checkpoint(path: Path, overrides: list[str] | dict | None = None) -> Checkpoint:
@@ -129,20 +152,26 @@ def read_checkpoint(path: Path, overrides: list[str] | dict | None = None) -> Ch
                 for part in ("state", "fluid"):
                     g = h5[f"attached/{key}/{part}"]
                     groups[f"attached/{key}/{part}"] = {name: ds[...] for name, ds in g.items()}
-                child_extra[key] = json.loads(h5[f"attached/{key}"].attrs["extra"])
+                child_extra[key] = h5[f"attached/{key}"].attrs["extra"]
+            _verify(h5, path, groups, h5.attrs["checksum"])
             config_text = h5.attrs["config"]
             extra = json.loads(h5.attrs["extra"])
-            checksum = h5.attrs["checksum"]
             stored = provenance.loads(h5.attrs.get("provenance"))
-    except (OSError, KeyError, ValueError, RuntimeError) as err:
+            child_extra = {key: json.loads(text) for key, text in child_extra.items()}
+    except CheckpointError:
+        raise
+    except DamagedFileError as err:
+        raise CheckpointError(f"checkpoint {path} is corrupt: {err}; nothing was computed from it") from None
+    except (OSError, KeyError, ValueError, RuntimeError, TypeError) as err:
         raise CheckpointError(f"checkpoint {path} is unreadable or truncated ({str(err)[:200]})") from None
     groups.setdefault("fluid", {})
-    if provenance.state_digest(groups) != checksum:
-        raise CheckpointError(f"checkpoint {path} is corrupt: its checksum does not match its contents")
     try:
         config = build_config(yaml.safe_load(config_text), overrides)
     except ConfigError as err:
         raise ConfigError(f"{err}") from None
+    except yaml.YAMLError as err:
+        raise CheckpointError(f"checkpoint {path}: its config attribute is not valid YAML "
+                              f"({str(err).splitlines()[0][:160]})") from None
     attached = {key: Checkpoint(config, groups[f"attached/{key}/state"], groups[f"attached/{key}/fluid"],
                                 child_extra[key], provenance=stored) for key in keys}
     return Checkpoint(config, groups["state"], groups["fluid"], extra, path, provenance=stored, attached=attached)

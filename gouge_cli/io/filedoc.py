@@ -138,7 +138,8 @@ CHECKPOINT_ATTRS = {
     "config": RUN_ATTRS["config"],
     "extra": ("-", "callback state (JSON): slip detector, slip number, onset time, parent run"),
     "version": RUN_ATTRS["version"],
-    "checksum": ("-", "SHA-256 over every dataset's name, dtype, shape and bytes"),
+    "checksum": ("-", "'sha256-v2:' + SHA-256 over every dataset (path, dtype, shape, bytes) and every "
+                      "attribute of the file but this one"),
     "provenance": RUN_ATTRS["provenance"],
 }
 
@@ -199,7 +200,7 @@ def describe(obj, unit: str, description: str) -> None:
 def describe_attributes(group, table: dict) -> None:
     """Write ``attribute_units`` (JSON {name: [unit, description]}) for the group's own attributes."""
     known = {k: list(table.get(k, ("-", "undocumented"))) for k in group.attrs.keys()
-             if k not in ("attribute_units", "unit", "description")}
+             if k not in ("attribute_units", "unit", "description", "attrs_sha256")}     # the seal: io.integrity
     group.attrs["attribute_units"] = json.dumps(known)
 
 

@@ -29,11 +29,17 @@ Layout of ``run.h5``::
 
 Rows are buffered and flushed every ``flush_rows`` rows or on close, so a crash loses at
 most the rows since the last flush and never corrupts earlier ones.
+
+Integrity (:mod:`gouge_cli.io.integrity`): series, snapshot and grid datasets are chunked with
+HDF5's Fletcher-32 checksum (checked by HDF5 on every read); every group and dataset carries
+``attrs_sha256``, a SHA-256 over its other attributes (and over the data of the small datasets
+without Fletcher-32: slip sub-events, /analysis columns). The readers here check both and the
+series time for increase, and raise DamagedFileError (exit 2) naming the dataset, the rows or
+the attribute; a file written before checksums (no root ``attrs_sha256``) is read unchecked.
 """
 
 from __future__ import annotations
 
-import bisect
 import json
 import math
 import os
@@ -48,12 +54,13 @@ import yaml
 from .. import __version__
 from . import provenance
 from ..config import SLIP_END_FACTOR, SLIP_START_FACTOR, Config, dump_config
-from ..errors import NotARunError, RunStillRunningError
+from ..errors import DamagedFileError, NotARunError, RunStillRunningError
 from ..model.timestep import half_period
 from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, document_analysis, document_run_file,
                       document_slip, grid_geometry)
 from ..kernels import layout as L
 from ..kernels import measure as M
+from .integrity import SEAL, check_seal, read, seal, seal_tree, stored_seal
 from .rundir import open_run_file
 
 # name -> (unit, description); units are the dimensionless scales of docs/physics/units.md
@@ -110,10 +117,11 @@ class RunFile:
             a["provenance"] = provenance.dumps(provenance.collect(threads))
             for key, value in (extra_attrs or {}).items():
                 a[key] = value
-            self.h5.create_group("series")
-            self.h5.create_group("snapshots")
+            seal(self.h5.create_group("series"))
+            seal(self.h5.create_group("snapshots"))
         else:
             self.h5.attrs["provenance_resumed"] = provenance.dumps(provenance.collect(threads))
+        seal(self.h5)
 
     def append(self, row: dict):
         self._rows.append(row)
@@ -130,9 +138,10 @@ class RunFile:
                 if name not in group:
                     unit, description = SERIES[name]
                     ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64,
-                                              chunks=(4096,))
+                                              chunks=(4096,), fletcher32=True)
                     ds.attrs["unit"] = unit
                     ds.attrs["description"] = description
+                    seal(ds)
                     if name != "time" and rows_before:
                         ds.resize((rows_before,))
                         ds[:] = np.nan
@@ -170,7 +179,7 @@ class RunFile:
         grp.attrs["load_time"] = float(s.clock[L.C_DRIVE_TIME])
         grp.attrs["step"] = s.step
         for name in ("x", "z", "radius", "vx", "vz", "spin", "body"):     # in original grain order
-            grp.create_dataset(name, data=s.by_id(getattr(s, name)), compression="gzip", compression_opts=1)
+            _checked(grp, name, s.by_id(getattr(s, name)), compression="gzip", compression_opts=1)
         npairs = int(s.start[-1])
         ci = np.empty(npairs, np.int32)
         cj = np.empty(npairs, np.int32)
@@ -182,30 +191,38 @@ class RunFile:
         ci[:m] = s.id[ci[:m]]
         cj[:m] = s.id[cj[:m]]
         for name, arr in (("contact_i", ci), ("contact_j", cj), ("contact_fx", cfx), ("contact_fz", cfz)):
-            grp.create_dataset(name, data=arr[:m], compression="gzip", compression_opts=1)
+            _checked(grp, name, arr[:m], compression="gzip", compression_opts=1)
         if sim.fluid is not None:
             f = sim.fluid
             geometry = grid_geometry(f.state[L.S_Z_BOT], f.dx, f.dz)
             for name, arr in f.snapshot_fields().items():
-                grp.create_dataset(name, data=arr).attrs.update(geometry)
+                _checked(grp, name, arr).attrs.update(geometry)
         for name, ds in grp.items():
             describe(ds, *SNAPSHOT[name])
+            seal(ds)
         describe_attributes(grp, SNAPSHOT_ATTRS)
+        seal(grp)
         self.h5.flush()
 
     def add_slip(self, number: int, entry: dict, subevents: list[dict]):
         """Write slip `number` as /slips/NNN: `entry` as attributes, subevent_time and
         subevent_velocity (S,) datasets [t0, v0]; flushed at once."""
-        group = self.h5.require_group("slips").create_group(f"{number:03d}")
+        if "slips" not in self.h5:
+            seal(self.h5.create_group("slips"))
+        group = self.h5["slips"].create_group(f"{number:03d}")
         for key, value in entry.items():
             group.attrs[key] = value
         group.create_dataset("subevent_time", data=np.array([s["time"] for s in subevents], float))
         group.create_dataset("subevent_velocity", data=np.array([s["velocity"] for s in subevents], float))
         document_slip(group)
+        for ds in group.values():
+            seal(ds)
+        seal(group)
         self.h5.flush()
 
     def set_attr(self, key: str, value):
         self.h5.attrs[key] = value
+        seal(self.h5)
 
     def close(self, status: str = "finished", final_state_hash: str | None = None):
         if self.h5.id.valid:
@@ -219,12 +236,31 @@ class RunFile:
                     self.h5.attrs["deborah_max"] = float(np.nanmax(deborah))
             self.h5.attrs["status"] = status
             document_run_file(self.h5)
+            for name in ("series", "snapshots", "slips"):      # described here the first time
+                if name in self.h5:
+                    seal(self.h5[name])
+            self.h5.visititems(lambda _, obj: None if SEAL in obj.attrs else seal(obj))   # from before seals
+            seal(self.h5)
             self.h5.close()
+
+
+def _checked(group, name: str, data: np.ndarray, **options):
+    """A dataset with Fletcher-32 per chunk (an empty one, which cannot be chunked, is covered by
+    its seal instead)."""
+    if data.size == 0:
+        return group.create_dataset(name, data=data)
+    return group.create_dataset(name, data=data, chunks=options.pop("chunks", True), fletcher32=True, **options)
 
 
 def read_series(path: Path) -> dict[str, np.ndarray]:
     with h5py.File(path, "r") as h5:
-        return {name: ds[...] for name, ds in h5["series"].items()}
+        required = stored_seal(h5) is not None
+        check_seal(h5["series"], required)
+        out = {}
+        for name, ds in h5["series"].items():
+            check_seal(ds, required)
+            out[name] = read(ds)
+        return out
 
 
 def slip_catalog(run_dir: Path) -> list[dict]:
@@ -321,7 +357,9 @@ class RunReader:
 
     ``allow_running=False`` raises :class:`RunStillRunningError` for status 'running';
     ``allow_running=True`` also opens a file its writer still holds (read without the HDF5 file
-    lock: what was flushed).
+    lock: what was flushed). The root attributes and the time series are checked on opening (seal,
+    chunk checksums, time increasing), every other series, snapshot and slip when it is read; a
+    damaged one raises :class:`DamagedFileError` (module doc).
     """
 
     def __init__(self, path: Path | str, allow_running: bool = False):
@@ -332,7 +370,11 @@ class RunReader:
             raise NotARunError(f"{h5_path} cannot be read as HDF5 ({exc}); "
                                "if its run is still going, wait for it to finish") from exc
         try:
+            self.sealed = stored_seal(self.h5) is not None
+            check_seal(self.h5, self.sealed)
             self.info = self._read_info(run_dir, h5_path)
+            self._checked: set = set()
+            self._time = checked_time(self.h5, self.sealed)
             if self.info.status == "running" and not allow_running:
                 what = self.info.describe()
                 hint = ("wait for `gouge restart` to finish, or run it again with --force"
@@ -342,7 +384,6 @@ class RunReader:
         except Exception:
             self.h5.close()
             raise
-        self._time = self.h5["series"]["time"]
 
     def _read_info(self, run_dir: Path, h5_path: Path) -> RunInfo:
         h5 = self.h5
@@ -405,20 +446,28 @@ class RunReader:
         """Samples ``start:stop`` of each named series, shape (stop - start,); None if absent."""
         group = self.h5["series"]
         stop = self.info.n_samples if stop is None else stop
-        return {n: (group[n][start:stop].astype(float) if n in group else None) for n in names}
+        return {n: (self._dataset(group, n)[start:stop].astype(float) if n in group else None) for n in names}
+
+    def _dataset(self, group, name: str):
+        """A series as a sliceable view whose reads are checked (its seal once, chunks on every read)."""
+        ds = group[name]
+        if ds.name not in self._checked:
+            check_seal(ds, self.sealed)
+            self._checked.add(ds.name)
+        return _Checked(ds)
 
     def index_at_or_after(self, t: float) -> int:
-        """First sample index with time >= t (bisection on the dataset, no full read)."""
-        return bisect.bisect_left(self._time, t)
+        """First sample index with time >= t."""
+        return int(np.searchsorted(self._time, t, side="left"))
 
     def index_at_or_before(self, t: float) -> int:
         """Last sample index with time <= t."""
-        return bisect.bisect_right(self._time, t) - 1
+        return int(np.searchsorted(self._time, t, side="right")) - 1
 
     def time_offset(self) -> float:
         """time - load_time (the absolute time at which the driver started) [t0]."""
         if self.has("load_time") and self.info.n_samples:
-            return float(self._time[0] - self.h5["series"]["load_time"][0])
+            return float(self._time[0] - self._dataset(self.h5["series"], "load_time")[0])
         return self.info.load_start_time if math.isfinite(self.info.load_start_time) else 0.0
 
     def attributes(self) -> dict:
@@ -435,18 +484,59 @@ class RunReader:
         return sorted(self.h5["snapshots"].keys()) if "snapshots" in self.h5 else []
 
     def snapshot_times(self) -> list[float]:
-        return [float(self.h5["snapshots"][n].attrs["time"]) for n in self.snapshot_names()]
+        return [float(self._snapshot_group(n).attrs["time"]) for n in self.snapshot_names()]
+
+    def _snapshot_group(self, name: str):
+        grp = self.h5["snapshots"][name]
+        if grp.name not in self._checked:
+            check_seal(grp, self.sealed)
+            self._checked.add(grp.name)
+        return grp
+
+    def snapshot_array(self, name: str, key: str) -> np.ndarray:
+        """One dataset of snapshot `name` (e.g. 'pressure'), checked."""
+        ds = self._snapshot_group(name)[key]
+        check_seal(ds, self.sealed)
+        return read(ds)
 
     def snapshot(self, name: str) -> dict:
         """One snapshot group as arrays (grains, contacts, optional pressure/porosity fields)."""
-        grp = self.h5["snapshots"][name]
-        out = {key: grp[key][...] for key in grp.keys()}
+        grp = self._snapshot_group(name)
+        out = {key: self.snapshot_array(name, key) for key in grp.keys()}
         out["time"] = float(grp.attrs["time"])
         out["step"] = int(grp.attrs["step"])
         if "pressure" in grp and "origin" in grp["pressure"].attrs:
             out["grid"] = {k: np.asarray(grp["pressure"].attrs[k], float) for k in ("origin", "spacing")}
         return out
 
+
+
+class _Checked:
+    """Slicing a dataset through :func:`gouge_cli.io.integrity.read`."""
+
+    def __init__(self, ds):
+        self.ds = ds
+
+    def __getitem__(self, selection):
+        return read(self.ds, selection)
+
+
+def checked_time(h5, required: bool) -> np.ndarray:
+    """/series/time of an open run file, checked: seal, chunk checksums, finite and never
+    decreasing (DamagedFileError naming the first row that breaks it)."""
+    if "series" not in h5 or "time" not in h5["series"]:
+        return np.zeros(0)
+    check_seal(h5["series"], required)
+    ds = h5["series"]["time"]
+    check_seal(ds, required)
+    t = read(ds)
+    bad = np.flatnonzero(~np.isfinite(t) | np.concatenate([[False], np.diff(t) < 0]))
+    if bad.size:
+        k = int(bad[0])
+        raise DamagedFileError(f"{h5.filename}:/series/time: row {k} ({t[k]:.6g}) does not follow row {k - 1} "
+                               f"({t[k - 1] if k else float('nan'):.6g}): the time series is damaged"
+                               + (f" ({bad.size} rows)" if bad.size > 1 else ""))
+    return t
 
 
 def open_run(path: Path | str, allow_running: bool = False) -> RunReader:
@@ -481,12 +571,17 @@ def read_slips(h5: h5py.File) -> list[dict] | None:
     subevent_velocity lists, per slip, in order), or None if the run wrote none."""
     if "slips" not in h5:
         return None
+    required = stored_seal(h5) is not None
+    check_seal(h5["slips"], required)
     out = []
     for name in sorted(h5["slips"]):
         g = h5["slips"][name]
-        entry = {k: attr_value(g.attrs, k) for k in g.attrs.keys()}
-        entry["subevent_time"] = g["subevent_time"][...].tolist() if "subevent_time" in g else []
-        entry["subevent_velocity"] = g["subevent_velocity"][...].tolist() if "subevent_velocity" in g else []
+        check_seal(g, required)
+        entry = {k: attr_value(g.attrs, k) for k in g.attrs.keys() if k != SEAL}
+        for key in ("subevent_time", "subevent_velocity"):
+            if key in g:
+                check_seal(g[key], required)
+            entry[key] = read(g[key]).tolist() if key in g else []
         out.append(entry)
     return out
 
@@ -520,3 +615,4 @@ def write_analysis_tables(h5_path: Path, notch: bool, summary: str, tables: dict
         for name, (rows, columns) in tables.items():
             _table_to_group(grp.create_group(name), rows, columns)
         document_analysis(grp)
+        seal_tree(grp)

@@ -110,8 +110,8 @@ def frame_times(drained: Branch, undrained: Branch, pad: float = 0.15) -> np.nda
 def pressure_scale(branch: Branch) -> float:
     """Largest |P|/sigma over the branch's snapshots (the movie's fixed colour scale)."""
     h5 = branch.reader.h5["snapshots"]
-    vmax = max((float(np.abs(h5[n]["pressure"][...]).max()) for n in branch.names if "pressure" in h5[n]),
-               default=0.0)
+    vmax = max((float(np.abs(branch.reader.snapshot_array(n, "pressure")).max()) for n in branch.names
+                if "pressure" in h5[n]), default=0.0)
     return vmax / branch.reader.info.sigma or 1e-6
 
 

@@ -12,9 +12,10 @@ from pathlib import Path
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint, remove_stale_temps
 from ..config import Config, dump_config, load_config
-from ..errors import ConfigError, hdf5_os_error
+from ..errors import ConfigError, DamagedFileError, hdf5_os_error
 from ..kernels import layout as L
 from ..io.runfile import RunFile
+from ..io.verify import continued_problems
 from ..model.params import choose_threads
 from ..model.preflight import check_config
 from ..driver.phases import compaction_phase, load_phase
@@ -155,11 +156,23 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
                 if str(h5.attrs["status"]) == "finished":
                     raise RunDirError(f"{run_dir} already finished; nothing to resume")
             rec_state = ck.extra.get("slip_recorder", {})
+            _refuse_damaged(run_dir / "run.h5", ck.time, ck.step, int(rec_state.get("count", 0)))
             writer = RunFile(run_dir / "run.h5", ck.config, sim.dt, mode="a", threads=sim.threads)
             writer.truncate_after(ck.time, ck.step, int(rec_state.get("count", 0)))
             writer.set_attr("status", "running")
         return _drive(sim, writer, run_dir, live=live, quiet=quiet, label=f"resume {ck.config.name}",
                       resume_from=ck)
+
+
+def _refuse_damaged(path: Path, time: float, step: int, slips: int) -> None:
+    """DamagedFileError naming what is damaged in the part of run.h5 a resume keeps (nothing is run)."""
+    damaged = continued_problems(path, time, step, slips)
+    if damaged:
+        listed = ", ".join(p.object + (f" rows {p.rows[0]}-{p.rows[1]}" if p.rows else "") for p in damaged[:3])
+        more = f" and {len(damaged) - 3} more" if len(damaged) > 3 else ""
+        raise DamagedFileError(f"{path} holds damaged data before the checkpoint the run would continue from "
+                               f"({listed}{more}), so nothing was resumed; `gouge verify {path.parent}` says what "
+                               "recomputes it")
 
 
 __all__ = ["RunResult", "default_run_dir", "run_scene", "resume_run", "stopped_by_os_error"]

@@ -58,7 +58,8 @@ def test_start_moves_up_to_the_capped_lead(start, tmp_path):
 
     from gouge_cli.model.timestep import slip_duration
     from gouge_cli.studies.accuracy import MAX_LEAD_SLIPS, start_from_checkpoint
-    from gouge_cli.io.checkpoint import read_checkpoint
+    from gouge_cli.io.checkpoint import DIGEST_PREFIX, read_checkpoint
+    from gouge_cli.io.integrity import content_digest
     from gouge_cli.driver.simulation import Simulation
     ck = read_checkpoint(start.source)
     duration = slip_duration(start.config, Simulation(start.config, arrays=ck.state).wall_mass_per_length)
@@ -69,6 +70,7 @@ def test_start_moves_up_to_the_capped_lead(start, tmp_path):
         extra.pop("slip", None)
         extra["onset_time"] = ck.time + 20.0 * duration
         h5.attrs["extra"] = json.dumps(extra)
+        h5.attrs["checksum"] = DIGEST_PREFIX + content_digest(h5)     # an edited checkpoint, stamped again
     moved = start_from_checkpoint(copy, start.config)
     sim = Simulation(moved.config, arrays=moved.state)
     assert sim.state.time == pytest.approx(ck.time + (20.0 - MAX_LEAD_SLIPS) * duration, abs=sim.dt)

@@ -16,7 +16,8 @@ import yaml
 from typer.testing import CliRunner
 
 from gouge_cli.errors import CheckpointError
-from gouge_cli.io.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
+from gouge_cli.io.checkpoint import DIGEST_PREFIX, read_checkpoint, snapshot_of, write_checkpoint
+from gouge_cli.io.integrity import content_digest
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.io.runfile import slip_catalog
@@ -281,6 +282,7 @@ def test_restart_names_library_differences_from_the_parent(finished_run, tmp_pat
         prov = json.loads(h5.attrs["provenance"])
         prov["libraries"]["numpy"] = "1.0.0"
         h5.attrs["provenance"] = json.dumps(prov)
+        h5.attrs["checksum"] = DIGEST_PREFIX + content_digest(h5)     # an edited checkpoint, stamped again
     result = gouge("restart", run, "--slip", slip, "--perm", "1e-5", "--duration", "50", "--quiet")
     assert result.exit_code == 0, result.output
     assert f"numpy 1.0.0 -> {np.__version__}" in result.output

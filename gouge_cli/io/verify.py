@@ -1,0 +1,250 @@
+"""`gouge verify`: a scrub of a run directory, every byte of every file read and checked.
+
+Checked: ``run.h5`` (the seal of every group and dataset, every chunk's Fletcher-32, the time
+series increasing; :mod:`gouge_cli.io.integrity`), ``checkpoints/*.h5`` (their digest, see
+:mod:`gouge_cli.io.checkpoint`) and the ``run.h5`` of every fork branch
+(``forks/slip_NNN/<branch>``). Each file is sound, damaged (what is damaged: object, rows,
+snapshot step, slip number) or unchecked (written before checksums: read in full, nothing to
+compare with). For each damaged part the report names what recomputes it: the latest sound
+checkpoint at or before it (or the config, from the start), and the command where one exists
+(`gouge analyze` for /analysis, `gouge restart --force` for a fork branch, `gouge resume` for what
+follows latest.h5). `resume` uses :func:`run_file_problems` on what it continues from.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from ..errors import DamagedFileError, InputError
+from .checkpoint import read_checkpoint
+from .integrity import all_objects, check_seal, damaged_rows, read, stored_seal
+from .runfile import attr_value, checked_time
+
+
+@dataclass
+class Problem:
+    """One damaged part of a file. part: 'file' (root attributes, structure), 'series',
+    'snapshot', 'slip' or 'analysis'; rows (series: first, last), step (snapshot), slip (number)."""
+
+    object: str
+    message: str
+    part: str = "file"
+    rows: tuple | None = None
+    step: int | None = None
+    slip: int | None = None
+    time: float | None = None          # clock of the start of the damaged part, when known [t0]
+    recompute: str | None = None
+
+
+@dataclass
+class FileReport:
+    path: str
+    kind: str                          # run, checkpoint, fork
+    status: str                        # sound, damaged, unchecked
+    problems: list = field(default_factory=list)
+    time: float | None = None          # checkpoints: their clock [t0]
+    recompute: str | None = None
+
+
+def _part(path: str) -> dict:
+    """Which part of a run file an HDF5 object path belongs to."""
+    m = re.match(r"/snapshots/(\d+)", path)
+    if m:
+        return {"part": "snapshot", "step": int(m.group(1))}
+    m = re.match(r"/slips/(\d+)", path)
+    if m:
+        return {"part": "slip", "slip": int(m.group(1))}
+    if path.startswith("/series/") or path == "/series":
+        return {"part": "series"}
+    if path.startswith("/analysis"):
+        return {"part": "analysis"}
+    return {"part": "file"}
+
+
+def run_file_problems(path: Path) -> tuple[list[Problem], bool]:
+    """(problems, sealed) of a run file read in full: every object's seal (required when the
+    root has one), every dataset's bytes, series time increasing and series lengths equal."""
+    problems: list[Problem] = []
+    try:
+        h5 = h5py.File(path, "r")
+    except OSError as err:
+        return [Problem("/", f"cannot be opened as HDF5 ({str(err).splitlines()[0][:160]})")], False
+    with h5:
+        try:
+            sealed = stored_seal(h5) is not None
+        except DamagedFileError as err:
+            return [Problem("/", str(err))], True
+        objects = {"/": h5}
+        try:
+            objects = all_objects(h5)
+        except (OSError, RuntimeError, KeyError, ValueError) as err:
+            problems.append(Problem("/", f"its structure cannot be walked ({str(err).splitlines()[0][:160]})"))
+        for name, obj in sorted(objects.items()):
+            try:
+                check_seal(obj, sealed)
+            except DamagedFileError as err:
+                problems.append(Problem(name, str(err), **_part(name)))
+            if isinstance(obj, h5py.Dataset):
+                try:
+                    read(obj)
+                except DamagedFileError as err:
+                    rows = damaged_rows(obj) if obj.ndim == 1 and obj.chunks else []
+                    extra = {"rows": (rows[0][0], rows[-1][1])} if rows and name.startswith("/series/") else {}
+                    problems.append(Problem(name, str(err), **_part(name), **extra))
+        try:
+            t = checked_time(h5, False)
+        except DamagedFileError as err:
+            t = None
+            if not any(p.object == "/series/time" for p in problems):
+                row = re.search(r"row (\d+)", str(err))
+                problems.append(Problem("/series/time", str(err), "series",
+                                        rows=(int(row.group(1)), int(row.group(1))) if row else None))
+        if "series" in h5:
+            lengths = {n: ds.shape[0] for n, ds in h5["series"].items() if isinstance(ds, h5py.Dataset)}
+            if len(set(lengths.values())) > 1:
+                problems.append(Problem("/series", f"series of different lengths ({lengths})", "lengths",
+                                        rows=(min(lengths.values()), max(lengths.values()))))
+        for p in problems:                  # the clock where each damaged part starts, when readable
+            p.time = _start_time(h5, p, t)
+    return problems, sealed
+
+
+def continued_problems(path: Path, time: float, step: int, slips: int) -> list[Problem]:
+    """The problems of run file `path` in what a resume from a checkpoint at clock `time`, step
+    `step`, after `slips` slips keeps (series rows up to `time`, snapshots up to `step`, slips up
+    to `slips`, the root attributes); /analysis is left out (`gouge analyze` rewrites it)."""
+    problems, _ = run_file_problems(path)
+    kept = []
+    for p in problems:
+        if p.part == "analysis" or (p.part == "snapshot" and p.step > step) or (p.part == "slip" and p.slip > slips):
+            continue
+        if p.part == "series" and p.rows is not None and p.time is not None and p.time > time:
+            continue
+        if p.part == "lengths" and _rows_up_to(path, time) <= p.rows[0]:
+            continue
+        kept.append(p)
+    return kept
+
+
+def _rows_up_to(path: Path, time: float) -> int:
+    with h5py.File(path, "r") as h5:
+        return int(np.searchsorted(read(h5["series"]["time"]), time, side="right"))
+
+
+def _start_time(h5, p: Problem, t) -> float | None:
+    try:
+        if p.part == "series":
+            return 0.0 if p.rows is None or t is None or p.rows[0] >= len(t) else float(t[max(p.rows[0] - 1, 0)])
+        if p.part == "snapshot":
+            return float(h5["snapshots"][f"{p.step:012d}"].attrs["time"])
+        if p.part == "slip":
+            return float(attr_value(h5["slips"][f"{p.slip:03d}"].attrs, "checkpoint_time"))
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError):
+        return None
+    return None
+
+
+def _checkpoint_report(path: Path, root: Path) -> FileReport:
+    rel = str(path.relative_to(root))
+    try:
+        ck = read_checkpoint(path)
+    except InputError as err:
+        return FileReport(rel, "checkpoint", "damaged", [Problem("/", str(err))])
+    try:
+        with h5py.File(path, "r") as h5:
+            legacy = not str(attr_value(h5.attrs, "checksum", "")).startswith("sha256-v2:")
+    except OSError:
+        legacy = True
+    return FileReport(rel, "checkpoint", "unchecked" if legacy else "sound", time=ck.time)
+
+
+def _source(checkpoints: list[FileReport], time: float | None, before: str | None = None) -> str:
+    """The latest sound checkpoint at or before `time` (None: unknown, from the start)."""
+    good = [c for c in checkpoints if c.status != "damaged" and c.time is not None and c.path != before
+            and time is not None and c.time <= time]
+    if not good:
+        return "config.yaml (from the start: `gouge run RUN/config.yaml --out NEW` gives the same bits)"
+    best = max(good, key=lambda c: c.time)
+    return f"{best.path} (t = {best.time:.6g} t0)"
+
+
+def verify_run(run_dir: Path) -> dict:
+    """Scrub a run directory (module doc). Returns {"run", "sound", "files": [FileReport as dict]}."""
+    root = Path(run_dir)
+    if not (root / "run.h5").is_file():
+        raise InputError(f"{root} is not a gouge run directory (no run.h5 in it)")
+    checkpoints = [_checkpoint_report(p, root) for p in sorted((root / "checkpoints").glob("*.h5"))]
+    reports = []
+    problems, sealed = run_file_problems(root / "run.h5")
+    main = FileReport("run.h5", "run", "damaged" if problems else ("sound" if sealed else "unchecked"), problems)
+    for p in problems:
+        if p.part == "analysis":
+            p.recompute = f"`gouge analyze {root}` (rewrites /analysis)"
+        else:
+            p.recompute = _source(checkpoints, p.time)
+    reports.append(main)
+    for c in checkpoints:
+        if c.status == "damaged":
+            c.recompute = _source(checkpoints, _checkpoint_time_hint(root, c.path), before=c.path)
+    reports.extend(checkpoints)
+    for branch in sorted(root.glob("forks/slip_*/*/run.h5")):
+        rel = str(branch.relative_to(root))
+        problems, sealed = run_file_problems(branch)
+        report = FileReport(rel, "fork", "damaged" if problems else ("sound" if sealed else "unchecked"), problems)
+        if problems:
+            slip = int(branch.parent.parent.name.removeprefix("slip_"))
+            name = branch.parent.name
+            perm = "" if name == "drained" else f" --perm {name.removeprefix('perm_')}"
+            source = next((c for c in checkpoints if c.path == f"checkpoints/slip_{slip:03d}.h5"), None)
+            state = "sound" if source and source.status != "damaged" else "damaged or missing"
+            report.recompute = (f"checkpoints/slip_{slip:03d}.h5 ({state}): `gouge restart {root} --slip {slip}"
+                                f"{perm} --force`")
+        reports.append(report)
+    return {"run": str(root), "sound": not any(r.status == "damaged" for r in reports),
+            "files": [_plain(asdict(r)) for r in reports]}
+
+
+def _checkpoint_time_hint(root: Path, rel: str) -> float | None:
+    """A damaged slip checkpoint's clock from the run file's catalog (None if not known)."""
+    m = re.search(r"slip_(\d+)\.h5$", rel)
+    if not m:
+        return None
+    try:
+        with h5py.File(root / "run.h5", "r") as h5:
+            return float(attr_value(h5["slips"][f"{int(m.group(1)):03d}"].attrs, "checkpoint_time"))
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError):
+        return None
+
+
+def _plain(obj):
+    if isinstance(obj, dict):
+        return {k: _plain(v) for k, v in obj.items() if v is not None}
+    if isinstance(obj, (list, tuple)):
+        return [_plain(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj
+
+
+def describe_report(report: dict) -> str:
+    """The report as lines for a terminal."""
+    lines = []
+    for f in report["files"]:
+        lines.append(f"{f['status']:9s} {f['path']}" + (f" (t = {f['time']:.6g} t0)" if "time" in f else ""))
+        for p in f.get("problems", []):
+            where = (f" rows {p['rows'][0]}-{p['rows'][1]}" if "rows" in p else "")
+            lines.append(f"          {p['object']}{where}: {p['message']}")
+            if "recompute" in p:
+                lines.append(f"            recompute from {p['recompute']}")
+        if "recompute" in f:
+            lines.append(f"          recompute from {f['recompute']}")
+    damaged = sum(f["status"] == "damaged" for f in report["files"])
+    unchecked = sum(f["status"] == "unchecked" for f in report["files"])
+    lines.append(f"{report['run']}: {len(report['files'])} files, {damaged} damaged"
+                 + (f", {unchecked} written without checksums (read in full, not compared)" if unchecked else ""))
+    return "\n".join(lines)
