@@ -95,7 +95,7 @@ save(ax, "series")
 # ## The slip catalog: a `pandas.DataFrame`
 
 # %%
-columns = ["onset_since_loading", "duration", "static_strength", "stress_drop", "peak_velocity_over_Vs",
+columns = ["onset_time", "duration", "static_strength", "stress_drop", "peak_velocity_over_Vs",
            "fit_r2", "fit_ok", "m_eff_over_m_b", "checkpoint"]
 print(run.slips[columns].to_string(float_format=lambda v: f"{v:.4g}"))
 

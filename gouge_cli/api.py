@@ -48,9 +48,9 @@ TIME_DOC = "time since loading began (stored clock minus the clock at the loadin
 
 #: units of the slip table's columns (those not in the run file's own documentation)
 SLIP_UNITS = dict(ANALYSIS_UNITS, **{k: v[0] for k, v in SLIP_ATTRS.items()},
-                  onset_since_loading="t0", end_since_loading="t0", peak_velocity_over_Vs="-",
-                  mean_velocity_over_Vs="-", fit_amplitude="v0", fit_half_period="t0", fit_r2="-",
-                  fit_ok="-", fit_reason="-", m_eff="rho_s d^2", m_eff_over_m_b="-", checkpoint_path="-")
+                  peak_velocity_over_Vs="-", mean_velocity_over_Vs="-", fit_amplitude="v0", fit_half_period="t0",
+                  fit_r2="-", fit_ok="-", fit_verdict="-", fit_reason="-", m_eff="rho_s d^2", m_eff_over_m_b="-",
+                  checkpoint_path="-")
 
 
 class _SeriesArray(BackendArray):
@@ -164,10 +164,10 @@ class Run:
     @property
     def slips(self) -> pd.DataFrame:
         """The slip catalog, one row per slip (index: number): the columns of
-        RUN/analysis/catalog.csv (onset_time is the stored clock, onset_since_loading the same
-        onset since loading; static_strength, stress_drop [tau/sigma]; velocities [v0] and over
-        V_s), end_since_loading, the Eq. 3 block-slider fit (fit_amplitude, fit_half_period,
-        fit_r2, fit_ok: it passes the fit bar, fit_reason, m_eff = k (T_fit/pi)^2 [rho_s d^2],
+        RUN/analysis/catalog.csv (onset_time, end_time since loading began, onset_clock the stored
+        clock; static_strength, stress_drop [tau/sigma]; velocities over V_s; SI columns beside),
+        the Eq. 3 block-slider fit (fit_amplitude, fit_half_period, fit_r2, fit_ok: it passes the
+        fit bar, fit_verdict: holds / failed / inapplicable, fit_reason, m_eff = k (T_fit/pi)^2 [rho_s d^2],
         m_eff_over_m_b) and checkpoint_path (the file `gouge restart --slip N` forks from, or None).
         ``df.attrs["units"]``: the unit of each column."""
         if self._slips is None:
@@ -180,12 +180,12 @@ class Run:
             rows = catalog_table(r, catalog)
             fits = [fit_slip(r, entry) for entry in catalog]
         for row, fit in zip(rows, fits):
-            row.update(end_since_loading=row["end_time"] - self.time_offset, fit_amplitude=fit.amplitude,
-                       fit_half_period=fit.half_period, fit_r2=fit.r2, fit_ok=bool(fit.success),
-                       fit_reason=fit.reason, m_eff=fit.m_eff, m_eff_over_m_b=fit.m_eff / self.info.m_b,
+            row.update(fit_amplitude=fit.amplitude, fit_half_period=fit.half_period, fit_r2=fit.r2,
+                       fit_ok=bool(fit.success), fit_verdict=fit.verdict, fit_reason=fit.verdict_reason,
+                       m_eff=fit.m_eff, m_eff_over_m_b=fit.m_eff / self.info.m_b,
                        checkpoint_path=str(self.path / row["checkpoint"]) if row["checkpoint"] else None)
-        columns = list(CATALOG_COLUMNS) + ["end_since_loading", "fit_amplitude", "fit_half_period", "fit_r2",
-                                           "fit_ok", "fit_reason", "m_eff", "m_eff_over_m_b", "checkpoint_path"]
+        columns = list(CATALOG_COLUMNS) + ["fit_amplitude", "fit_half_period", "fit_r2", "fit_ok", "fit_verdict",
+                                           "fit_reason", "m_eff", "m_eff_over_m_b", "checkpoint_path"]
         df = pd.DataFrame(rows, columns=columns).set_index("number", drop=False)
         df.index.name = None
         df.attrs["units"] = {c: SLIP_UNITS.get(c, "-") for c in columns}

@@ -70,7 +70,7 @@ def series(run, names=("tau_over_sigma",), ax=None, slips: bool = True, color: s
                 label=f"{name} [{var.attrs['units']}]")
     if slips and len(run.slips):
         df = run.slips
-        for a, b in zip(df["onset_since_loading"], df["end_since_loading"]):
+        for a, b in zip(df["onset_time"], df["end_time"]):
             ax.axvspan(a, b, color=SLIP_SHADE, alpha=0.3, lw=0, zorder=0)
     ax.set_xlabel(LABEL["time"])
     ax.grid(True, color="0.9", lw=0.6)

@@ -121,13 +121,13 @@ def test_slips_equal_cli_json_and_analyze_csv(forked, tmp_path):
     assert len(df) == len(cli) >= 1
     for entry, (_, row) in zip(cli, df.iterrows()):
         assert row["number"] == entry["number"]
-        assert _same(row["onset_since_loading"], entry["onset_time"], 1e-9)
-        assert _same(row["end_since_loading"], entry["end_time"], 1e-9)
-        for key in ("duration", "static_strength", "stress_drop", "peak_velocity", "slip"):
+        assert _same(row["onset_time"], entry["onset_time"], 1e-9)      # both since loading began
+        assert _same(row["end_time"], entry["end_time"], 1e-9)
+        for key in ("duration", "static_strength", "stress_drop", "peak_velocity_over_Vs", "slip"):
             assert _same(row[key], entry[key]), key
         assert row["checkpoint"] == entry["checkpoint"]
         assert Path(row["checkpoint_path"]).is_file()
-    assert set(df.attrs["units"]) == set(df.columns) and df.attrs["units"]["onset_since_loading"] == "t0"
+    assert set(df.attrs["units"]) == set(df.columns) and df.attrs["units"]["onset_time"] == "t0"
     copy = tmp_path / "copy"           # `gouge analyze` writes into the run: a copy keeps the fixture as it is
     import shutil
 
@@ -137,11 +137,15 @@ def test_slips_equal_cli_json_and_analyze_csv(forked, tmp_path):
         rows = list(csv.DictReader(fh))
     for csv_row, (_, row) in zip(rows, df.iterrows()):
         for col in CATALOG_COLUMNS:
-            assert _same(row[col], csv_row[col] if col == "checkpoint" else float(csv_row[col])), col
+            if isinstance(row[col], str) or row[col] is None:
+                assert str(row[col] or "") == csv_row[col], col
+            else:
+                assert _same(row[col], float(csv_row[col]) if csv_row[col] != "" else None), col
     with open(copy / "analysis" / "fits.csv", newline="") as fh:
         fits = list(csv.DictReader(fh))
     for fit, (_, row) in zip(fits, df.iterrows()):
-        assert _same(row["fit_r2"], float(fit["r2"])) and _same(row["m_eff"], float(fit["m_eff"]))
+        assert _same(row["fit_r2"], float(fit["r2"])) and _same(row["m_eff_over_m_b"], float(fit["m_eff_over_m_b"]))
+        assert row["fit_verdict"] == fit["verdict"]
         assert row["fit_ok"] == (fit["success"] == "True")
         assert _same(row["fit_half_period"], float(fit["half_period"]))
 

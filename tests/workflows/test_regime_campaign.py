@@ -31,7 +31,7 @@ def regime(tmp_path_factory):
     folder = tmp_path_factory.mktemp("regime")
     (folder / "tiny.yaml").write_text(yaml.safe_dump(SCENE))
     spec = folder / "regime.yaml"
-    spec.write_text(yaml.safe_dump({"name": "reduced", "base": "tiny.yaml", "out": str(folder / "campaigns"),
+    spec.write_text(yaml.safe_dump({"name": "reduced", "base": "tiny.yaml", "out": str(folder / "campaigns"), "sweep": {"seeds": [1]},
                                     "action": "study", "study": {"permeabilities": PERMS, "duration": 800}}))
     report = run_campaign(spec, cluster=ClusterOptions(workers=1), log=lambda m: None)
     return report, folder / "campaigns" / "reduced"
