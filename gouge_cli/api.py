@@ -473,7 +473,7 @@ def _run_dir(run) -> Path:
 
 def analyze(run: Run | Path | str, notch: bool = True, main: str = "first", write: bool = True):
     """`gouge analyze` of one run: its :class:`~gouge_cli.analysis.report.RunAnalysis` (catalog,
-    fits, pairs, summary); ``write``: also RUN/analysis/*.csv, summary.json and /analysis in run.h5
+    fits, pairs, summary); ``write``: also ``RUN/analysis/*.csv``, summary.json and /analysis in run.h5
     (the only API call besides the launchers that writes into a run)."""
     from .analysis.report import analyze_run, write_analysis
 
