@@ -517,7 +517,7 @@ def write_results(s: Survey, log=print) -> dict:
             log(f"phase cell {x}={c['x']:g}" + (f", {y}={c['y']:g}" if y else "") +
                 f": {c['n_pairs']} pairs, complex fraction {c['frac_complex']:.3g}, Type II fraction "
                 f"{c['frac_type_II']:.3g}")
-    if s.spec.action == "study" and len(perms) >= 2:
+    if s.spec.action == "study" and len(s.spec.study.permeabilities) >= 2:
         out.update(_regime_outputs(pair_rows, s, figs))
     sweep_keys = [k for k in swept if k != "seed"]
     if sweep_keys:

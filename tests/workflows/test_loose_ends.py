@@ -101,19 +101,19 @@ def test_full_disk_in_restart_names_the_command_that_continues(loaded, monkeypat
     def full(out_dir):
         raise OSError(errno.ENOSPC, "No space left on device", str(out_dir))
 
-    _on_row(monkeypatch, "perm_0.001", 5, full)
+    _on_row(monkeypatch, "perm_1e-03", 5, full)
     result = _restart(run_dir, slip)
     assert result.exit_code == EXIT_PHYSICS, result.output
     text = " ".join(result.output.split())
     assert "no space left on device" in text and f"gouge restart {run_dir} --slip {slip} --perm 0.001" in text
     assert "no --force needed" in text and "gouge resume" not in text
     assert branch_status(fork / "drained") == "finished"
-    assert branch_status(fork / "perm_0.001").startswith("failed: No space left on device")
+    assert branch_status(fork / "perm_1e-03").startswith("failed: No space left on device")
     assert not (fork / "pair.json").exists()
     monkeypatch.undo()
     again = _restart(run_dir, slip)           # the named command, no --force
     assert again.exit_code == 0, again.output
-    assert branch_status(fork / "perm_0.001") == "finished" and (fork / "pair.json").is_file()
+    assert branch_status(fork / "perm_1e-03") == "finished" and (fork / "pair.json").is_file()
     refused = _restart(run_dir, slip)         # everything finished: --force is needed
     assert refused.exit_code == EXIT_BAD_INPUT and "--force" in refused.output
 

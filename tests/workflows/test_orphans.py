@@ -115,11 +115,11 @@ def test_sigkill_on_study_parent_leaves_no_worker(loaded):
     print(f"study: {len(workers)} processes gone {seconds:.2f} s after SIGKILL on their parent")
     assert seconds < BOUND
     fork = run_dir / "forks" / f"slip_{slip:03d}"
-    assert [b for b in ("drained", "perm_1e-05", "perm_0.001") if branch_status(fork / b) != "finished"], \
+    assert [b for b in ("drained", "perm_1e-05", "perm_1e-03") if branch_status(fork / b) != "finished"], \
         "every branch finished before the kill: the test killed nothing"
     again = gouge(*args)
     assert again.returncode == 0, again.stdout + again.stderr
-    for b in ("drained", "perm_1e-05", "perm_0.001"):
+    for b in ("drained", "perm_1e-05", "perm_1e-03"):
         assert branch_status(fork / b) == "finished", b
     assert (fork / "pair.json").is_file()
 
