@@ -63,14 +63,19 @@ class RunLock:
 
 
 def pid_alive(pid: int) -> bool:
-    """Whether a process with this PID exists on this host (a stale lock or temp file's writer)."""
+    """Whether a process with this PID runs on this host (a stale lock or temp file's writer); a
+    zombie (killed, not yet reaped by an init that reaps late) is not running."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
         return False
     except PermissionError:
         return True
-    return True
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
 
 
 def holder(run_dir: Path) -> str | None:

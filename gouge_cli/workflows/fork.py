@@ -148,9 +148,9 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
              duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
     """Fork the drained branch and one undrained branch per permeability from slip `slip`.
 
-    A finished drained branch is kept when ``perms`` adds branches to an existing fork; a finished
-    branch of the same permeability (or the drained one alone, without ``perms``) needs ``force``.
-    A branch not finished (interrupted, stopped by a full disk, killed) is run again without ``force``.
+    Without ``force`` only the branches not finished yet are run (new permeabilities added to an
+    existing fork, or a branch interrupted, stopped by a full disk or killed); the finished ones are
+    kept, and a fork whose requested branches have all finished is refused.
     A branch stopped by Ctrl-C stops the fork (KeyboardInterrupt, naming the command that finishes
     it; no later branch runs); a full disk raises :class:`~gouge_cli.errors.NoSpaceError` naming it.
 
@@ -166,14 +166,13 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     if note:
         print(note, file=sys.stderr, flush=True)
     fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
-    for perm in perms:
-        target = fork_dir / branch_name(perm)
-        if branch_status(target) == "finished" and not force:
-            raise RunDirError(f"{target / 'run.h5'} exists (finished); pass --force to run this branch again")
-    drained = _finished_drained(fork_dir) if perms and not force else None
-    if not perms and branch_status(fork_dir / "drained") == "finished" and not force:
-        raise RunDirError(f"{fork_dir / 'drained' / 'run.h5'} exists (finished); pass --force to run it again")
-    branches = ([] if drained is not None else [None]) + list(perms)
+    names = [None] + list(perms)
+    finished = {p: branch_status(fork_dir / branch_name(p)) == "finished" for p in names}
+    if all(finished.values()) and not force:
+        last = fork_dir / branch_name(names[-1]) / "run.h5"
+        raise RunDirError(f"{last} exists (finished); pass --force to run this branch again")
+    kept = [] if force else [_finished_branch(fork_dir, p) for p in names if finished[p]]
+    branches = names if force else [p for p in names if not finished[p]]
     command = restart_command(run_dir, slip, perms, overrides, duration)
     results = []
     for perm in branches:
@@ -190,25 +189,18 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         results.append(r)
     with RunReader(run_dir, allow_running=True) as reader:
         origin = reader.time_offset()
-    summary = pair_summary(run_dir, slip, ck.time - origin, ([drained] if drained is not None else []) + results,
-                           origin, ck.config.loading.velocity)
+    by_name = {b.name: b for b in kept + results}
+    summary = pair_summary(run_dir, slip, ck.time - origin, [by_name[branch_name(p)] for p in names], origin,
+                           ck.config.loading.velocity)
     summary["library_differences_from_parent"] = provenance.bit_risks(ck.provenance)
     return summary
 
 
-def _finished_drained(fork_dir: Path) -> BranchResult | None:
-    """The fork's drained branch when it has finished (kept when --perm adds a branch), else None."""
-    out_dir = fork_dir / "drained"
-    if not (out_dir / "run.h5").is_file():
-        return None
-    try:
-        with RunReader(out_dir) as r:
-            if r.info.status != "finished":
-                return None
-    except AnalysisError:
-        return None
+def _finished_branch(fork_dir: Path, perm: float | None) -> BranchResult:
+    """A finished branch of the fork, kept as it is (status "finished (kept)")."""
+    out_dir = fork_dir / branch_name(perm)
     catalog = slip_catalog(out_dir)
-    return BranchResult("drained", out_dir, "finished (kept)", 0.0, 0, catalog[0] if catalog else None)
+    return BranchResult(branch_name(perm), out_dir, "finished (kept)", 0.0, 0, catalog[0] if catalog else None)
 
 
 def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[BranchResult], origin: float,
