@@ -26,11 +26,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["wilson", "bootstrap_median", "regime_rows", "thesis_point", "REGIME_COLUMNS", "FRACTIONS",
+__all__ = ["wilson", "bootstrap_median", "regime_rows", "thesis_point", "REGIME_COLUMNS",
            "RATIO_MEDIANS", "ThesisPoint"]
 
 Z95 = 1.959963984540054
-FRACTIONS = ("type_I", "type_II", "tie", "type_I_sign", "complex", "slower", "smaller_drop")
 RATIO_MEDIANS = ("peak_velocity_ratio", "stress_drop_ratio", "duration_ratio")
 _NAN = float("nan")
 
@@ -126,15 +125,8 @@ def regime_rows(pair_rows: list[dict], seed_key: str = "seed") -> list[dict]:
     return out
 
 
-REGIME_COLUMNS = None  # filled below from a template row
-
-
-def _columns() -> list[str]:
-    template = _group_stats([])
-    return ["kappa_c", "seed", *template.keys()]
-
-
-REGIME_COLUMNS = _columns()
+#: columns of regime.csv (the keys of a group's statistics, after kappa_c and seed)
+REGIME_COLUMNS = ["kappa_c", "seed", *_group_stats([]).keys()]
 
 
 # --------------------------------------------------------------------------- the thesis on the map
