@@ -142,22 +142,6 @@ def bit_risks(stored: dict, current: dict | None = None) -> list[str]:
             if key in old and old[key] != new.get(key)]
 
 
-def branch_bit_risks(branch_dir: Path) -> list[str]:
-    """:func:`bit_risks` between the parent checkpoint a fork branch started from and the
-    provenance the branch was run with (both read from the files; [] if either is missing)."""
-    import h5py
-
-    try:
-        with h5py.File(Path(branch_dir) / "run.h5", "r") as h5:
-            mine = loads(h5.attrs.get("provenance"))
-            parent = Path(branch_dir) / str(h5.attrs.get("parent_run", "")) / str(h5.attrs.get("parent_checkpoint", ""))
-        with h5py.File(parent, "r") as h5:
-            theirs = loads(h5.attrs.get("provenance"))
-    except (OSError, KeyError):
-        return []
-    return bit_risks(theirs, mine) if mine else []
-
-
 def risk_line(stored: dict, what: str) -> str | None:
     """One line for the user when continuing `what` may not reproduce its bits, else None."""
     risks = bit_risks(stored)

@@ -263,6 +263,19 @@ def read_series(path: Path) -> dict[str, np.ndarray]:
         return out
 
 
+def run_status(h5_path: Path) -> str | None:
+    """The ``status`` attribute of a run file ('running', 'finished', 'interrupted', ...), its
+    root seal checked; None when the file is missing or cannot be opened as HDF5 (a start cut
+    short). :class:`DamagedFileError` when the root attributes do not match their seal."""
+    try:
+        h5 = h5py.File(h5_path, "r")
+    except OSError:
+        return None
+    with h5:
+        check_seal(h5, stored_seal(h5) is not None)
+        return str(attr_value(h5.attrs, "status", ""))
+
+
 def slip_catalog(run_dir: Path) -> list[dict]:
     """The run's slip catalog (one dict of attributes per slip, in order; [] if none)."""
     with open_run_file(Path(run_dir) / "run.h5") as h5:

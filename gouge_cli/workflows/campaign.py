@@ -31,7 +31,6 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import h5py
 import yaml
 
 from ..errors import CampaignConflict
@@ -96,14 +95,6 @@ class Piece:
         return "run" if self.kind == "run" else f"fork_{self.slip:03d}"
 
 
-def _run_status(h5_path: Path) -> str | None:
-    try:
-        with h5py.File(h5_path, "r") as h5:
-            return str(h5.attrs.get("status", ""))
-    except OSError:
-        return None
-
-
 def _task(ledger: Path, settings: dict, body) -> dict:
     """Run ``body()`` with the piece's ledger kept: running -> done | failed (physics) | error."""
     from ..errors import PhysicsError
@@ -134,13 +125,13 @@ def _task(ledger: Path, settings: dict, body) -> dict:
 def advance_run(run_dir: str, config: dict, settings: dict) -> dict:
     """Dask task: bring the point's run to 'finished'. Resumes from checkpoints/latest.h5 when an
     earlier attempt left one; starts afresh otherwise. Returns the slips kept with checkpoints."""
-    from ..io.runfile import slip_catalog
+    from ..io.runfile import run_status, slip_catalog
     from .run import resume_run, run_scene
 
     run_dir = Path(run_dir)
 
     def body():
-        status = _run_status(run_dir / "run.h5")
+        status = run_status(run_dir / "run.h5")
         resumed = status in ("running", "interrupted") and (run_dir / "checkpoints" / "latest.h5").is_file()
         if status != "finished":
             result = resume_run(run_dir, quiet=True) if resumed else \

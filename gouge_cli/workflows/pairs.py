@@ -10,11 +10,15 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import h5py
+
 from ..analysis.forkpairs import classify_fork, fork_branches
-from ..errors import AnalysisError
-from ..io.runfile import RunReader
+from ..errors import AnalysisError, InputError
+from ..io.checkpoint import read_checkpoint
 from ..io.filedoc import json_safe
-from ..io.provenance import branch_bit_risks
+from ..io.integrity import check_seal, stored_seal
+from ..io.provenance import bit_risks, loads
+from ..io.runfile import RunReader
 
 __all__ = ["write_pair_json", "branch_status"]
 
@@ -59,3 +63,23 @@ def write_pair_json(fork_dir: Path, main: str = "first") -> dict:
     })
     (fork_dir / "pair.json").write_text(json.dumps(record, indent=2, allow_nan=False))
     return record
+
+
+def branch_bit_risks(branch_dir: Path) -> list[str]:
+    """:func:`~gouge_cli.io.provenance.bit_risks` between the parent checkpoint a fork branch
+    started from and the provenance the branch was run with, both read through their checksums
+    ([] if either file or its provenance is missing; one line saying so if either is damaged,
+    nothing compared)."""
+    try:
+        with h5py.File(Path(branch_dir) / "run.h5", "r") as h5:
+            check_seal(h5, stored_seal(h5) is not None)
+            mine = loads(h5.attrs.get("provenance"))
+            parent = Path(branch_dir) / str(h5.attrs.get("parent_run", "")) / str(h5.attrs.get("parent_checkpoint", ""))
+        if not mine or not parent.is_file():
+            return []
+        theirs = read_checkpoint(parent).provenance
+    except (OSError, KeyError):
+        return []
+    except InputError as err:       # a damaged branch file or parent checkpoint: say so, compare nothing
+        return [f"not compared: {str(err).splitlines()[0]}"]
+    return bit_risks(theirs, mine)

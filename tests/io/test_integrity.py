@@ -432,3 +432,54 @@ def test_checkpoint_written_before_the_full_digest_is_still_read(run, tmp_path):
         h5["state/x"][0] += 1e-12
     with pytest.raises(CheckpointError, match="corrupt"):
         read_checkpoint(ck)
+
+
+def test_damaged_snapshot_refused_by_movie(run, tmp_path):
+    """A snapshot chunk of a fork branch made unreadable: `gouge movie` exits 2 naming the branch
+    file and the dataset, and leaves no movie behind."""
+    run_dir, slip = run
+    work = tmp_path / "run"
+    shutil.copytree(run_dir, work)
+    result = gouge("restart", work, "--slip", slip, "--perm", 1e-4, "--set", "output.slip_frames=3", "--quiet")
+    assert result.exit_code == 0, result.output
+    movie = tmp_path / "slip.mp4"
+    assert gouge("movie", work, "--slip", slip, "--out", tmp_path / "sound.gif").exit_code == 0
+    branch = work / f"forks/slip_{slip:03d}/drained/run.h5"
+    name, offset, size = next(s for s in dataset_spans(branch) if s[0].startswith("/snapshots/") and s[0].endswith("/x"))
+    with open(branch, "r+b") as f:
+        f.seek(offset)
+        f.write(b"\xff" * size)
+    refused(gouge("movie", work, "--slip", slip, "--out", movie), name, "drained")
+    assert not movie.exists()
+
+
+def test_campaign_status_read_through_the_seal(run, tmp_path):
+    """The campaign decides to resume, restart or keep a point's run from its status attribute:
+    read through the root seal, a flipped status is DamagedFileError, never a silent re-run."""
+    from gouge_cli.io.runfile import run_status
+
+    run_dir, _ = run
+    work = tmp_path / "run"
+    shutil.copytree(run_dir, work, ignore=shutil.ignore_patterns("forks"))
+    assert run_status(work / "run.h5") == "finished"
+    assert run_status(tmp_path / "missing.h5") is None
+    _flip_text(work / "run.h5", b"finished", b"finishee")
+    with pytest.raises(DamagedFileError, match="do not match"):
+        run_status(work / "run.h5")
+
+
+def test_damaged_parent_checkpoint_named_in_pair_record(run, tmp_path):
+    """pair.json's library comparison with the parent checkpoint: sound -> [] here (same
+    libraries); a damaged parent checkpoint -> one line saying it was not compared, never a
+    comparison with corrupted provenance."""
+    from gouge_cli.workflows.pairs import branch_bit_risks
+
+    run_dir, slip = run
+    work = tmp_path / "run"
+    shutil.copytree(run_dir, work)
+    branch = work / f"forks/slip_{slip:03d}/drained"
+    assert branch_bit_risks(branch) == []
+    ck = work / f"checkpoints/slip_{slip:03d}.h5"
+    _flip_text(ck, b"friction: 0.5", b"friction: 1.5")
+    (line,) = branch_bit_risks(branch)
+    assert line.startswith("not compared") and ck.name in line
