@@ -16,7 +16,8 @@ stretch of a shared machine hits both), timing, besides the run's wall time:
   series rows, snapshots, slips, closing) and in writing checkpoints;
 - read: opening the finished run.h5 as the analysis does (root seal, time series), reading every
   series, every snapshot array and the slip catalog, and reading every checkpoint through
-  read_checkpoint with its digest verified or not (best of 5 each).
+  read_checkpoint with its digest verified or not (best of 5 each), and `gouge analyze` without
+  writing its tables (best of 3).
 
 Printed as a table and written as JSON with the CPU, the numba target and the commit; the
 numbers and the machine they were measured on go to docs/integrity.md.
@@ -125,6 +126,20 @@ def read_checkpoints(run_dir: Path, checks: bool) -> float:
         checkpoint._verify = verify
 
 
+def analyze(run_dir: Path) -> float:
+    """Seconds of `gouge analyze` without writing (catalog, fits, pairs from the run file); NaN
+    for a run without slips (nothing to analyse)."""
+    from gouge_cli.api import analyze as run_analysis
+    from gouge_cli.errors import NoSlipsError
+
+    t = time.perf_counter()
+    try:
+        run_analysis(run_dir, write=False)
+    except NoSlipsError:
+        return float("nan")
+    return time.perf_counter() - t
+
+
 def one_run(config, out: Path, checks: bool) -> dict:
     writer, ckpt = Clock(), Clock()
     with patched(checks, writer, ckpt):
@@ -136,6 +151,7 @@ def one_run(config, out: Path, checks: bool) -> dict:
     return {"wall_s": wall, "write_run_h5_s": writer.seconds, "write_checkpoints_s": ckpt.seconds,
             "read_run_h5_s": min(read_run(out) for _ in range(5)),
             "read_checkpoints_s": min(read_checkpoints(out, checks) for _ in range(5)),
+            "analyze_s": min(analyze(out) for _ in range(3)),
             "run_h5_bytes": (out / "run.h5").stat().st_size,
             "checkpoints": len(files), "checkpoint_bytes": sum(p.stat().st_size for p in files)}
 
@@ -178,7 +194,7 @@ def main(argv=None) -> int:
               "runs_without": rows[False]}
     print(f"\n{'median of ' + str(args.repeats):<24}{'with':>12}{'without':>12}{'ratio':>8}")
     for key in ("wall_s", "write_run_h5_s", "write_checkpoints_s", "read_run_h5_s", "read_checkpoints_s",
-                "run_h5_bytes", "checkpoint_bytes"):
+                "analyze_s", "run_h5_bytes", "checkpoint_bytes"):
         a, b = med[True][key], med[False][key]
         print(f"{key:<24}{a:>12.4g}{b:>12.4g}{a / b if b else float('nan'):>8.3f}")
     extra = (med[True]["write_run_h5_s"] + med[True]["write_checkpoints_s"]

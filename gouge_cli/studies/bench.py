@@ -213,8 +213,10 @@ def time_lammps(n_grains: int, ranks: int, steps: int, dt: float, skin: float,
     match = re.search(r"grain_steps_per_s=([\d.eE+-]+)", proc.stdout)
     if match:
         return float(match.group(1)), None
-    tail = (proc.stderr.strip() or proc.stdout.strip()).splitlines()[-3:]
-    return None, f"LAMMPS failed (exit {proc.returncode}): {' | '.join(tail) or 'no output'}"
+    lines = [line.strip() for line in (proc.stderr + "\n" + proc.stdout).splitlines() if line.strip()]
+    errors = [line for line in lines if line.startswith("ERROR")]       # LAMMPS's own, before mpirun's
+    shown = errors[:2] or lines[-3:]
+    return None, f"LAMMPS failed (exit {proc.returncode}): {' | '.join(shown) or 'no output'}"
 
 
 def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability: float, threads: int,

@@ -39,13 +39,30 @@ def plant():
     device.d_hertz_mindlin = cuda.jit(device=True)(planted)
 
 
+def growing(sim, steps: int, tries: int = 30):
+    """`sim` advanced, 50 steps at a time, to a point where its pair list outgrows max(N, its
+    present length) within `steps` steps (a GPU copy started with that capacity must then grow
+    its list on the device), whatever the packing's seed."""
+    import copy
+
+    for _ in range(tries):
+        probe = copy.deepcopy(sim)
+        capacity = max(probe.state.n, int(probe.state.start[-1]))
+        for _ in range(steps):
+            probe.advance(1)
+            if int(probe.state.start[-1]) > capacity:
+                return sim
+        sim.advance(50)
+    raise SystemExit(f"the pair list did not grow within {steps} steps at any of {tries} starts")
+
+
 def main(mode: str, seed: int):
     if mode == "planted":
         plant()
     if mode == "planted":
         return {"rows": gpu_check.lockstep(gpu_check.scene(40, 6.0, seed), (1, 2), THREADS)}
     if mode == "lockstep":
-        sim = gpu_check.scene(40, 6.0, seed)
+        sim = growing(gpu_check.scene(40, 6.0, seed), 70)
         rows = gpu_check.lockstep(sim, (1, 1, 8, 60), THREADS, capacity=1)
         sim.start_loading()                          # spring and drive on, no background damping
         rows += gpu_check.lockstep(sim, (50, 80), THREADS)

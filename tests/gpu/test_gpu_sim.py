@@ -3,8 +3,9 @@ CUDA simulator (no GPU needed).
 
 Each check runs tests/gpu/sim_check.py in a fresh process with NUMBA_ENABLE_CUDASIM=1 (the
 simulator must be chosen before numba.cuda is imported, and must not reach this process):
-* lockstep: a compacted 40-grain layer under loading, the GPU copy starting with too short a
-  pair list (it overflows and grows on the device), compared after 1, 1, 8 and 60 steps,
+* lockstep: a compacted 40-grain layer at a point where its pair list is about to grow, the GPU
+  copy starting with too short a list (it overflows and grows on the device), compared after
+  1, 1, 8 and 60 steps,
   then 50 and 80 more after the spring is re-attached: every State array bit for bit,
   through list rebuilds and re-numberings (sort_every 1);
 * ensemble: three 30-grain layers (different seeds, velocities, one of them loading) advanced

@@ -8,7 +8,6 @@ import json
 import h5py
 import matplotlib.image as mpimg
 import pytest
-import yaml
 from typer.testing import CliRunner
 
 from gouge_cli.analysis.catalog import CATALOG_COLUMNS, FIT_COLUMNS
@@ -17,6 +16,7 @@ from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.plots import DPI, FIGSIZE
 from gouge_cli.plots.snapshot import snapshot_pixels
+from slipping import slipping_run
 
 SCENE = {
     "name": "tiny",
@@ -35,17 +35,19 @@ def gouge(*args):
 
 
 @pytest.fixture(scope="module")
-def forked_run(tmp_path_factory):
-    """The tiny scene (3 slips), forked before slip 2 with one undrained branch writing snapshots."""
-    base = tmp_path_factory.mktemp("analyze")
-    scene = base / "tiny.yaml"
-    scene.write_text(yaml.safe_dump(SCENE))
-    out = base / "tiny"
-    result = gouge("run", scene, "--out", out, "--quiet")
+def forked(tmp_path_factory):
+    """The tiny scene (2 or more slips with checkpoints), its second such slip forked with one
+    undrained branch writing snapshots: (run directory, slip number)."""
+    _, out, numbers = slipping_run(SCENE, tmp_path_factory.mktemp("analyze"))
+    result = gouge("restart", out, "--slip", numbers[1], "--perm", 1e-3, "--set", "output.snapshot_interval=500",
+                   "--quiet")
     assert result.exit_code == 0, result.output
-    result = gouge("restart", out, "--slip", 2, "--perm", 1e-3, "--set", "output.snapshot_interval=500", "--quiet")
-    assert result.exit_code == 0, result.output
-    return out
+    return out, numbers[1]
+
+
+@pytest.fixture(scope="module")
+def forked_run(forked):
+    return forked[0]
 
 
 def _rows(path):
@@ -54,7 +56,8 @@ def _rows(path):
         return reader.fieldnames, list(reader)
 
 
-def test_analyze_writes_tables(forked_run):
+def test_analyze_writes_tables(forked):
+    forked_run, slip = forked
     result = gouge("analyze", forked_run)
     assert result.exit_code == 0, result.output
     assert "block-slider fits" in result.output and "drained / undrained pairs" in result.output
@@ -76,8 +79,8 @@ def test_analyze_writes_tables(forked_run):
     assert all(float(r["predicted_half_period"]) > 0 for r in rows)
     header, rows = _rows(forked_run / "analysis" / "pairs.csv")
     assert header == list(PAIR_COLUMNS) and len(rows) == 1
-    assert rows[0]["branch"] == "perm_1e-03" and int(rows[0]["slip"]) == 2
-    _check_pair_rule(forked_run / "forks" / "slip_002", rows[0])
+    assert rows[0]["branch"] == "perm_1e-03" and int(rows[0]["slip"]) == slip
+    _check_pair_rule(forked_run / "forks" / f"slip_{slip:03d}", rows[0])
 
 
 def _check_pair_rule(fork, row):
@@ -129,7 +132,8 @@ def _check_png(path, size_in):
     assert image[..., :3].std() > 0.05, f"{path} looks blank"
 
 
-def test_plot_run_and_slip(forked_run, tmp_path):
+def test_plot_run_and_slip(forked, tmp_path):
+    forked_run, slip = forked
     result = gouge("plot", forked_run)
     assert result.exit_code == 0, result.output
     figures = forked_run / "figures"
@@ -138,20 +142,20 @@ def test_plot_run_and_slip(forked_run, tmp_path):
     assert len(snaps) == 1
 
     out = tmp_path / "figs"
-    result = gouge("plot", forked_run, "--slip", 2, "--out", out)
+    result = gouge("plot", forked_run, "--slip", slip, "--out", out)
     assert result.exit_code == 0, result.output
     names = {p.name for p in out.glob("*.png")}
-    expected = {"overview.png", "slip_002.png", "slip_002_friction.png", "slip_002_pair_perm_1e-03.png",
-                "slip_002_snapshot_perm_1e-03.png"}
+    expected = {"overview.png"} | {f"slip_{slip:03d}{part}.png" for part in
+                                   ("", "_friction", "_pair_perm_1e-03", "_snapshot_perm_1e-03")}
     assert expected <= names, names
-    _check_png(out / "slip_002.png", FIGSIZE["slip"])
-    _check_png(out / "slip_002_friction.png", FIGSIZE["friction"])
-    _check_png(out / "slip_002_pair_perm_1e-03.png", FIGSIZE["pair"])
+    _check_png(out / f"slip_{slip:03d}.png", FIGSIZE["slip"])
+    _check_png(out / f"slip_{slip:03d}_friction.png", FIGSIZE["friction"])
+    _check_png(out / f"slip_{slip:03d}_pair_perm_1e-03.png", FIGSIZE["pair"])
     # the undrained snapshot has a pressure field: colorbar makes it wider than the dry one
-    wet = mpimg.imread(out / "slip_002_snapshot_perm_1e-03.png")
+    wet = mpimg.imread(out / f"slip_{slip:03d}_snapshot_perm_1e-03.png")
     dry = mpimg.imread(snaps[0])
     sizes = set()
-    with h5py.File(forked_run / "forks/slip_002/perm_1e-03/run.h5", "r") as h5:
+    with h5py.File(forked_run / f"forks/slip_{slip:03d}/perm_1e-03/run.h5", "r") as h5:
         width = float(h5.attrs["width"])
         for grp in h5["snapshots"].values():
             assert "pressure" in grp

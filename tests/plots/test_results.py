@@ -10,7 +10,6 @@ import json
 
 import h5py
 import pytest
-import yaml
 from PIL import Image
 from typer.testing import CliRunner
 
@@ -19,6 +18,7 @@ from gouge_cli.analysis.blockslider import BlockSliderFit
 from gouge_cli.analysis.forkpairs import DRAINED_DE, UNDRAINED_DE
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
+from slipping import slipping_run
 
 SCENE = {
     "name": "tiny",
@@ -43,24 +43,22 @@ def _sha(path):
 
 @pytest.fixture(scope="module")
 def two_perms(tmp_path_factory):
-    """The tiny scene forked before slip 2 at K1, then K2 added by a second `gouge restart`."""
-    base = tmp_path_factory.mktemp("results")
-    scene = base / "tiny.yaml"
-    scene.write_text(yaml.safe_dump(SCENE))
-    out = base / "tiny"
-    assert gouge("run", scene, "--out", out, "--quiet").exit_code == 0
-    first = gouge("restart", out, "--slip", 2, "--perm", K1, "--quiet")
+    """The tiny scene's second slip with a checkpoint (number n) forked at K1, then K2 added by a
+    second `gouge restart`: (run directory, first and second restart results, the drained
+    branch's SHA-256 after the first, n)."""
+    _, out, numbers = slipping_run(SCENE, tmp_path_factory.mktemp("results"))
+    n = numbers[1]
+    first = gouge("restart", out, "--slip", n, "--perm", K1, "--quiet")
     assert first.exit_code == 0, first.output
-    fork = out / "forks" / "slip_002"
-    drained_hash = _sha(fork / "drained" / "run.h5")
-    second = gouge("restart", out, "--slip", 2, "--perm", K2, "--quiet")
-    return out, first, second, drained_hash
+    drained_hash = _sha(out / "forks" / f"slip_{n:03d}" / "drained" / "run.h5")
+    second = gouge("restart", out, "--slip", n, "--perm", K2, "--quiet")
+    return out, first, second, drained_hash, n
 
 
 def test_restart_perm_adds_a_branch(two_perms):
-    out, _, second, drained_hash = two_perms
+    out, _, second, drained_hash, n = two_perms
     assert second.exit_code == 0, second.output
-    fork = out / "forks" / "slip_002"
+    fork = out / "forks" / f"slip_{n:03d}"
     assert sorted(p.name for p in fork.iterdir() if p.is_dir()) == ["drained", "perm_1e-02", "perm_1e-03"]
     assert _sha(fork / "drained" / "run.h5") == drained_hash           # the drained branch was kept
     printed = json.loads(second.output[second.output.index("{"):])
@@ -69,20 +67,20 @@ def test_restart_perm_adds_a_branch(two_perms):
     pj = json.loads((fork / "pair.json").read_text())
     assert sorted(p["branch"] for p in pj["pairs"]) == ["perm_1e-02", "perm_1e-03"]
     assert pj["run"] == "../.." and (fork / pj["run"]).resolve() == out.resolve()
-    again = gouge("restart", out, "--slip", 2, "--perm", K1, "--quiet")     # the same K needs --force
+    again = gouge("restart", out, "--slip", n, "--perm", K1, "--quiet")     # the same K needs --force
     assert again.exit_code == EXIT_BAD_INPUT and "perm_1e-03" in again.output and "--force" in again.output
 
 
 def test_one_onset_time_everywhere(two_perms, tmp_path):
-    out, _, _, _ = two_perms
+    out, _, _, _, n = two_perms
     listed = gouge("slips", out, "--json")
     assert listed.exit_code == 0
     slips = json.loads(listed.output)
     assert all("attribute_units" not in e and "peak_velocity" not in e for e in slips)
-    onset = next(e for e in slips if e["number"] == 2)["onset_time"]
+    onset = next(e for e in slips if e["number"] == n)["onset_time"]
     with h5py.File(out / "run.h5", "r") as h5:
         origin = float(h5["series/time"][0] - h5["series/load_time"][0])
-        clock = float(h5["slips/002"].attrs["onset_time"]) if "slips/002" in h5 else None
+        clock = float(h5[f"slips/{n:03d}"].attrs["onset_time"]) if f"slips/{n:03d}" in h5 else None
         dt_sample = float(h5["series/time"][1] - h5["series/time"][0])
     assert origin > 0 and onset > 0
     if clock is not None:
@@ -91,27 +89,27 @@ def test_one_onset_time_everywhere(two_perms, tmp_path):
     assert analyzed.exit_code == 0, analyzed.output
     run = json.loads(analyzed.output)["runs"][0]
     assert run["time_origin"] == "loading start"
-    assert next(r for r in run["catalog"] if r["number"] == 2)["onset_time"] == pytest.approx(onset, abs=1e-9)
+    assert next(r for r in run["catalog"] if r["number"] == n)["onset_time"] == pytest.approx(onset, abs=1e-9)
     with open(out / "analysis" / "catalog.csv") as fh:
-        row = next(r for r in csv.DictReader(fh) if r["number"] == "2")
+        row = next(r for r in csv.DictReader(fh) if r["number"] == str(n))
     assert float(row["onset_time"]) == pytest.approx(onset, abs=1e-6)
     assert float(row["onset_clock"]) == pytest.approx(onset + origin, abs=1e-6)
-    # the drained branch retraces the parent: its compared slip is slip 2, on the same clock and origin
+    # the drained branch retraces the parent: its compared slip is slip n, on the same clock and origin
     with open(out / "analysis" / "pairs.csv") as fh:
         pairs = list(csv.DictReader(fh))
     assert len(pairs) == 2
-    pj = json.loads((out / "forks" / "slip_002" / "pair.json").read_text())
+    pj = json.loads((out / "forks" / f"slip_{n:03d}" / "pair.json").read_text())
     for p in pairs + pj["pairs"]:
         assert float(p["drained_onset"]) == pytest.approx(onset, abs=2 * dt_sample)
-    assert gouge("plot", out, "--slip", 2, "--out", tmp_path).exit_code == 0
+    assert gouge("plot", out, "--slip", n, "--out", tmp_path).exit_code == 0
     for p in pj["pairs"]:
-        png = Image.open(tmp_path / f"slip_002_pair_{p['branch']}.png")
+        png = Image.open(tmp_path / f"slip_{n:03d}_pair_{p['branch']}.png")
         shaded = json.loads(png.text["Description"])
         assert shaded["drained"][0] == pytest.approx(p["drained_onset"], rel=1e-12)
 
 
 def test_two_permeabilities_are_never_pooled(two_perms, tmp_path):
-    out, _, _, _ = two_perms
+    out, _, _, _, n = two_perms
     analyzed = gouge("analyze", out, "--json", "--no-notch")
     assert analyzed.exit_code == 0, analyzed.output
     groups = json.loads(analyzed.output)["campaign"]["per_permeability"]
@@ -124,10 +122,10 @@ def test_two_permeabilities_are_never_pooled(two_perms, tmp_path):
         de = float(r["deborah_slip"]) if r["deborah_slip"] not in ("", "nan") else float(r["deborah_mean"])
         expected = ("drained-like" if de < DRAINED_DE else "undrained" if de >= UNDRAINED_DE else "partially drained")
         assert r["regime"] == expected
-    result = gouge("plot", out, "--slip", 2, "--out", tmp_path)
+    result = gouge("plot", out, "--slip", n, "--out", tmp_path)
     assert result.exit_code == 0, result.output
     assert "every permeability on shared axes" in result.output                # `gouge plot` says what it drew
-    png = Image.open(tmp_path / "slip_002_compare.png")
+    png = Image.open(tmp_path / f"slip_{n:03d}_compare.png")
     described = json.loads(png.text["Description"])
     assert [b["branch"] for b in described["branches"]] == ["perm_1e-03", "perm_1e-02"]
     assert "De =" in png.text["Title"] or all(b["regime"] for b in described["branches"])
@@ -147,7 +145,7 @@ def test_fit_verdicts():
 
 
 def test_failed_fit_is_flagged_in_every_output(two_perms, tmp_path, monkeypatch):
-    out, _, _, _ = two_perms
+    out, _, _, _, n = two_perms
     monkeypatch.setattr(blockslider, "judge_fit", lambda *a, **k: (False, "forced failure for the test"))
     text = gouge("analyze", out, "--no-notch")
     assert text.exit_code == 0, text.output
@@ -161,24 +159,24 @@ def test_failed_fit_is_flagged_in_every_output(two_perms, tmp_path, monkeypatch)
     data = json.loads(gouge("analyze", out, "--json", "--no-notch").output)["runs"][0]
     assert all(f["verdict"] == "failed" and f["reason"] for f in data["fits"])
     assert all(p["drained_fit_verdict"] == "failed" for p in data["pairs"])
-    assert gouge("plot", out, "--slip", 2, "--out", tmp_path).exit_code == 0
-    slip = Image.open(tmp_path / "slip_002.png")
+    assert gouge("plot", out, "--slip", n, "--out", tmp_path).exit_code == 0
+    slip = Image.open(tmp_path / f"slip_{n:03d}.png")
     meta = json.loads(slip.text["Description"])
     assert meta["fit_drawn"] is False and meta["verdict"] == "failed" and "forced failure" in meta["reason"]
-    pair = Image.open(tmp_path / "slip_002_pair_perm_1e-03.png")
+    pair = Image.open(tmp_path / f"slip_{n:03d}_pair_perm_1e-03.png")
     assert "forced failure" in pair.text["Title"]
 
 
 def test_export_from_another_directory_lands_in_the_run(two_perms, tmp_path, monkeypatch):
     """parent_run is relative to the branch folder: resolving it from the current directory wrote
     the export outside the run (into cwd/../../../export)."""
-    out, _, _, _ = two_perms
-    with h5py.File(out / "forks" / "slip_002" / "perm_1e-03" / "run.h5", "r") as h5:
+    out, _, _, _, n = two_perms
+    with h5py.File(out / "forks" / f"slip_{n:03d}" / "perm_1e-03" / "run.h5", "r") as h5:
         assert h5.attrs["parent_run"] == "../../.."
     elsewhere = tmp_path / "a" / "b" / "c"
     elsewhere.mkdir(parents=True)
     monkeypatch.chdir(elsewhere)
-    result = gouge("export", out, "--fork", "slip_002/perm_1e-03")
+    result = gouge("export", out, "--fork", f"slip_{n:03d}/perm_1e-03")
     assert result.exit_code == 0, result.output
-    assert (out / "export" / "slip_002_perm_1e-03.vtkhdf").is_file()
+    assert (out / "export" / f"slip_{n:03d}_perm_1e-03.vtkhdf").is_file()
     assert not (tmp_path / "export").exists() and not any(elsewhere.iterdir())

@@ -8,8 +8,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import yaml
-
 import numba
 import numpy as np
 
@@ -18,6 +16,7 @@ from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K
 from gouge_cli.kernels.probe import stream_probe
 from needs import two_threads
+from slipping import slipping_run
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -97,15 +96,12 @@ def test_footprint_sub_systems_are_the_first_rows_of_the_packing():
 
 
 def test_batch_script_forks_every_slip(tmp_path):
-    scene = {"name": "batch", "packing": {"n_grains": 300, "width": 15},
+    scene = {"name": "batch", "seed": 1, "packing": {"n_grains": 300, "width": 15},
              "loading": {"spring_constant": 2e-4, "velocity": 4e-5}, "numerics": {"dt_safety": 0.3},
              "run": {"duration": 80000}, "output": {"series_interval": 10, "snapshot_interval": 40000}}
-    cfg = tmp_path / "batch.yaml"
-    cfg.write_text(yaml.safe_dump(scene))
-    run = tmp_path / "batch"
+    _, run, _ = slipping_run(scene, tmp_path, slips=1)
     bin_dir = Path(sys.executable).parent
     env = dict(os.environ, GOUGE=str(bin_dir / "gouge"), PYTHON=sys.executable)
-    subprocess.run([str(bin_dir / "gouge"), "run", str(cfg), "--out", str(run), "--quiet"], check=True, env=env)
     catalog = json.loads(subprocess.run([str(bin_dir / "gouge"), "slips", str(run), "--json"], check=True,
                                         capture_output=True, text=True, env=env).stdout)
     kept = [e["number"] for e in catalog if e["checkpoint"]]

@@ -21,6 +21,7 @@ from gouge_cli.cli.main import app
 from gouge_cli.config import build_config
 from gouge_cli.errors import MAX_MESSAGE
 from gouge_cli.io.rundir import LOCK_NAME, holder
+from gouge_cli.io.runfile import slip_catalog
 from test_kill_resume import ENV, slipping_scene
 
 runner = CliRunner()
@@ -159,10 +160,12 @@ def test_concurrent_commands_on_a_run_in_progress(scene_file, tmp_path):
 
 def test_drained_only_fork_without_perm(finished, tmp_path):
     d = copy_of(finished, tmp_path / "run")
-    result = gouge("restart", d, "--slip", 1, "--quiet")
+    n = next(int(e["number"]) for e in slip_catalog(d) if e["checkpoint"])
+    result = gouge("restart", d, "--slip", n, "--quiet")
     assert result.exit_code == 0, result.output
-    assert list((d / "forks" / "slip_001").iterdir()) != [] and (d / "forks/slip_001/drained/run.h5").is_file()
-    assert not list((d / "forks" / "slip_001").glob("perm_*"))
+    fork = d / "forks" / f"slip_{n:03d}"
+    assert list(fork.iterdir()) != [] and (fork / "drained/run.h5").is_file()
+    assert not list(fork.glob("perm_*"))
 
 
 def test_damaged_run_file_gives_one_line(finished, tmp_path):

@@ -13,14 +13,13 @@ import math
 
 import h5py
 import pytest
-import yaml
 from PIL import Image
 from typer.testing import CliRunner
 
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.io.integrity import seal
-from gouge_cli.io.runfile import slip_catalog
+from slipping import slipping_run
 
 SCENE = {
     "name": "tiny_study",
@@ -46,12 +45,7 @@ def _branches(run_dir):
 @pytest.fixture(scope="module")
 def study_run(tmp_path_factory):
     """A loaded tiny run and the numbers of (up to) two of its slips with checkpoints."""
-    cfg = tmp_path_factory.mktemp("cfg") / "tiny_study.yaml"
-    cfg.write_text(yaml.safe_dump(SCENE))
-    out = tmp_path_factory.mktemp("runs") / "tiny_study"
-    assert gouge("run", cfg, "--out", out, "--quiet").exit_code == 0
-    numbers = [int(e["number"]) for e in slip_catalog(out) if e["checkpoint"]]
-    assert numbers, "the tiny scene must slip at least once"
+    cfg, out, numbers = slipping_run(SCENE, tmp_path_factory.mktemp("runs"), slips=1)
     return cfg, out, numbers[-2:]
 
 

@@ -23,6 +23,7 @@ from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.io.runfile import slip_catalog
 from gouge_cli.workflows.fork import run_fork
 from gouge_cli.driver.simulation import Simulation
+from slipping import slipping_run
 
 SCENE = {
     "name": "tiny",
@@ -41,18 +42,20 @@ def gouge(*args):
 
 
 @pytest.fixture(scope="module")
-def scene_file(tmp_path_factory):
-    path = tmp_path_factory.mktemp("cfg") / "tiny.yaml"
-    path.write_text(yaml.safe_dump(SCENE))
-    return path
+def tiny(tmp_path_factory):
+    """The tiny scene run to its end with 2 or more slips kept with checkpoints and a stress drop
+    above 0.02: (config file, run directory, those slips' numbers)."""
+    return slipping_run(SCENE, tmp_path_factory.mktemp("runs"), slips=2, min_drop=0.02)
 
 
 @pytest.fixture(scope="module")
-def finished_run(scene_file, tmp_path_factory):
-    out = tmp_path_factory.mktemp("runs") / "tiny"
-    result = gouge("run", scene_file, "--out", out, "--quiet")
-    assert result.exit_code == 0, result.output
-    return out
+def scene_file(tiny):
+    return tiny[0]
+
+
+@pytest.fixture(scope="module")
+def finished_run(tiny):
+    return tiny[1]
 
 
 def series(path: Path) -> dict:
@@ -87,9 +90,10 @@ def test_catalog_has_slips_with_checkpoints(finished_run):
     assert listed.exit_code == 0 and f'"number": {len(catalog)}' in listed.output
 
 
-def test_checkpoint_restart_is_bitwise(finished_run):
+def test_checkpoint_restart_is_bitwise(tiny):
     """N steps + checkpoint + N steps == 2N steps, bit for bit (dry)."""
-    ck = read_checkpoint(finished_run / "checkpoints" / "slip_002.h5")
+    _, finished_run, kept = tiny
+    ck = read_checkpoint(finished_run / "checkpoints" / f"slip_{kept[1]:03d}.h5")
     straight = Simulation(ck.config, arrays=ck.state)
     straight.advance(4000)
     halfway = Simulation(ck.config, arrays=ck.state)
@@ -106,58 +110,65 @@ def test_checkpoint_restart_is_bitwise(finished_run):
     assert a["counters"][1] > ck.state["counters"][1]   # rebuilds happened on the way
 
 
-def test_drained_fork_retraces_the_original(finished_run):
-    summary = run_fork(finished_run, 2, [], quiet=True)
+def test_drained_fork_retraces_the_original(tiny):
+    _, finished_run, kept = tiny
+    n = kept[1]
+    summary = run_fork(finished_run, n, [], quiet=True)
     drained = summary["branches"]["drained"]
     assert drained["status"] == "finished" and drained["first_slip"] is not None
     original = series(finished_run / "run.h5")
-    fork = series(finished_run / "forks" / "slip_002" / "drained" / "run.h5")
+    fork = series(finished_run / "forks" / f"slip_{n:03d}" / "drained" / "run.h5")
     idx = np.searchsorted(original["time"], fork["time"][1:])
     assert np.array_equal(original["time"][idx], fork["time"][1:])
     for name in ("wall_x", "wall_vx", "tau_over_sigma", "porosity", "kinetic_energy", "max_overlap"):
         assert np.array_equal(original[name][idx], fork[name][1:]), name
-    entry = next(e for e in slip_catalog(finished_run) if e["number"] == 2)
+    entry = next(e for e in slip_catalog(finished_run) if e["number"] == n)
     with h5py.File(finished_run / "run.h5", "r") as h5:          # restart reports times since loading began
         origin = float(h5["series/time"][0] - h5["series/load_time"][0])
     assert drained["first_slip"]["onset_time"] == pytest.approx(entry["onset_time"] - origin, abs=1e-9)
     # the fork wrote dense snapshots while its wall slipped (output.slip_frames, 30 by default)
-    with h5py.File(finished_run / "forks" / "slip_002" / "drained" / "run.h5", "r") as h5:
+    with h5py.File(finished_run / "forks" / f"slip_{n:03d}" / "drained" / "run.h5", "r") as h5:
         interval, dt = h5.attrs["snapshot_dense_interval"], h5.attrs["dt"]
         lo = yaml.safe_load(h5.attrs["config"])["slips"]["end_factor"] * SCENE["loading"]["velocity"]
         snaps = [h5["snapshots"][n] for n in sorted(h5["snapshots"])]
         sliding = [g for g in snaps if g["vx"][g["body"][...] == 2].mean() >= lo]
         gaps = np.diff([g.attrs["time"] for g in sliding])
         assert len(sliding) >= 3 and gaps.min() >= interval - dt
-    again = gouge("restart", finished_run, "--slip", 2)        # the drained branch alone again: --force
+    again = gouge("restart", finished_run, "--slip", n)        # the drained branch alone again: --force
     assert again.exit_code == EXIT_BAD_INPUT and "--force" in again.output
 
 
 @pytest.mark.parametrize("args,words", [
-    (["--slip", 99, "--perm", "1e-5"], ["no checkpoint for slip 99", "1, 2"]),
-    (["--slip", 2, "--perm", "-1e-5"], ["--perm", "positive"]),
-    (["--slip", 2, "--perm", "1e-5", "--duration", "-5"], ["--duration"]),
+    (["--slip", 99, "--perm", "1e-5"], ["no checkpoint for slip 99", "KEPT"]),
+    (["--slip", "N", "--perm", "-1e-5"], ["--perm", "positive"]),
+    (["--slip", "N", "--perm", "1e-5", "--duration", "-5"], ["--duration"]),
 ])
-def test_restart_bad_input(finished_run, args, words):
-    result = gouge("restart", finished_run, *args)
+def test_restart_bad_input(tiny, args, words):
+    """N: a slip kept with its checkpoint; KEPT: the list of those the message offers."""
+    _, finished_run, kept = tiny
+    offered = ", ".join(str(int(e["number"])) for e in slip_catalog(finished_run) if e["checkpoint"])
+    result = gouge("restart", finished_run, *[kept[1] if a == "N" else a for a in args])
     assert result.exit_code == EXIT_BAD_INPUT, result.output
     for w in words:
-        assert w in result.output
+        assert (offered if w == "KEPT" else w) in result.output
 
 
-def test_restart_refuses_non_run_and_corrupt_checkpoint(finished_run, tmp_path):
-    result = gouge("restart", tmp_path, "--slip", 1, "--perm", "1e-5")
+def test_restart_refuses_non_run_and_corrupt_checkpoint(tiny, tmp_path):
+    _, finished_run, kept = tiny
+    n = kept[0]
+    result = gouge("restart", tmp_path, "--slip", n, "--perm", "1e-5")
     assert result.exit_code == EXIT_BAD_INPUT and "not a gouge run directory" in result.output
     copy = tmp_path / "copy"
     subprocess.run(["cp", "-r", str(finished_run), str(copy)], check=True)
-    ck = copy / "checkpoints" / "slip_001.h5"
+    ck = copy / "checkpoints" / f"slip_{n:03d}.h5"
     with h5py.File(ck, "r+") as h5:
         h5["state/x"][3] += 1e-9
-    result = gouge("restart", copy, "--slip", 1, "--perm", "1e-5")
+    result = gouge("restart", copy, "--slip", n, "--perm", "1e-5")
     assert result.exit_code == EXIT_BAD_INPUT and "corrupt" in result.output
     ck.write_bytes(ck.read_bytes()[:5000])
     with pytest.raises(CheckpointError, match="unreadable or truncated"):
         read_checkpoint(ck)
-    assert not (copy / "forks" / "slip_001").exists()
+    assert not (copy / "forks" / f"slip_{n:03d}").exists()
 
 
 def test_bad_config_writes_nothing(scene_file, tmp_path):

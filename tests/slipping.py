@@ -1,0 +1,43 @@
+"""A scene that slips, for every ``GOUGE_TEST_SEED_OFFSET``.
+
+Whether a small scene slips in a given loading time, and how often, depends on its packing. A
+test that needs slips (with checkpoints, to fork them) runs its scene with :func:`slipping_run`,
+which tries the next packings (seed + 1, seed + 2, ...) until the catalog holds what the test
+needs, so the test asserts what it is about on a run that has it, whatever the offset.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from gouge_cli.cli.main import app
+from gouge_cli.io.runfile import slip_catalog
+
+
+def slipping_run(scene: dict, root: Path, slips: int = 2, min_drop: float = 0.0, tries: int = 6,
+                 args: tuple = ()) -> tuple[Path, Path, list[int]]:
+    """(config file, run directory, numbers of the slips kept with checkpoints and a stress drop
+    above `min_drop`) of `scene` run with ``gouge run CONFIG --out root/NAME --quiet *args``, at
+    the first of `tries` seeds whose catalog holds at least `slips` such slips. The config file
+    (root/NAME.yaml) holds the seed that was used."""
+    root = Path(root)
+    config, out = root / f"{scene['name']}.yaml", root / scene["name"]
+    counts = []
+    for k in range(tries):
+        config.write_text(yaml.safe_dump(dict(scene, seed=scene["seed"] + k)))
+        if out.exists():
+            shutil.rmtree(out)
+        result = CliRunner().invoke(app, ["run", str(config), "--out", str(out), "--quiet", *map(str, args)])
+        assert result.exit_code == 0, result.output
+        numbers = [int(e["number"]) for e in slip_catalog(out) if e["checkpoint"] and e["stress_drop"] > min_drop]
+        if len(numbers) >= slips:
+            return config, out, numbers
+        counts.append(len(numbers))
+    pytest.fail(f"none of {tries} packings of scene {scene['name']!r} gave {slips} slips with checkpoints "
+                f"and a stress drop above {min_drop} "
+                f"(they gave {counts})")
