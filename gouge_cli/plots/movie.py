@@ -99,7 +99,12 @@ def frame_times(drained: Branch, undrained: Branch, pad: float = 0.15) -> np.nda
     taus = np.sort(np.concatenate([drained.tau, undrained.tau]))
     spacing = np.median(np.diff(taus)) if taus.size > 1 else 1.0
     span = max(float(taus.max()), 1.0)
-    taus = taus[taus >= -pad * span]
+    late = taus[taus >= -pad * span]
+    if not late.size:
+        raise MovieError(f"no snapshot of either branch shows the slip: the last is {-float(taus.max()):.4g} t0 "
+                         "before the onset; run the fork again (`gouge restart ... --force`) with "
+                         "output.slip_frames > 0, which writes frames while the wall slips")
+    taus = late
     keep = [taus[0]]
     for t in taus[1:]:
         if t - keep[-1] > spacing / 3:

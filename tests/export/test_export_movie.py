@@ -35,14 +35,30 @@ def gouge(*args):
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
-    """A wet and a dry run of one small scene (same packing, 2,000 t0 of loading)."""
+    """A wet and a dry run of one small scene (same packing, 2,000 t0 of loading), and the two
+    as a fork (_fake_fork)."""
+    from gouge_cli.errors import MovieError
+    from gouge_cli.plots.movie import frame_times, open_fork
+
     root = tmp_path_factory.mktemp("export")
     cfg = root / "tinywet.yaml"
-    cfg.write_text(yaml.safe_dump(SCENE))
-    for name, extra in (("wet", []), ("dry", ["--set", "fluid=none"])):
-        result = gouge("run", cfg, "--out", root / name, "--quiet", *extra)
-        assert result.exit_code == 0, result.output
-    return root
+    for k in range(6):      # a packing whose two runs, taken as a fork, give the movie frames
+        for name in ("wet", "dry", "forked"):
+            shutil.rmtree(root / name, ignore_errors=True)
+        cfg.write_text(yaml.safe_dump(dict(SCENE, seed=SCENE["seed"] + k)))
+        for name, extra in (("wet", []), ("dry", ["--set", "fluid=none"])):
+            result = gouge("run", cfg, "--out", root / name, "--quiet", *extra)
+            assert result.exit_code == 0, result.output
+        drained, undrained = open_fork(_fake_fork(root), 1, 1e-5)
+        try:
+            frame_times(drained, undrained)
+            return root
+        except MovieError:
+            pass
+        finally:
+            drained.reader.close()
+            undrained.reader.close()
+    pytest.fail("no packing of the scene gave its fork movie a frame")
 
 
 def clock_tolerance(steps, *times) -> float:
@@ -322,3 +338,17 @@ def test_export_of_a_fork_lands_in_its_run_whatever_the_working_directory(runs, 
     assert result.exit_code == 0, result.output
     assert (run / "export" / "slip_001_perm_1e-05.vtkhdf").is_file()
     assert not (tmp_path / "export").exists()
+
+
+def test_movie_without_a_frame_of_the_slip_is_refused():
+    """Snapshots that all end before the onset give no frame: MovieError naming the fix, not an
+    IndexError (seen on a fork whose branches wrote no slip frames)."""
+    from gouge_cli.errors import MovieError
+    from gouge_cli.plots.movie import Branch, frame_times
+
+    def branch(*tau):
+        return Branch("b", None, 0.0, [f"{k}" for k in range(len(tau))], np.array(tau), np.zeros(0), np.zeros(0))
+
+    with pytest.raises(MovieError, match="slip_frames"):
+        frame_times(branch(-500.0, -20.0), branch(-480.0, -5.0))
+    assert frame_times(branch(-500.0, 0.1), branch(-480.0, 50.0)).tolist() == [0.1, 50.0]

@@ -4,10 +4,13 @@ says why instead of leaving its rows out silently."""
 from __future__ import annotations
 
 import os
+import shutil
 import stat
 import subprocess
 import sys
 from pathlib import Path
+
+import pytest
 
 from gouge_cli.studies import bench
 
@@ -53,3 +56,12 @@ def test_a_failing_lammps_is_reported_with_its_exit_code(tmp_path, monkeypatch):
     rate, reason = bench.time_lammps(500, 1, 10, 0.89, 0.2, "granular")
     assert rate is None
     assert reason.startswith("LAMMPS failed (exit ") and "Unrecognized pair style" in reason
+
+
+@pytest.mark.skipif(shutil.which("lmp") is None, reason="lmp is not installed (Debian/Ubuntu: apt-get install lammps)")
+def test_a_real_lammps_times_the_deck():
+    """With LAMMPS installed, the deck runs and gives a rate for both contact styles (a small
+    layer, few steps: what is checked is that the rows exist, not their speed)."""
+    for style in ("granular", "hh"):
+        rate, reason = bench.time_lammps(500, 1, 200, 0.89, 0.2, style)
+        assert reason is None and rate is not None and rate > 0, (style, reason)

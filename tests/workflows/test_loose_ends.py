@@ -22,7 +22,7 @@ from typer.testing import CliRunner
 
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_PHYSICS, AnalysisError
-from gouge_cli.io.runfile import slip_catalog
+from slipping import slipping_run
 from gouge_cli.workflows.pairs import branch_status, write_pair_json
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -63,13 +63,8 @@ def test_extreme_values_are_exit_2_naming_the_key(tmp_path, section, key, value)
 
 @pytest.fixture(scope="module")
 def loaded(tmp_path_factory):
-    folder = tmp_path_factory.mktemp("loose")
-    (folder / "loose.yaml").write_text(yaml.safe_dump(SCENE))
-    run_dir = folder / "run"
-    result = gouge("run", folder / "loose.yaml", "--out", run_dir, "--quiet")
-    assert result.exit_code == 0, result.output
-    slips = [int(e["number"]) for e in slip_catalog(run_dir) if e["checkpoint"]]
-    assert slips, "the scene kept no slip with a checkpoint"
+    """The scene run with a slip kept with its checkpoint: (run directory, that slip's number)."""
+    _, run_dir, slips = slipping_run(SCENE, tmp_path_factory.mktemp("loose"), slips=1)
     return run_dir, slips[0]
 
 
