@@ -4,20 +4,18 @@ switches are undone afterwards, and the two runs hold the same data (the checks 
 
 from __future__ import annotations
 
-import importlib.util
 import math
-from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
 
+from benchmark_scripts import load
 from gouge_cli.config import build_config
 from gouge_cli.io import checkpoint, runfile
 from gouge_cli.io.integrity import SEAL
 from gouge_cli.io.verify import verify_run
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "integrity_cost.py"
 SCENE = {"name": "cost", "seed": 3, "packing": {"n_grains": 300, "width": 15},
          "loading": {"spring_constant": 2e-4, "velocity": 4e-5}, "numerics": {"threads": 1},
          "run": {"duration": 6000},
@@ -26,10 +24,7 @@ SCENE = {"name": "cost", "seed": 3, "packing": {"n_grains": 300, "width": 15},
 
 @pytest.fixture(scope="module")
 def cost():
-    spec = importlib.util.spec_from_file_location("integrity_cost", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load("integrity_cost")
 
 
 def _objects(path):

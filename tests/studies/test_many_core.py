@@ -3,21 +3,17 @@ side-by-side results it read (synthetic inputs; the measuring parts need a many-
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "many_core.py"
+from benchmark_scripts import load
+
 
 
 @pytest.fixture(scope="module")
 def many_core():
-    spec = importlib.util.spec_from_file_location("many_core", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load("many_core")
 
 
 def _bench():
