@@ -96,6 +96,14 @@ def check_seal(obj, required: bool = False) -> None:
                                "match their checksum (damaged file)")
 
 
+STRUCTURE_ERRORS = (OSError, RuntimeError, KeyError)     # what h5py raises on damaged metadata
+
+
+def structure_error(h5, err: BaseException) -> DamagedFileError:
+    """DamagedFileError for a file whose HDF5 metadata (groups, links, heaps) cannot be walked."""
+    return DamagedFileError(f"{h5.filename}: its HDF5 structure is damaged ({_short(err)})")
+
+
 def obj_is_fletcher(obj) -> bool:
     return isinstance(obj, h5py.Dataset) and bool(obj.fletcher32)
 

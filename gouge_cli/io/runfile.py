@@ -60,7 +60,7 @@ from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, d
                       document_slip, grid_geometry)
 from ..kernels import layout as L
 from ..kernels import measure as M
-from .integrity import SEAL, check_seal, read, seal, seal_tree, stored_seal
+from .integrity import SEAL, STRUCTURE_ERRORS, check_seal, read, seal, seal_tree, stored_seal, structure_error
 from .rundir import open_run_file
 
 # name -> (unit, description); units are the dimensionless scales of docs/physics/units.md
@@ -394,6 +394,10 @@ class RunReader:
                         if self.info.is_fork else
                         "wait for it to finish, or `gouge resume` it if it was killed")
                 raise RunStillRunningError(f"{what} has status 'running': {hint}")
+        except STRUCTURE_ERRORS as err:         # damaged groups or links, met while opening
+            damaged = structure_error(self.h5, err)
+            self.h5.close()
+            raise damaged from None
         except Exception:
             self.h5.close()
             raise
@@ -537,10 +541,13 @@ class _Checked:
 def checked_time(h5, required: bool) -> np.ndarray:
     """/series/time of an open run file, checked: seal, chunk checksums, finite and never
     decreasing (DamagedFileError naming the first row that breaks it)."""
-    if "series" not in h5 or "time" not in h5["series"]:
-        return np.zeros(0)
+    try:
+        if "series" not in h5 or "time" not in h5["series"]:
+            return np.zeros(0)
+        ds = h5["series"]["time"]
+    except STRUCTURE_ERRORS as err:
+        raise structure_error(h5, err) from None
     check_seal(h5["series"], required)
-    ds = h5["series"]["time"]
     check_seal(ds, required)
     t = read(ds)
     bad = np.flatnonzero(~np.isfinite(t) | np.concatenate([[False], np.diff(t) < 0]))

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import DamagedFileError, InputError
 from .checkpoint import read_checkpoint
-from .integrity import all_objects, check_seal, damaged_rows, read, stored_seal
+from .integrity import STRUCTURE_ERRORS, all_objects, check_seal, damaged_rows, read, stored_seal, structure_error
 from .runfile import attr_value, checked_time
 
 
@@ -104,13 +104,19 @@ def run_file_problems(path: Path) -> tuple[list[Problem], bool]:
                 row = re.search(r"row (\d+)", str(err))
                 problems.append(Problem("/series/time", str(err), "series",
                                         rows=(int(row.group(1)), int(row.group(1))) if row else None))
-        if "series" in h5:
-            lengths = {n: ds.shape[0] for n, ds in h5["series"].items() if isinstance(ds, h5py.Dataset)}
-            if len(set(lengths.values())) > 1:
-                problems.append(Problem("/series", f"series of different lengths ({lengths})", "lengths",
-                                        rows=(min(lengths.values()), max(lengths.values()))))
+        try:
+            if "series" in h5:
+                lengths = {n: ds.shape[0] for n, ds in h5["series"].items() if isinstance(ds, h5py.Dataset)}
+                if len(set(lengths.values())) > 1:
+                    problems.append(Problem("/series", f"series of different lengths ({lengths})", "lengths",
+                                            rows=(min(lengths.values()), max(lengths.values()))))
+        except STRUCTURE_ERRORS as err:
+            problems.append(Problem("/series", str(structure_error(h5, err)), "series"))
         for p in problems:                  # the clock where each damaged part starts, when readable
-            p.time = _start_time(h5, p, t)
+            try:
+                p.time = _start_time(h5, p, t)
+            except STRUCTURE_ERRORS:
+                p.time = None
     return problems, sealed
 
 
