@@ -69,7 +69,9 @@ def check_stiff_grains(sim, s):
 
 
 def check_soft_grains_stable(sim, s):
-    sane(s, overlap=0.35)
+    # the energy a slip can release, ~ tau^2 W / k, is 10 x the base scene's here (sigma and k both
+    # 10 x): so is the kinetic-energy bound (1.6e-3 E d^3 reached for seed 15)
+    sane(s, overlap=0.35, kinetic=1e-2)
     assert s["max_overlap"].max() > 0.1                           # large overlaps: the scene is what it says
     assert s["porosity"][-1] < 0.15
 

@@ -118,10 +118,13 @@ def dataset_spans(path: Path) -> list[tuple[str, int, int]]:
 
 
 def attributes(path: Path) -> list[tuple[str, str]]:
+    """(object, name) of every attribute whose stored value has a byte to flip (an empty string,
+    such as a fork's slip without a checkpoint, has none)."""
     out = []
     with h5py.File(path, "r") as h5:
         for obj_path, obj in all_objects(h5).items():
-            out += [(obj_path, name) for name in obj.attrs.keys()]
+            out += [(obj_path, name) for name, value in obj.attrs.items()
+                    if (len(value) if isinstance(value, (str, bytes)) else np.asarray(value).nbytes)]
     return sorted(out)
 
 

@@ -150,7 +150,8 @@ def test_stop_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_pa
         assert np.array_equal(sa[name], sb[name], equal_nan=True), name
     ca, cb = slip_catalog(out), slip_catalog(cut)
     assert [e["onset_time"] for e in ca] == [e["onset_time"] for e in cb]
-    assert [e["checkpoint_time"] for e in ca] == [e["checkpoint_time"] for e in cb]
+    assert np.array_equal([e["checkpoint_time"] for e in ca], [e["checkpoint_time"] for e in cb],
+                          equal_nan=True)                 # (NaN: a slip kept without a checkpoint)
 
 
 @pytest.mark.validation
