@@ -20,16 +20,20 @@ from gouge_cli.io.runfile import slip_catalog
 
 
 def slipping_run(scene: dict, root: Path, slips: int = 2, min_drop: float = 0.0, tries: int = 6,
-                 args: tuple = ()) -> tuple[Path, Path, list[int]]:
+                 args: tuple = (), grow: float = 1.0) -> tuple[Path, Path, list[int]]:
     """(config file, run directory, numbers of the slips kept with checkpoints and a stress drop
     above `min_drop`) of `scene` run with ``gouge run CONFIG --out root/NAME --quiet *args``, at
-    the first of `tries` seeds whose catalog holds at least `slips` such slips. The config file
-    (root/NAME.yaml) holds the seed that was used."""
+    the first of `tries` seeds whose catalog holds at least `slips` such slips; each try after
+    the first also runs `grow` times longer (for scenes whose first slip comes late for some
+    packings). The config file (root/NAME.yaml) holds the seed and duration that were used."""
     root = Path(root)
     config, out = root / f"{scene['name']}.yaml", root / scene["name"]
     counts = []
     for k in range(tries):
-        config.write_text(yaml.safe_dump(dict(scene, seed=scene["seed"] + k)))
+        run = dict(scene.get("run", {}))
+        if "duration" in run:
+            run["duration"] = run["duration"] * grow ** k
+        config.write_text(yaml.safe_dump(dict(scene, seed=scene["seed"] + k, run=run)))
         if out.exists():
             shutil.rmtree(out)
         result = CliRunner().invoke(app, ["run", str(config), "--out", str(out), "--quiet", *map(str, args)])

@@ -64,7 +64,7 @@ def test_extreme_values_are_exit_2_naming_the_key(tmp_path, section, key, value)
 @pytest.fixture(scope="module")
 def loaded(tmp_path_factory):
     """The scene run with a slip kept with its checkpoint: (run directory, that slip's number)."""
-    _, run_dir, slips = slipping_run(SCENE, tmp_path_factory.mktemp("loose"), slips=1)
+    _, run_dir, slips = slipping_run(SCENE, tmp_path_factory.mktemp("loose"), slips=1, grow=1.5)
     return run_dir, slips[0]
 
 
