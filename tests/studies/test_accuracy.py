@@ -43,8 +43,20 @@ def test_fit_order_recovers_a_power_law():
 
 
 def test_start_is_before_a_slip(start):
+    """The start is the slip checkpoint moved up to at most MAX_LEAD_SLIPS slip durations before
+    the onset, and the interval runs from there to the slip's end plus 10 %."""
+    from gouge_cli.driver.simulation import Simulation
+    from gouge_cli.io.checkpoint import read_checkpoint
+    from gouge_cli.model.timestep import slip_duration
+    from gouge_cli.studies.accuracy import MAX_LEAD_SLIPS, slip_end
+
     assert re.search(r"checkpoints/slip_\d{3}\.h5$", start.source), start.source
-    assert 100.0 < start.interval < 2000.0
+    ck = read_checkpoint(start.source)
+    sim = Simulation(start.config, arrays=ck.state)
+    onset, end = float(ck.extra["onset_time"]), slip_end(start.source, ck.extra)
+    begin = max(ck.time, onset - MAX_LEAD_SLIPS * slip_duration(start.config, sim.wall_mass_per_length))
+    assert begin < onset < end
+    assert start.interval == pytest.approx(1.1 * (end - begin), abs=1.1 * sim.dt)
 
 
 def test_start_moves_up_to_the_capped_lead(start, tmp_path):
