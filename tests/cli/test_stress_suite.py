@@ -201,8 +201,10 @@ def test_dt_beyond_bound_is_refused():
 
 
 def test_undrained_fine_grid_stops_with_energy_blow_up():
+    """The instability's onset depends on the packing (5,000-20,000 t0 for most seeds, after
+    30,000 t0 for seed 21): loaded for up to 100,000 t0, the run stops at the blow-up."""
     with pytest.raises(PhysicsError, match="kinetic-energy blow-up") as info:
-        run_scene("low_permeability_fine_grid", None)
+        run_scene("low_permeability_fine_grid", 100000.0)
     message = str(info.value)
     assert "fluid.cell_size (now 2.5 d" in message and "numerics.dt_safety" in message
 
