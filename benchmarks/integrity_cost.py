@@ -28,10 +28,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import platform
 import shutil
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
@@ -157,15 +155,11 @@ def one_run(config, out: Path, checks: bool) -> dict:
 
 
 def machine() -> dict:
-    import numba
-    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                if line.startswith("model name")), platform.processor()) if Path("/proc/cpuinfo").exists() else \
-        platform.processor()
-    flags = Path("/proc/cpuinfo").read_text() if Path("/proc/cpuinfo").exists() else ""
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    return {"cpu": cpu, "numba_target": numba.config.CPU_NAME or __import__("llvmlite.binding").binding.get_host_cpu_name(),
-            "avx512": " avx512f" in flags, "logical_cpus": __import__("os").cpu_count(), "commit": commit,
-            "h5py": h5py.__version__, "hdf5": h5py.version.hdf5_version, "date": time.strftime("%Y-%m-%d")}
+    """Where it ran: gouge's provenance record (CPU model, vector width, numba target, library
+    versions, commit), with HDF5's version and the date."""
+    from gouge_cli.io import provenance
+
+    return dict(provenance.collect(), hdf5=h5py.version.hdf5_version, date=time.strftime("%Y-%m-%d"))
 
 
 def main(argv=None) -> int:
@@ -201,7 +195,7 @@ def main(argv=None) -> int:
              - med[False]["write_run_h5_s"] - med[False]["write_checkpoints_s"])
     print(f"writing with checks costs {extra:.3g} s more, {100 * extra / med[False]['wall_s']:.2f} % of the run's "
           f"wall time ({med[False]['wall_s']:.3g} s)")
-    print(json.dumps(report["machine"]))
+    print(json.dumps({k: report["machine"][k] for k in ("cpu", "git_commit", "hdf5", "date")}))
     Path(args.json).parent.mkdir(parents=True, exist_ok=True)
     Path(args.json).write_text(json.dumps(report, indent=2))
     return 0

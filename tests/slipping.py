@@ -18,6 +18,16 @@ from typer.testing import CliRunner
 from gouge_cli.cli.main import app
 from gouge_cli.io.runfile import slip_catalog
 
+TINY = {        # 300 grains: two or more slips with checkpoints in 80,000 t0 for most packings
+    "name": "tiny",
+    "seed": 4,
+    "packing": {"n_grains": 300, "width": 15},
+    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
+    "numerics": {"dt_safety": 0.3, "threads": 1},
+    "run": {"duration": 80000},
+    "output": {"series_interval": 10, "snapshot_interval": 20000},
+}
+
 
 def slipping_run(scene: dict, root: Path, slips: int = 2, min_drop: float = 0.0, tries: int = 6,
                  args: tuple = (), grow: float = 1.0) -> tuple[Path, Path, list[int]]:

@@ -22,7 +22,6 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
-import yaml
 from typer.testing import CliRunner
 
 from gouge_cli.cli.main import app
@@ -32,6 +31,7 @@ from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.io.integrity import all_objects, seal, value_bytes
 from gouge_cli.io.runfile import RunReader, slip_catalog
 from gouge_cli.io.verify import run_file_problems, verify_run
+from slipping import slipping_run
 
 SCENE = {
     "name": "flips",
@@ -64,19 +64,10 @@ def refused(result, *words):
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     """A finished run with a slip kept with its checkpoint, and the drained fork of that slip."""
-    root = tmp_path_factory.mktemp("integrity")
-    for k in range(4):
-        scene = root / f"flips{k}.yaml"
-        scene.write_text(yaml.safe_dump(dict(SCENE, seed=SCENE["seed"] + k)))
-        out = root / f"run{k}"
-        result = gouge("run", scene, "--out", out, "--quiet")
-        assert result.exit_code == 0, result.output
-        slips = [int(e["number"]) for e in slip_catalog(out) if e["checkpoint"]]
-        if slips:
-            result = gouge("restart", out, "--slip", slips[0], "--set", "output.slip_frames=3", "--quiet")
-            assert result.exit_code == 0, result.output
-            return out, slips[0]
-    pytest.fail("none of 4 packings of the scene slipped with a checkpoint")
+    _, out, slips = slipping_run(SCENE, tmp_path_factory.mktemp("integrity"), slips=1)
+    result = gouge("restart", out, "--slip", slips[0], "--set", "output.slip_frames=3", "--quiet")
+    assert result.exit_code == 0, result.output
+    return out, slips[0]
 
 
 def interrupted_copy(run_dir: Path, target: Path, more: float = 300.0) -> Path:

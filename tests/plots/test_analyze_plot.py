@@ -16,17 +16,8 @@ from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.plots import DPI, FIGSIZE
 from gouge_cli.plots.snapshot import snapshot_pixels
-from slipping import slipping_run
+from slipping import TINY, slipping_run
 
-SCENE = {
-    "name": "tiny",
-    "seed": 4,
-    "packing": {"n_grains": 300, "width": 15},
-    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-    "numerics": {"dt_safety": 0.3, "threads": 1},
-    "run": {"duration": 80000},
-    "output": {"series_interval": 10, "snapshot_interval": 20000},
-}
 runner = CliRunner()
 
 
@@ -38,7 +29,7 @@ def gouge(*args):
 def forked(tmp_path_factory):
     """The tiny scene (2 or more slips with checkpoints), its second such slip forked with one
     undrained branch writing snapshots: (run directory, slip number)."""
-    _, out, numbers = slipping_run(SCENE, tmp_path_factory.mktemp("analyze"))
+    _, out, numbers = slipping_run(TINY, tmp_path_factory.mktemp("analyze"))
     result = gouge("restart", out, "--slip", numbers[1], "--perm", 1e-3, "--set", "output.snapshot_interval=500",
                    "--quiet")
     assert result.exit_code == 0, result.output

@@ -18,17 +18,8 @@ from gouge_cli.analysis.blockslider import BlockSliderFit
 from gouge_cli.analysis.forkpairs import DRAINED_DE, UNDRAINED_DE
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
-from slipping import slipping_run
+from slipping import TINY, slipping_run
 
-SCENE = {
-    "name": "tiny",
-    "seed": 4,
-    "packing": {"n_grains": 300, "width": 15},
-    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-    "numerics": {"dt_safety": 0.3, "threads": 1},
-    "run": {"duration": 80000},
-    "output": {"series_interval": 10, "snapshot_interval": 20000},
-}
 K1, K2 = 1e-3, 1e-2
 runner = CliRunner()
 
@@ -46,7 +37,7 @@ def two_perms(tmp_path_factory):
     """The tiny scene's second slip with a checkpoint (number n) forked at K1, then K2 added by a
     second `gouge restart`: (run directory, first and second restart results, the drained
     branch's SHA-256 after the first, n)."""
-    _, out, numbers = slipping_run(SCENE, tmp_path_factory.mktemp("results"))
+    _, out, numbers = slipping_run(TINY, tmp_path_factory.mktemp("results"))
     n = numbers[1]
     first = gouge("restart", out, "--slip", n, "--perm", K1, "--quiet")
     assert first.exit_code == 0, first.output
