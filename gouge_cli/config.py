@@ -217,7 +217,16 @@ class FluidConfig(_Section):
     )
     compressibility: Compressibility = Field(36.0, gt=0, description="beta [1/E] (4.5e-10 1/Pa)")
     viscosity: Viscosity = Field(1.43e-7, gt=0, description="eta [E t0] (1e-3 Pa s)")
-    cell_size: float = Field(2.5, ge=0.5, le=20, description="target grid cell size [d]")
+    filter_width: float = Field(
+        3.0, ge=0, le=40,
+        description="[d] coarse-graining width w, a physical parameter of the model (the thesis's 'a few grains'): "
+                    "solid fraction, solid velocity and drag are averaged with a Gaussian of standard deviation w/2 "
+                    "that conserves the solid area, the drag going back through its transpose; 0: no filter, the "
+                    "grid cell is the averaging width (the answers then depend on cell_size)")
+    cell_size: Optional[float] = Field(
+        None, ge=0.25, le=20,
+        description="[d] pressure-grid spacing h, a numerical parameter: at a fixed filter_width the answers "
+                    "converge as h falls (docs/validation.md); default filter_width / 2, at most filter_width")
     solver: Literal["auto", "implicit", "explicit"] = Field(
         "auto", description="pressure time stepping: implicit (backward Euler, conjugate gradients), explicit "
                             "(forward Euler, sub-stepped to explicit_safety x the FTCS bound), or auto: one "
@@ -228,6 +237,24 @@ class FluidConfig(_Section):
         description="fluid update period dt_f, rounded to whole DEM steps [t0]; the drag is lagged by up to "
                     "dt_f, and dt_f above ~1-2 t0 destabilises undrained (kappa_c <~ 1e-4) coupling")
     explicit_safety: float = Field(0.5, gt=0, le=1.0, description="fraction of the FTCS bound per sub-step [-]")
+
+    @model_validator(mode="after")
+    def _two_scales(self):
+        if self.filter_width == 0 and self.cell_size is None:
+            raise ValueError("fluid.filter_width 0 (no filter) needs fluid.cell_size, the averaging width then")
+        if self.filter_width == 0 and self.cell_size < 2.0:
+            raise ValueError(f"fluid.cell_size {self.cell_size:g} d without a filter (fluid.filter_width 0): cells "
+                             "below 2 d are then the averaging width and make the undrained coupling unstable; "
+                             "give a fluid.filter_width (e.g. 3) and refine the grid under it instead")
+        if self.filter_width > 0 and self.cell_size is not None and self.cell_size > self.filter_width:
+            raise ValueError(f"fluid.cell_size ({self.cell_size:g} d) must not exceed fluid.filter_width "
+                             f"({self.filter_width:g} d): the grid must resolve the averaging width")
+        return self
+
+    @property
+    def grid_spacing(self) -> float:
+        """h [d]: cell_size, or half the filter width when it is not given."""
+        return self.cell_size if self.cell_size is not None else 0.5 * self.filter_width
 
 
 class Config(_Section):

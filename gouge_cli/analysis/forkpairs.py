@@ -18,7 +18,8 @@ _NAN = float("nan")
 
 
 PAIR_COLUMNS = (
-    "run", "slip", "branch", "permeability", "regime", "deborah_slip", "deborah_mean", "main", "type",
+    "run", "slip", "branch", "permeability", "filter_width", "cell_size", "regime", "deborah_slip", "deborah_mean",
+    "main", "type",
     "base_type", "complex", "criteria", "undrained_event", "drained_strength", "undrained_strength",
     "strength_difference", "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
     "undrained_peak_over_Vs", "n_undrained_slips", "n_subevents", "drained_onset", "drained_end",
@@ -158,6 +159,8 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 "slip": int(info.fork_slip) if info.fork_slip is not None else _slip_number(fork_dir),
                 "branch": udir.name,
                 "permeability": uinfo.permeability if uinfo.permeability is not None else _NAN,
+                "filter_width": uinfo.filter_width if uinfo.filter_width is not None else _NAN,
+                "cell_size": uinfo.grid_spacing if uinfo.grid_spacing is not None else _NAN,
                 "main": definition.main,
                 "type": result.type,
                 "base_type": result.base_type,

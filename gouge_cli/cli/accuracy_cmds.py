@@ -70,6 +70,9 @@ def accuracy(
     analytic: bool = typer.Option(True, "--analytic/--no-analytic", help="also the analytic cases"),
     fluid: bool = typer.Option(True, "--fluid/--no-fluid", help="also the fluid ladders (a dry scene gets "
                                                                 "kappa_c = 1e-5 for them)"),
+    ladders: Optional[str] = typer.Option(
+        None, "--ladders", help="only these scene ladders, comma-separated: dt_safety, grid, filter_width, "
+                                "fluid.step, fluid.solver (default: all)"),
     stick_scaling: Optional[str] = typer.Option(
         None, "--stick-scaling", help="instead: the stick-scaling ladder over these lambdas, e.g. 1,4,16,64,256 "
                                       "(slip statistics and cost against lambda; gouge_cli.studies.scaling_ladder)"),
@@ -79,7 +82,7 @@ def accuracy(
     keep: bool = typer.Option(False, "--keep", help="stick-scaling ladder: keep the runs already in the output "
                                                     "directory (same scene) and run only the missing ones"),
 ):
-    """Errors and run times of a scene at ladders of dt_safety, fluid cell size, fluid step and solver, and of analytic cases; observed orders.
+    """Errors and run times of a scene at ladders of dt_safety, fluid grid spacing (at a fixed filter width), filter width, fluid step and solver, and of analytic cases; observed orders.
 
     Every level starts from the same pre-slip state and runs the same short interval (the DEM
     is chaotic: longer intervals measure the chaotic spread, not the discretisation error).
@@ -101,12 +104,27 @@ def accuracy(
         target = out_dir or Path("runs") / "accuracy" / name
         result = run_accuracy(cfg, target, checkpoint=slip_checkpoint, quick=quick, interval=interval,
                               samples=samples, analytic=analytic, fluid=fluid,
+                              ladders=_ladder_names(ladders),
                               on_level=lambda r: err.print(f"{r.level.ladder} {r.level.setting}: {r.status[:80]} "
                                                            f"({r.wall_seconds:.2f} s)", highlight=False))
     except PhysicsError as e:
         fail(f"physics failure while preparing the scene: {e}", EXIT_PHYSICS)
     _print_report(result)
     out.print(f"results: {target / 'accuracy.csv'}, {target / 'accuracy.png'}", highlight=False)
+
+
+def _ladder_names(text: Optional[str]) -> Optional[tuple]:
+    """The --ladders list, checked against the scene ladders' names (exit 2 naming an unknown one)."""
+    from ..studies.accuracy import LADDERS
+
+    if text is None:
+        return None
+    names = tuple(part.strip() for part in text.split(",") if part.strip())
+    unknown = [n for n in names if n not in LADDERS]
+    if unknown or not names:
+        fail(f"--ladders: unknown ladder {', '.join(map(repr, unknown)) or '(none given)'}; "
+             f"choose from {', '.join(LADDERS)}")
+    return names
 
 
 def register(app: typer.Typer):

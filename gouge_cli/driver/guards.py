@@ -112,9 +112,9 @@ def _fluid_hint(sim: Simulation) -> str:
     if sim.fluid is None:
         return ""
     f = sim.config.fluid
-    return (f"; with pore fluid, also lower fluid.step (now {f.step:g} t0, the lag of the drag) or raise "
-            f"fluid.cell_size (now {f.cell_size:g} d: on small cells a nearly undrained coupling can "
-            f"create energy); the coupling stiffens as fluid.permeability (now {f.permeability:g} d^2) falls")
+    return (f"; with pore fluid, also lower fluid.step (now {f.step:g} t0, the period of the drag update); "
+            f"the coupling stiffens as fluid.permeability (now {f.permeability:g} d^2) falls and as "
+            f"fluid.filter_width (now {f.filter_width:g} d, the averaging width) narrows")
 
 
 class NonFiniteGuard:
@@ -248,7 +248,7 @@ class FluidSubstepGuard:
                 f"explicit pressure step above its bound: the fluid step {step:.4g} t0 is {step / bound:.3g} x the "
                 f"FTCS bound {bound:.3g} t0 and needs {substeps} sub-steps per update (limit {self.limit})",
                 "use fluid.solver=implicit (unconditionally stable), or raise fluid.cell_size "
-                f"(now {sim.config.fluid.cell_size:g} d); the diffusivity grows with fluid.permeability "
+                f"(now {sim.config.fluid.grid_spacing:g} d); the diffusivity grows with fluid.permeability "
                 f"(now {sim.config.fluid.permeability:g} d^2)", sim.state.time)
 
 

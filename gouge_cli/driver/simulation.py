@@ -92,7 +92,7 @@ class Simulation:
                 status = self.fluid.init(s.x, s.z, s.vx, s.vz, s.radius, z_bot, z_top)
             if status != 0:
                 raise PhysicsError("the pressure grid could not be initialised (layer thickness <= 0)",
-                                   "check the packing and fluid.cell_size", s.time)
+                                   "check the packing", s.time)
         self.drag = (self.fluid.drag_x, self.fluid.drag_z)
 
     # ---- phase -------------------------------------------------------------------------
@@ -269,7 +269,7 @@ class Simulation:
             "worst_pair": (int(o[L.WORST_I]), int(o[L.WORST_J])),
         }
         if self.fluid is not None:
-            row.update(self.fluid.observe())
+            row.update(self.fluid.observe(s.wall[L.W_VX], s.vx, s.vz))
         return row
 
     def measure(self) -> dict:

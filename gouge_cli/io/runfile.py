@@ -85,7 +85,13 @@ SERIES = {
     "pressure_mean": ("E", "mean pore pressure perturbation"),
     "pressure_min": ("E", "smallest pore pressure perturbation"),
     "pressure_max": ("E", "largest pore pressure perturbation"),
-    "deborah": ("-", "Deborah number l u0 / D of the fluid"),
+    "deborah": ("-", "Deborah number l u0 / D: l half the layer thickness, u0 the top wall's speed |wall_vx|, "
+                     "D the mean diffusivity (independent of the grid)"),
+    "deborah_grid": ("-", "diagnostic: l u0 / D with u0 the largest solid speed deposited on the grid (depends on "
+                          "the grid and the filter width)"),
+    "fluid_energy": ("E d^3", "elastic energy stored in the pore fluid, sum of dx dz beta phi P^2 / 2 (per unit "
+                              "thickness)"),
+    "drag_power": ("E d^3/t0", "work rate of the fluid drag on the grains, sum of F . v"),
     "fluid_updates": ("-", "pore-pressure updates of the grid so far (cumulative)"),
     "explicit_updates": ("-", "of them, those that took the explicit step (fluid.solver auto: Heun; explicit: FTCS)"),
     # stick scaling (driver.stick_scaling), only in runs with numerics.stick_scaling > 1
@@ -314,6 +320,23 @@ class RunInfo:
     branch: str | None = None
     parent_run: str | None = None
     fork_slip: int | None = None
+
+    @property
+    def filter_width(self) -> float | None:
+        """fluid.filter_width [d] of a wet run (the coupling's averaging width); None dry. A run
+        written before the key existed had no filter: 0."""
+        fluid = self.config.get("fluid")
+        return float(fluid.get("filter_width", 0.0)) if fluid else None
+
+    @property
+    def grid_spacing(self) -> float | None:
+        """The pressure grid's spacing h [d] of a wet run (fluid.cell_size, default half the filter
+        width); None dry."""
+        fluid = self.config.get("fluid")
+        if not fluid:
+            return None
+        h = fluid.get("cell_size")
+        return float(h) if h is not None else 0.5 * float(fluid.get("filter_width", 0.0))
 
     @property
     def predicted_half_period(self) -> float:

@@ -29,8 +29,7 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     other."""
     x, z, vx, vz, radius = grains.x, grains.z, grains.vx, grains.vz, grains.radius
     force_x, force_z, inv_mass, body = grains.force_x, grains.force_z, grains.inv_mass, grains.body
-    fparams, fstate, P, s, s_old = fluid.params, fluid.state, fluid.pressure, fluid.s, fluid.s_old
-    ux, uz, perm, div_u, work = fluid.ux, fluid.uz, fluid.permeability, fluid.div_u, fluid.work
+    fstate, s, s_old, ux, uz, work = fluid.state, fluid.s, fluid.s_old, fluid.ux, fluid.uz, fluid.work
     corners, partial = fluid.corners, fluid.partial
     n = x.shape[0]
     width = params[WIDTH]
@@ -55,19 +54,17 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
                                                 wall[W_VX], wall[W_VZ]), serial, serial or not overlap)
         if status == 0:
             if not overlap:
-                status = fluid_solve(width, z_bottom, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm,
-                                     div_u, work)
+                status = fluid_solve(width, z_bottom, z_top, dt_f, fluid)
             else:
                 open_step(grains, wall, clock, params)
                 late = _solve_and_drift(x, z, vx, vz, grains.spin, force_x, force_z, grains.torque, inv_mass,
                                         grains.inv_inertia, body, lists.x_build, lists.z_build, owed, params, width,
-                                        z_bottom, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u,
-                                        work, partial, not serial, lists.cell_count)
+                                        z_bottom, z_top, dt_f, fluid, not serial, lists.cell_count)
                 if late > 0:
                     counters[K_NEED_REBUILD] = 1
                 status = lists.cell_count[0]
                 drifted = True
-            fluid_drag(n, work, corners, drag_x, drag_z, status)
+            fluid_drag(n, width, fluid, drag_x, drag_z, status)
         if status != 0:
             if owed and not drifted:
                 close_step(grains, wall, params)
@@ -78,8 +75,7 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
 
 @njit(parallel=True, cache=NUMBA_CACHE)
 def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, x_build, z_build,
-                     owed, params, width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work,
-                     partial, pending, out):
+                     owed, params, width, z_bot, z_top, dt_f, fluid, pending, out):
     """fluid_solve (serial, grid only) while the threads run step 2 of the next step, the grains'
     kicks and drift (move_range), each grain on its own: the bits of one after the other.
     Every thread moves its own part of the grains (kernels.step.kick_drift's: the ones it holds
@@ -93,7 +89,7 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
     [Each thread keeps its own grains: having the other threads move thread 0's grains in chunks
     while it finished and solved was slower (those grains sit in the other core's cache). Arrays,
     not the grains/lists records: unpacked from tuples inside this parallel function, the two
-    tasks ran slower than one after the other.]"""
+    tasks ran slower than one after the other; the fluid record is only passed through.]"""
     n = x.shape[0]
     tasks = max(min(int(params[THREADS]), n), 1)
     claim = tasks + 1
@@ -102,17 +98,16 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
     out[done] = 0
     for t in prange(tasks):
         if t != 0 and pending:
-            _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, s, ux, uz, work, partial)
+            _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, fluid)
         if tasks == 1:                          # (one thread: the grid while the deposit's data is warm)
-            out[0] = fluid_solve(width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work)
+            out[0] = fluid_solve(width, z_bot, z_top, dt_f, fluid)
         late = move_range(t * n // tasks, (t + 1) * n // tasks, x, z, vx, vz, spin, force_x, force_z, torque,
                           inv_mass, inv_inertia, body, x_build, z_build, owed, params)
         if t == 0 and tasks > 1:
-            if pending and not _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, s, ux, uz, work,
-                                                    partial):
+            if pending and not _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, fluid):
                 while fetch_add(out, done, 0) == 0:         # (an atomic read: the claimant is running)
                     pass
-            out[0] = fluid_solve(width, z_bot, z_top, dt_f, fparams, fstate, P, s, s_old, ux, uz, perm, div_u, work)
+            out[0] = fluid_solve(width, z_bot, z_top, dt_f, fluid)
         out[t + 1] = late
     total = 0
     for t in range(tasks):
@@ -121,11 +116,11 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
 
 
 @njit(cache=NUMBA_CACHE, inline="always")
-def _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, s, ux, uz, work, partial):
+def _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, fluid):
     """The deposit's finish (fluid_finish_deposit) if no thread has claimed it (fetch_add on
     out[claim]), then out[done] set; returns whether this thread did it."""
     if fetch_add(out, claim, 1) != 0:
         return False
-    fluid_finish_deposit(width, z_bot, z_top, s, ux, uz, work, partial)
+    fluid_finish_deposit(width, z_bot, z_top, fluid.s, fluid.ux, fluid.uz, fluid.work, fluid.partial)
     fetch_add(out, done, 1)
     return True

@@ -1,6 +1,12 @@
 """Fluid drag on the grains (thesis Eqs. 12-13): pressure gradient at cell centres, the drag
 density -(grad P)/s per cell, gathered onto each grain with the deposit's weights and areas.
 
+The running coupling uses its energy-consistent form (drag_triples, grain_drag_consistent): the
+exact adjoint of the deposit that makes the pressure source, so that in the undrained limit the
+work of the drag equals minus the change of the fluid's stored energy (module section below).
+The gradient form (drag_density, grain_drag) is its definition in the continuum and the tests'
+reference.
+
 Drag
 ----
 F_k = -a_k sum_c W_kc (grad P)_c / s_c with the same weights and areas as the
@@ -15,7 +21,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import CELL_BITS, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL
+from .layout import CELL_BITS, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ
 from .deposit import cell_weights, corner_shares, grain_area
 from .lanes import bilinear_pairs
 from .pressure import flat, flat_columns
@@ -153,3 +159,70 @@ def grain_drag_at(corners, n, nz, pairs, drag_x, drag_z):
         i10 = i00 + column
         i10 = i10 - end if i10 >= end else i10
         drag_x[k], drag_z[k] = bilinear_pairs(pairs, i00, i10, a00[k], a10[k], a01[k], a11[k])
+
+
+# ---- the energy-consistent drag ---------------------------------------------------------------
+#
+# The source (kernels.pressure.undrained_source) changes P_c by dP = (1 + beta P) ds_c,e / (beta s phi),
+# ds_c,e = ds_c + dt u_c . grad s_c, from the deposit s_c = sum_k a_k W_kc / (dx dz) and
+# u_c = sum_k a_k W_kc v_k / (dx dz s_c). The fluid then stores dE = dx dz sum_c (P_c / s_c) ds_c,e,
+# and the force that does exactly minus that work on each grain is
+#
+#     F_k = -a_k sum_c [ q_c dW_kc/dx_k + W_kc r_c ],   q = P / s,  r = (P / s^2) grad s,
+#
+# (grad s the deposit's own gradient). Summed by parts in the continuum this is -a_k grad P / s,
+# the drag of Eq. 12; on the grid it is its adjoint, so the coupling neither creates nor destroys
+# energy at any wavelength the grid holds (the gradient form, with the centred difference of P,
+# does not see grid-scale modes the deposit makes, and pumps energy into them when no diffusion
+# damps them: the nearly undrained limit). Its total is zero exactly: sum_k a_k dW_kc/dx_k =
+# -dx dz grad s_c cancels the r term cell by cell (with P = 0 on the planes, -integral grad P = 0
+# too). Through the filter (kernels.filter) q and r go back by S^T.
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def drag_triples(P, s, grad_s_x, grad_s_z, q, rx, rz):
+    """q = P/s [E], r = (P/s^2) grad s [E/d] per cell (0 where s <= 0); all float64[nx, nz]."""
+    pf, sf, gx, gz, qf, xf, zf = flat(P), flat(s), flat(grad_s_x), flat(grad_s_z), flat(q), flat(rx), flat(rz)
+    for c in range(np.uint64(pf.size)):
+        if sf[c] > 0.0:
+            inv = 1.0 / sf[c]
+            value = pf[c] * inv
+            qf[c] = value
+            xf[c] = value * inv * gx[c]
+            zf[c] = value * inv * gz[c]
+        else:
+            qf[c] = 0.0
+            xf[c] = 0.0
+            zf[c] = 0.0
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
+def grain_drag_consistent(corners, n, nz, inv_dx, q, rx, rz, drag_x, drag_z):
+    """F_k = -a_k sum_c [q_c dW_kc/dx_k + W_kc r_c] [E d^2] with the corner cells, areas and d fz/dz
+    the deposit stored (kernels.deposit: dW/dx_k of the bilinear weights is -(1 - fz)/dx, (1 - fz)/dx,
+    -fz/dx, fz/dx on the cells 00, 10, 01, 11, and the same in z with d fz/dz, 0 where a grain's
+    z-weight is clamped to a boundary row). q, rx, rz: float64[nx, nz] (drag_triples, then S^T).
+    Each grain on its own: the same bits on any thread count."""
+    cells = corners[CR_CELL].view(np.int64)
+    a00s, a10s, a01s, a11s, dfz = corners[CR_A00], corners[CR_A10], corners[CR_A01], corners[CR_A11], corners[CR_DFZ]
+    qf, xf, zf = flat(q), flat(rx), flat(rz)
+    column = np.uint64(nz)
+    end = np.uint64(qf.size)
+    one = np.uint64(1)
+    for kk in prange(n):
+        k = np.uint64(kk)
+        cell = cells[k] - CELL_BITS
+        if cell < 0:
+            drag_x[k] = 0.0
+            drag_z[k] = 0.0
+            continue
+        c00 = np.uint64(cell)
+        c10 = c00 + column
+        c10 = c10 - end if c10 >= end else c10
+        c01 = c00 + one
+        c11 = c10 + one
+        a00, a10, a01, a11 = a00s[k], a10s[k], a01s[k], a11s[k]
+        dqx = ((a00 + a10) * (qf[c10] - qf[c00]) + (a01 + a11) * (qf[c11] - qf[c01])) * inv_dx
+        dqz = ((a00 + a01) * (qf[c01] - qf[c00]) + (a10 + a11) * (qf[c11] - qf[c10])) * dfz[k]
+        drag_x[k] = -(dqx + a00 * xf[c00] + a10 * xf[c10] + a01 * xf[c01] + a11 * xf[c11])
+        drag_z[k] = -(dqz + a00 * zf[c00] + a10 * zf[c10] + a01 * zf[c01] + a11 * zf[c11])

@@ -8,7 +8,7 @@ pressure [E], permeability [d^2], viscosity [E t0], compressibility [1/E].
 Grid: :mod:`gouge_cli.kernels.deposit` (cell-centred, stretching with the layer, P = 0 on both
 wall planes, periodic in x).
 
-One fluid update = deposit (deposit.py) -> source and pressure solve (pressure.py, Eqs. 14-20)
+One fluid update = deposit (deposit.py) -> filter (filter.py) -> source and pressure solve (pressure.py, Eqs. 14-20)
 -> pressure gradient and grain drag (drag.py, Eqs. 12-13); this module orders them.
 
 Array layouts
@@ -16,12 +16,13 @@ Array layouts
 params : float64[N_FLUID_PARAMS]  indices P_* (kernels.layout) (see FluidGrid.from_config)
 state  : float64[N_FLUID_STATE]   indices S_* (kernels.layout); S_Z_BOT/S_Z_TOP are the planes at
                             the last update and must be checkpointed with P and s
-P, s, s_old, ux, uz, permeability, div_u : float64[nx, nz]
+P, s, s_old, ux, uz, permeability, div_u : float64[nx, nz] (s, ux, uz filtered: kernels.filter)
 work   : float64[N_GRID_WORK, nx, nz]   scratch, rows G_* of kernels.layout
 corners : float64[N_CORNERS, N]    per-grain deposit cells and areas (see deposit), reused for the drag
 partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit);
                             allocate it zeroed: between calls it is zero outside the columns flagged
                             in it (M_FLAG)
+taps_x : float64[nx], kernel_z : float64[nz, nz]   the filter's operators (kernels.filter), scratch
 drag_x, drag_z : float64[N]        force on each grain [E d^2]
 
 Status: STATUS_OK 0; STATUS_SOLVER 1 (CG not converged in max_iter: P is the
@@ -36,13 +37,14 @@ import numpy as np
 from numba import njit
 
 from . import NUMBA_CACHE
-from .layout import (AUTO_EXPLICIT, G_CAPACITY, G_DIAG, G_FX, G_FZ, G_GX, G_GZ, G_P, G_Q, G_RHS, G_SX, G_SZ,
-                     G_TB, G_TX, G_TZ, G_Z, P_BETA, P_ETA, P_KAPPA_C, P_MAX_ITER, P_MAX_SUBSTEPS, P_PHI_MAX,
-                     P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT, STATUS_NONFINITE,
-                     STATUS_OK, STATUS_SOLVER, S_DT_MAX, S_EXPLICIT_UPDATES, S_ITERATIONS, S_RESIDUAL,
-                     S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
+from .layout import (AUTO_EXPLICIT, G_CAPACITY, G_DIAG, G_FQ, G_FX, G_FZ, G_P, G_PREV, G_Q, G_RHS, G_SX,
+                     G_SZ, G_TB, G_TMP, G_TX, G_TZ, G_Z, P_BETA, P_ETA, P_FILTER_WIDTH, P_KAPPA_C, P_MAX_ITER,
+                     P_MAX_SUBSTEPS, P_PHI_MAX, P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT,
+                     STATUS_NONFINITE, STATUS_OK, STATUS_SOLVER, S_DT_MAX, S_EXPLICIT_UPDATES, S_ITERATIONS,
+                     S_RESIDUAL, S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
 from .deposit import deposit, deposit_finish
-from .drag import drag_density_pairs, grain_drag_at, pressure_gradient
+from .drag import drag_triples, grain_drag_consistent
+from .filter import apply_filter_transpose, filter_deposit, filter_setup
 from .pressure import (conjugate_gradient, copy_grid, explicit_bound, explicit_diffusion, face_conductances,
                        flat, heun_diffusion, implicit_system, permeability_field, undrained_source)
 
@@ -57,46 +59,70 @@ def _all_finite(P):
     return bad == 0
 
 
-@njit(cache=NUMBA_CACHE, inline="always")
-def _drag_pairs(work):
-    """The drag density's interleaved (x, z) pairs per cell: work rows G_FX and G_FZ as one flat
-    float64[2 nx nz] (kernels.drag.drag_density_pairs)."""
-    return work[G_FX:G_FZ + 1].reshape(2 * work.shape[1] * work.shape[2])
-
-
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _finish_grid(Lx, z_bot, z_top, P, s, uz, work, w_bot, w_top):
-    """Absolute uz, finiteness check, gradient and drag density; returns a status."""
+def _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, extrapolate, mx, mz):
+    """Absolute uz, finiteness check, the drag's fields on the grid; returns a status.
+
+    The drag acts until the next update, so it is taken from the pressure extrapolated to the
+    middle of that interval, P + (P - P^n)/2 (P^n in work[G_PREV]; extrapolate False, as at
+    fluid_init: P itself): a drag held at the value of the interval's start lags the grains by
+    half a fluid step, which at high De (no diffusion to damp it) pumps energy into the
+    grain-fluid oscillation at a rate ~ omega^2 dt_f / 4; the extrapolation removes that first
+    order term. The drag is the deposit's adjoint (kernels.drag.drag_triples: q = P/s,
+    r = (P/s^2) grad s), whose fields go back through the filter's transpose (kernels.filter)."""
+    P, s, uz, work = fluid.pressure, fluid.s, fluid.uz, fluid.work
     nx, nz = P.shape
-    dx = Lx / nx
-    dz = (z_top - z_bot) / nz
     for j in range(nz):                     # (a row's w once: a division per row, not per cell)
         w = w_bot + (j + 0.5) / nz * (w_top - w_bot)
         for i in range(nx):
             uz[i, j] += w
     if not _all_finite(P):
         return STATUS_NONFINITE
-    pressure_gradient(P, dx, dz, 0.0, 0.0, work[G_GX], work[G_GZ])
-    drag_density_pairs(work[G_GX], work[G_GZ], s, _drag_pairs(work))
+    ext = work[G_PREV]
+    pf, ef = flat(P), flat(ext)
+    if extrapolate:
+        for c in range(np.uint64(pf.size)):
+            ef[c] = 1.5 * pf[c] - 0.5 * ef[c]
+    else:
+        for c in range(np.uint64(pf.size)):
+            ef[c] = pf[c]
+    drag_triples(ext, s, work[G_SX], work[G_SZ], work[G_FQ], work[G_FX], work[G_FZ])
+    if mx > 0 or mz > 0:
+        for row in (G_FQ, G_FX, G_FZ):
+            apply_filter_transpose(work[row], work[G_TMP], fluid.taps_x, fluid.kernel_z, mx, mz)
     return STATUS_OK
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def fluid_drag(n, work, corners, drag_x, drag_z, status):
-    """Third part of fluid_update: the drag on every grain from the drag density, at the positions
-    of the deposit (corners); zero after a non-finite pressure (status STATUS_NONFINITE)."""
+def _filter(Lx, z_bot, z_top, fluid):
+    """The filter's taps for the current cells, then the deposit filtered (kernels.filter);
+    returns (mx, mz)."""
+    nx, nz = fluid.s.shape
+    mx, mz = filter_setup(fluid.params[P_FILTER_WIDTH], Lx / nx, (z_top - z_bot) / nz, fluid.taps_x, fluid.kernel_z)
+    work = fluid.work
+    filter_deposit(fluid.s, fluid.ux, fluid.uz, work[G_SX], work[G_SZ], work[G_TMP], fluid.taps_x, fluid.kernel_z,
+                   mx, mz)
+    return mx, mz
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def fluid_drag(n, Lx, fluid, drag_x, drag_z, status):
+    """Third part of fluid_update: the drag on every grain (kernels.drag.grain_drag_consistent) at
+    the positions of the deposit (fluid.corners); zero after a non-finite pressure (status
+    STATUS_NONFINITE)."""
     if status == STATUS_NONFINITE:
         for k in range(n):
             drag_x[k] = 0.0
             drag_z[k] = 0.0
         return
-    grain_drag_at(corners, n, work.shape[2], _drag_pairs(work), drag_x, drag_z)
+    work = fluid.work
+    grain_drag_consistent(fluid.corners, n, work.shape[2], work.shape[1] / Lx, work[G_FQ], work[G_FX], work[G_FZ],
+                          drag_x, drag_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
-               params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z):
-    """Deposit the initial solid fraction and set the drag of the current P.
+def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, fluid, drag_x, drag_z):
+    """Deposit and filter the initial solid fraction and set the drag of the current P.
 
     Call once before the first fluid_update (and after a restart that does not
     restore s and state). P is left as given (zeros for a fresh run).
@@ -104,14 +130,17 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
     """
     if not (z_top > z_bot):
         return STATUS_SOLVER
-    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, 0.0, 0.0, s, ux, uz, work[G_SX], work[G_SZ], corners, partial)
+    params, state, s, s_old, div_u, work = fluid.params, fluid.state, fluid.s, fluid.s_old, fluid.div_u, fluid.work
+    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, 0.0, 0.0, s, fluid.ux, fluid.uz, work[G_SX], work[G_SZ],
+            fluid.corners, fluid.partial)
+    mx, mz = _filter(Lx, z_bot, z_top, fluid)
     nx, nz = s.shape
     for i in range(nx):
         for j in range(nz):
             s_old[i, j] = s[i, j]
             div_u[i, j] = 0.0
     permeability_field(s, params[P_KAPPA_C], params[P_PHI_MIN], params[P_PHI_MAX],
-                       permeability, work[G_CAPACITY], params[P_BETA])
+                       fluid.permeability, work[G_CAPACITY], params[P_BETA])
     state[S_Z_BOT] = z_bot
     state[S_Z_TOP] = z_top
     state[S_ITERATIONS] = 0.0
@@ -119,42 +148,40 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top,
     state[S_SUBSTEPS] = 0.0
     state[S_UPDATES] = 0.0
     state[S_EXPLICIT_UPDATES] = 0.0
-    status = _finish_grid(Lx, z_bot, z_top, P, s, uz, work, 0.0, 0.0)
-    fluid_drag(n, work, corners, drag_x, drag_z, status)
+    status = _finish_grid(Lx, z_bot, z_top, fluid, 0.0, 0.0, False, mx, mz)
+    fluid_drag(n, Lx, fluid, drag_x, drag_z, status)
     return status
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f,
-                 params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z,
-                 grain_kick=None):
+def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid, drag_x, drag_z, grain_kick=None):
     """Advance the pore pressure by one fluid step and set the drag on every grain.
 
     x, z, vx, vz, radius : float64[>= n] grain state (x may lie outside [0, Lx))
     n : number of grains;  Lx : periodic width [d]
     z_bot, z_top : wall planes now [d] (mean z of the wall-grain centres)
     dt_f : time since the last fluid update [t0]
-    params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial : see module doc
-        (FluidGrid.kernel_args() returns them in this order, followed by drag_x, drag_z)
+    fluid : the grid's arrays (kernels.layout.FluidArrays, FluidGrid.record(); shapes: module doc)
     drag_x, drag_z : out, float64[>= n] fluid force per grain [E d^2], to be added
         to the contact forces until the next update.
     grain_kick : None, or (owed, ...) as in deposit, when the grains may still owe their second
         half kick: the deposit then takes the whole-step velocities without storing them.
 
     Order: deposit s^{n+1} and u_rel (keeping each grain's corner cells and areas in
-    corners); exact undrained source -> P*; Carman-Kozeny permeability from s^{n+1};
+    corners) and filter them over the width w (kernels.filter); exact undrained source -> P*; Carman-Kozeny permeability from s^{n+1};
     conductances with (1 + beta P^n); implicit or explicit diffusion over dt_f (auto: one
     explicit (Heun) step while dt_f <= AUTO_EXPLICIT times the FTCS bound, kernels.pressure);
-    grad P and drag. Returns a status (module doc). In three parts, fluid_begin (reads the grains),
+    grad P (extrapolated to the middle of the next interval) and the drag through the filter's
+    transpose. Returns a status (module doc). In three parts, fluid_begin (reads the grains),
     fluid_solve (the grid only) and fluid_drag, so that a caller can move the grains while
     the grid is solved.
     """
-    status = fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old, ux, uz, work, corners,
-                         partial, grain_kick)
+    status = fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid.state, fluid.s, fluid.s_old,
+                         fluid.ux, fluid.uz, fluid.work, fluid.corners, fluid.partial, grain_kick)
     if status != STATUS_OK:
         return status
-    status = fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, permeability, div_u, work)
-    fluid_drag(n, work, corners, drag_x, drag_z, status)
+    status = fluid_solve(Lx, z_bot, z_top, dt_f, fluid)
+    fluid_drag(n, Lx, fluid, drag_x, drag_z, status)
     return status
 
 
@@ -187,10 +214,15 @@ def fluid_finish_deposit(Lx, z_bot, z_top, s, ux, uz, work, partial):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, permeability, div_u, work):
-    """Second part of fluid_update, on the grid only (serial): source, permeability, diffusion,
-    gradient and drag density. Returns a status."""
+def fluid_solve(Lx, z_bot, z_top, dt_f, fluid):
+    """Second part of fluid_update, on the grid only (serial): filter, source, permeability,
+    diffusion, gradient and drag density. fluid: kernels.layout.FluidArrays. Returns a status."""
+    params, state, P, s, s_old, ux, uz, permeability, div_u, work = (
+        fluid.params, fluid.state, fluid.pressure, fluid.s, fluid.s_old, fluid.ux, fluid.uz, fluid.permeability,
+        fluid.div_u, fluid.work)
     nx, nz = P.shape
+    mx, mz = _filter(Lx, z_bot, z_top, fluid)
+    copy_grid(P, work[G_PREV])
     dx = Lx / nx
     dz = (z_top - z_bot) / nz
     beta = params[P_BETA]
@@ -238,7 +270,7 @@ def fluid_solve(Lx, z_bot, z_top, dt_f, params, state, P, s, s_old, ux, uz, perm
     state[S_Z_BOT] = z_bot
     state[S_Z_TOP] = z_top
     state[S_UPDATES] += 1.0
-    finish = _finish_grid(Lx, z_bot, z_top, P, s, uz, work, w_bot, w_top)
+    finish = _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, True, mx, mz)
     if finish != STATUS_OK:
         return finish
     return status

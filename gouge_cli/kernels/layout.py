@@ -85,7 +85,8 @@ P_MAX_ITER = 6       # CG iteration limit
 P_PHI_MIN = 7        # porosity clamp, lower (0.05)
 P_PHI_MAX = 8        # porosity clamp, upper (0.9)
 P_MAX_SUBSTEPS = 9   # explicit sub-step limit per fluid update
-N_FLUID_PARAMS = 10
+P_FILTER_WIDTH = 10  # coarse-graining filter width w [d] (kernels.filter; 0: none)
+N_FLUID_PARAMS = 11
 
 SOLVER_IMPLICIT = 0
 SOLVER_EXPLICIT = 1
@@ -116,18 +117,21 @@ G_CP = 10            # tridiagonal factor: modified upper coefficient, transpose
 G_DINV = 11          # tridiagonal factor: inverse pivot, transposed (nz, nx)
 G_GX = 12            # dP/dx at cell centres
 G_GZ = 13            # dP/dz at cell centres
-G_FX = 14            # drag per unit grain area -(grad P)/s: rows G_FX and G_FZ together hold the
-G_FZ = 15            # (x, z) pairs of every cell interleaved (kernels.drag.drag_density_pairs)
-G_SX = 16            # ds/dx consistent with the deposit
-G_SZ = 17            # ds/dz consistent with the deposit
-G_TZT = 18           # tz transposed (nz, nx), for the z-line solves (kernels.pressure)
-G_LINE = 19          # the z-line solves' right-hand side and solution, transposed (nz, nx)
-N_GRID_WORK = 20
+G_FQ = 14            # the consistent drag's fields (kernels.drag.drag_triples): q = P/s,
+G_FX = 15            # r_x and r_z = (P/s^2) ds/dx, ds/dz, each filtered back by S^T
+G_FZ = 16
+G_SX = 17            # ds/dx consistent with the deposit
+G_SZ = 18            # ds/dz consistent with the deposit
+G_TZT = 19           # tz transposed (nz, nx), for the z-line solves (kernels.pressure)
+G_LINE = 20          # the z-line solves' right-hand side and solution, transposed (nz, nx)
+G_PREV = 21          # P^n at the start of an update; then the pressure extrapolated for the drag
+G_TMP = 22           # the filter's scratch (kernels.filter)
+N_GRID_WORK = 23
 
 # the grid's arrays as kernels.coupled takes them, addressed by name (model.fluid.FluidGrid.record;
 # shapes: kernels.fluid_update's module doc)
 FluidArrays = namedtuple("FluidArrays", ("params", "state", "pressure", "s", "s_old", "ux", "uz", "permeability",
-                                         "div_u", "work", "corners", "partial"))
+                                         "div_u", "work", "corners", "partial", "taps_x", "kernel_z"))
 
 STATUS_OK = 0
 STATUS_SOLVER = 1

@@ -7,8 +7,13 @@ Python or from njit code,
     fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, *grid.kernel_args())
     status = fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, *grid.kernel_args())
 
+with kernel_args() = (record(), drag_x, drag_z),
+
 and adds ``grid.drag_x``, ``grid.drag_z`` to the contact forces. The numerics are
-documented in gouge_cli.kernels (deposit, pressure, drag, fluid_update; indices in layout). A dry scene never builds this.
+documented in gouge_cli.kernels (deposit, filter, pressure, drag, fluid_update; indices in layout).
+Two scales: the filter width w (fluid.filter_width, physics: the width over which grains are
+averaged) and the cell size h (fluid.cell_size, numerics: the grid, refined at fixed w until the
+answers stop changing). A dry scene never builds this.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ class FluidGrid:
       permeability [nx, nz] Carman-Kozeny kappa [d^2]
       div_u [nx, nz] solid volumetric strain rate over the last update [1/t0]
       drag_x, drag_z [N] fluid force on each grain [E d^2]
+      taps_x [nx], kernel_z [nz, nz] the filter's operators (kernels.filter), rebuilt each update
       params [N_PARAMS], state [N_STATE], work [N_WORK, nx, nz] (kernel layouts)
     Evolving state to checkpoint (everything else is rebuilt by each update):
     pressure, solid_fraction, state, drag_x, drag_z; see arrays() / restore().
@@ -54,7 +60,7 @@ class FluidGrid:
                  permeability: float, compressibility: float, viscosity: float,
                  solver: str = "auto", explicit_safety: float = 0.5, tolerance: float = 1e-10,
                  max_iterations: int = 1000, max_substeps: int = 100_000,
-                 porosity_min: float = 0.05, porosity_max: float = 0.9):
+                 porosity_min: float = 0.05, porosity_max: float = 0.9, filter_width: float = 0.0):
         if nx < 1 or nz < 2:
             raise ValueError(f"grid needs nx >= 1 and nz >= 2, got nx={nx}, nz={nz}")
         if not z_top > z_bot:
@@ -77,6 +83,7 @@ class FluidGrid:
         params[L.P_PHI_MIN] = porosity_min
         params[L.P_PHI_MAX] = porosity_max
         params[L.P_MAX_SUBSTEPS] = max_substeps
+        params[L.P_FILTER_WIDTH] = filter_width
         self.params = params
         self.state = np.zeros(L.N_FLUID_STATE)
         self.state[L.S_Z_BOT] = z_bot
@@ -98,29 +105,33 @@ class FluidGrid:
         self.div_u = np.zeros(shape)
         self.work = np.zeros((L.N_GRID_WORK, nx, nz))
         self.partial = aligned_zeros((L.DEPOSIT_GROUPS, nx * nz, L.N_MOMENTS))   # (records on whole cache lines)
+        self.taps_x = np.zeros(nx)
+        self.kernel_z = np.zeros((nz, nz))
 
     @classmethod
     def from_config(cls, fluid_config, Lx: float, z_bot: float, z_top: float, n_grains: int) -> "FluidGrid":
-        """Grid of nx = max(1, round(Lx/cell_size)) by nz = max(2, round((z_top - z_bot)/cell_size))."""
-        nx = max(1, int(round(Lx / fluid_config.cell_size)))
-        nz = max(2, int(round((z_top - z_bot) / fluid_config.cell_size)))
+        """Grid of nx = max(1, round(Lx/h)) by nz = max(2, round((z_top - z_bot)/h)), h the config's
+        grid spacing (fluid.cell_size, by default half the filter width)."""
+        h = fluid_config.grid_spacing
+        nx = max(1, int(round(Lx / h)))
+        nz = max(2, int(round((z_top - z_bot) / h)))
         return cls(nx, nz, Lx, z_bot, z_top, n_grains,
                    permeability=fluid_config.permeability,
                    compressibility=fluid_config.compressibility,
                    viscosity=fluid_config.viscosity,
                    solver=fluid_config.solver,
-                   explicit_safety=fluid_config.explicit_safety)
+                   explicit_safety=fluid_config.explicit_safety,
+                   filter_width=fluid_config.filter_width)
 
     def record(self) -> L.FluidArrays:
         """The grid's arrays by name, as kernels.coupled.advance_fluid takes them (without drag)."""
         return L.FluidArrays(self.params, self.state, self.pressure, self.solid_fraction, self.previous_solid_fraction,
                              self.solid_velocity_x, self.solid_velocity_z, self.permeability, self.div_u, self.work,
-                             self.corners, self.partial)
+                             self.corners, self.partial, self.taps_x, self.kernel_z)
 
     def kernel_args(self) -> tuple:
-        """(params, state, P, s, s_old, ux, uz, permeability, div_u, work, corners, partial, drag_x, drag_z):
-        the record's fields in order, then the drag, as fluid_init / fluid_update take them."""
-        return (*self.record(), self.drag_x, self.drag_z)
+        """(record(), drag_x, drag_z), as fluid_init / fluid_update take them."""
+        return (self.record(), self.drag_x, self.drag_z)
 
     def arrays(self) -> dict:
         """Copies of the evolving arrays (EVOLVING) for a checkpoint."""
@@ -149,17 +160,28 @@ class FluidGrid:
         """Fields for an output snapshot: pressure [E] and porosity [-], each [nx, nz]."""
         return {"pressure": self.pressure.copy(), "porosity": self.porosity}
 
-    def observe(self) -> dict:
+    def observe(self, wall_speed: float, vx: np.ndarray, vz: np.ndarray) -> dict:
         """Time-series values: pressure mean/min/max [E], the Deborah number, and the counts of
         updates so far and of those taken explicitly (fluid.solver auto: where the Heun step was
         within its threshold).
 
-        De = l u0 / D with l half the layer thickness (distance to the drained
-        walls), u0 the largest deposited solid speed and D the mean diffusivity.
+        De = l u0 / D (thesis Eq. 4) with l half the layer thickness (distance to the drained
+        walls), u0 = wall_speed, the top wall's speed [v0] (what the thesis's own estimate uses,
+        and independent of the grid), D the mean diffusivity; ``deborah_grid`` takes u0 from the
+        largest solid speed deposited on the grid instead (a diagnostic: it moves with the grid
+        and the filter width). The energy budget: ``fluid_energy``, the elastic energy stored in
+        the pore fluid, sum_c dx dz beta phi_c P_c^2 / 2 [E d^3 per unit thickness], and
+        ``drag_power``, the work rate of the drag on the grains, sum_k F_k . v_k [E d^3/t0]
+        (vx, vz: the grains' velocities [v0]); without drainage the one is minus the integral of
+        the other (tests/model/test_fluid_coupling.py).
         """
         speed = float(np.sqrt(self.solid_velocity_x**2 + self.solid_velocity_z**2).max())
+        half = 0.5 * self.dz * self.nz
         return {"pressure_mean": self.mean_pressure(), "pressure_min": self.min_pressure(),
-                "pressure_max": self.max_pressure(), "deborah": self.deborah(0.5 * self.dz * self.nz, speed),
+                "pressure_max": self.max_pressure(), "deborah": self.deborah(half, abs(wall_speed)),
+                "deborah_grid": self.deborah(half, speed),
+                "fluid_energy": self.stored_energy(),
+                "drag_power": float(np.dot(self.drag_x, vx[:self.n_grains]) + np.dot(self.drag_z, vz[:self.n_grains])),
                 "fluid_updates": float(self.state[L.S_UPDATES]),
                 "explicit_updates": float(self.state[L.S_EXPLICIT_UPDATES])}
 
@@ -207,6 +229,11 @@ class FluidGrid:
 
     def _clamped_porosity(self) -> np.ndarray:
         return np.clip(self.porosity, self.params[L.P_PHI_MIN], self.params[L.P_PHI_MAX])
+
+    def stored_energy(self) -> float:
+        """sum_c dx dz beta phi_c P_c^2 / 2 [E d^3 per unit thickness], phi clamped as for kappa."""
+        beta = self.params[L.P_BETA]
+        return float(0.5 * beta * self.dx * self.dz * np.sum(self._clamped_porosity() * self.pressure ** 2))
 
     def mean_pressure(self) -> float:
         return float(self.pressure.mean())

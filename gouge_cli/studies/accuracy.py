@@ -15,7 +15,10 @@ Ladders (the last value is the reference):
 
 * ``dt_safety`` 0.8, 0.4, 0.2, 0.1, 0.05 -> 0.025 with the scene's fluid settings (halvings:
   every level is sampled at the same times, a whole number of its steps apart);
-* ``fluid.cell_size`` 4, 3, 2.5 -> 2 [d];
+* ``grid``: the pressure-grid spacing h = w, w/2, w/4 -> w/8 at the scene's fixed filter width w
+  (fluid.filter_width; the convergence of the coupling's numerics);
+* ``filter_width``: w = 2, 3, 4 d at h = w/2 (a physical parameter: its sensitivity, no order;
+  errors against the scene's own w when it is one of them);
 * ``fluid.step`` 2, 1, 0.5, 0.25 -> 0.125 [t0];
 * ``fluid.solver`` implicit, explicit and auto at the scene's fluid.step, against the
   fluid.step reference (implicit).
@@ -31,11 +34,14 @@ Errors (relative; the reference level has none):
 * ``stress_drop``: drop of tau/sigma from its largest value before the peak wall velocity to
   its smallest value after it; ``peak_velocity``: largest sampled wall velocity; relative errors;
 * ``pressure``: RMS over the interval of the difference of the RMS pore pressure of the
-  grid (grid-independent) / its largest reference value.
+  grid (grid-independent) / its largest reference value;
+* ``pressure_field``: RMS over the interval and over fixed probe points (a lattice of spacing
+  w/2 in x and in the relative height between the wall planes, the pressure interpolated
+  bilinearly from the cell centres) of the pressure difference / the largest reference |P| there.
 
 The observed order is the least-squares slope of log(error) against log(setting) over the
-non-reference levels (dt for the dt_safety ladder, the fluid step actually used, the cell
-size actually used).
+non-reference levels (dt for the dt_safety ladder, the fluid step actually used, the grid
+spacing actually used).
 """
 
 from __future__ import annotations
@@ -61,12 +67,15 @@ from ..plots.accuracy import plot_work_precision
 from .analytic import AnalyticRow, block_slider_errors, energy_drift, head_on, hertz_reference, terzaghi_error
 
 DT_SAFETY = (0.8, 0.4, 0.2, 0.1, 0.05, 0.025)
-CELL_SIZE = (4.0, 3.0, 2.5, 2.0)
+GRID_FRACTIONS = (1.0, 0.5, 0.25, 0.125)          # h / w
+FILTER_WIDTHS = (2.0, 3.0, 4.0)
 FLUID_STEP = (2.0, 1.0, 0.5, 0.25, 0.125)
 QUICK_DT_SAFETY = (0.4, 0.2, 0.1)
-QUICK_CELL_SIZE = (4.0, 3.0, 2.5)
+QUICK_GRID_FRACTIONS = (1.0, 0.5, 0.25)
 QUICK_FLUID_STEP = (2.0, 1.0, 0.5)
-SCENE_ERRORS = ("wall_x", "wall_vx", "stress_drop", "peak_velocity", "pressure")
+SCENE_ERRORS = ("wall_x", "wall_vx", "stress_drop", "peak_velocity", "pressure", "pressure_field")
+ORDER_LADDERS = ("dt_safety", "grid", "fluid.step")
+LADDERS = ("dt_safety", "grid", "filter_width", "fluid.step", "fluid.solver")
 fluid_defaults = {"permeability": 1e-5}
 
 
@@ -192,13 +201,18 @@ def scene_ladders(config: Config, quick: bool = False, fluid: bool = True) -> li
                     reference=(v == dts[-1])) for v in dts]
     if not fluid:
         return levels
-    cells = QUICK_CELL_SIZE if quick else CELL_SIZE
+    fractions = QUICK_GRID_FRACTIONS if quick else GRID_FRACTIONS
     steps = QUICK_FLUID_STEP if quick else FLUID_STEP
     dt = fluid_dt(config, steps[-1])
     base_step = (config.fluid.step if config.fluid is not None else 0.5)
+    width = config.fluid.filter_width if config.fluid is not None and config.fluid.filter_width > 0 else 3.0
     common = {"numerics.dt": dt}
-    levels += [Level("cell_size", f"cell_size={v:g}", v, {**common, "fluid.cell_size": v, "fluid.step": base_step},
-                     reference=(v == cells[-1]), keep_fluid=False) for v in cells]
+    levels += [Level("grid", f"cell_size={f * width:g}", f * width,
+                     {**common, "fluid.filter_width": width, "fluid.cell_size": f * width, "fluid.step": base_step},
+                     reference=(f == fractions[-1]), keep_fluid=False) for f in fractions]
+    levels += [Level("filter_width", f"filter_width={w:g}", w,
+                     {**common, "fluid.filter_width": w, "fluid.cell_size": 0.5 * w, "fluid.step": base_step},
+                     reference=(w == width), keep_fluid=False) for w in FILTER_WIDTHS]
     levels += [Level("fluid.step", f"fluid.step={v:g}", v, {**common, "fluid.step": v, "fluid.solver": "implicit"},
                      reference=(v == steps[-1])) for v in steps]
     levels += [Level("fluid.solver", f"solver={s}", base_step,
@@ -217,6 +231,36 @@ def _pressure_rms(sim: Simulation) -> float:
     return float(np.sqrt(np.mean(sim.fluid.pressure ** 2))) if sim.fluid is not None else float("nan")
 
 
+def probe_points(width: float, length: float, thickness: float) -> np.ndarray:
+    """(n, 2) probe points (x [d], relative height in (0, 1)): a lattice of spacing width/2 in x and
+    about width/2 in height, inside the layer (the planes, where P = 0, excluded)."""
+    step = 0.5 * width
+    xs = np.arange(0.5 * step, length, step)
+    rows = max(1, int(thickness / step))
+    heights = (np.arange(rows) + 0.5) / rows
+    return np.array([(x, h) for x in xs for h in heights])
+
+
+def probe_pressure(sim: Simulation, points: np.ndarray) -> np.ndarray:
+    """The pressure [E] at probe points (x, relative height), bilinear from the cell centres
+    (periodic in x; P = 0 on the planes, half a cell beyond the first and last centres)."""
+    grid = sim.fluid
+    nx, nz = grid.nx, grid.nz
+    xs = (points[:, 0] / grid.dx - 0.5) % nx
+    i0 = np.floor(xs).astype(int)
+    fx = xs - i0
+    i1 = (i0 + 1) % nx
+    # z nodes: the bottom plane (P = 0) at q = 0, the cell centres at q = j + 1/2, the top plane at q = nz
+    nodes = np.concatenate([[0.0], np.arange(nz) + 0.5, [float(nz)]])
+    padded = np.zeros((nx, nz + 2))
+    padded[:, 1:-1] = grid.pressure
+    q = np.clip(points[:, 1], 0.0, 1.0) * nz
+    j0 = np.clip(np.searchsorted(nodes, q, side="right") - 1, 0, nz)
+    fz = (q - nodes[j0]) / (nodes[j0 + 1] - nodes[j0])
+    return ((1 - fx) * (1 - fz) * padded[i0, j0] + fx * (1 - fz) * padded[i1, j0]
+            + (1 - fx) * fz * padded[i0, j0 + 1] + fx * fz * padded[i1, j0 + 1])
+
+
 def run_level(start: Start, level: Level, period: float, count: int) -> LevelResult:
     """Run `level` from `start`, sampling every `period` [t0] (a whole number of its steps)
     `count` times: Simulation.run with the callbacks "guards", "sample" every `period` from the
@@ -226,15 +270,20 @@ def run_level(start: Start, level: Level, period: float, count: int) -> LevelRes
     sim = Simulation(config, arrays=start.state, fluid_arrays=fluid)
     guards = Guards()
     per = max(1, int(round(period / sim.dt)))
-    series = {k: [] for k in ("time", "wall_x", "wall_vx", "tau_over_sigma", "pressure_rms")}
+    series = {k: [] for k in ("time", "wall_x", "wall_vx", "tau_over_sigma", "pressure_rms", "pressure_probe")}
     steps0, status = sim.state.step, "ok"
     in_callbacks = [0.0]
+    points = None
+    if sim.fluid is not None:
+        width = start.config.fluid.filter_width if start.config.fluid is not None else 0.0
+        points = probe_points(width if width > 0 else 3.0, sim.state.width, sim.fluid.dz * sim.fluid.nz)
 
     def sample(s: Simulation):
         for key, value in (("time", s.state.time), ("wall_x", s.state.wall[L.W_X]),
                            ("wall_vx", s.state.wall[L.W_VX]), ("tau_over_sigma", s.tau_over_sigma()),
                            ("pressure_rms", _pressure_rms(s))):
             series[key].append(float(value))
+        series["pressure_probe"].append(probe_pressure(s, points) if points is not None else np.zeros(0))
 
     def timed_out(action):
         def run(s: Simulation):
@@ -308,6 +357,12 @@ def level_errors(result: LevelResult, reference: LevelResult) -> dict:
         out["pressure"] = float(np.sqrt(np.mean(diff ** 2)) / p_ref.max())
     else:
         out["pressure"] = float("nan")
+    field_ref, field = ref.get("pressure_probe"), run.get("pressure_probe")
+    if field_ref is not None and field is not None and field_ref.shape == field.shape and field_ref.size \
+            and np.all(np.isfinite(field)) and np.abs(field_ref).max() > 0:
+        out["pressure_field"] = float(np.sqrt(np.mean((field - field_ref) ** 2)) / np.abs(field_ref).max())
+    else:
+        out["pressure_field"] = float("nan")
     return out
 
 
@@ -346,7 +401,7 @@ def order_flag(values, errors, min_r2: float = ORDER_MIN_R2) -> str:
 
 
 def order_value(result: LevelResult) -> float:
-    """The setting the order is fitted against: dt, the fluid step used, or the cell size."""
+    """The setting the order is fitted against: dt, the fluid step used, the grid spacing or the width."""
     lv = result.level
     if lv.ladder == "dt_safety":
         return result.dt
@@ -368,13 +423,15 @@ def run_scene_ladders(start: Start, levels: list[Level], samples: int = 400, on_
         if on_level is not None:
             on_level(res)
     step_ref = next((r for r in results if r.level.ladder == "fluid.step" and r.level.reference), None)
+    step_ref = step_ref or next((r for r in results if r.level.ladder == "fluid.solver"
+                                 and r.level.setting == "solver=implicit"), None)
     for ladder in dict.fromkeys(r.level.ladder for r in results):
         group = [r for r in results if r.level.ladder == ladder]
         ref = step_ref if ladder == "fluid.solver" else next((r for r in group if r.level.reference), None)
         for r in group:
             r.errors = level_errors(r, ref) if ref is not None and r is not ref else {}
     orders, flags = {}, {}
-    for ladder in ("dt_safety", "cell_size", "fluid.step"):
+    for ladder in ORDER_LADDERS:
         group = [r for r in results if r.level.ladder == ladder and not r.level.reference]
         if group:
             values = [order_value(r) for r in group]
@@ -411,7 +468,7 @@ def write_csv(path: Path, scene: dict | None, analytic: dict | None):
 
 def run_accuracy(config: Config | None, out_dir: Path, checkpoint: Path | None = None, quick: bool = False,
                  interval: float | None = None, samples: int = 400, analytic: bool = True, scene: bool = True,
-                 fluid: bool = True, on_level=None) -> dict:
+                 fluid: bool = True, on_level=None, ladders: tuple | None = None) -> dict:
     """Scene ladders (from `checkpoint`, or from the first slip of `config`) and analytic ladders;
     writes out_dir/accuracy.csv and out_dir/accuracy.png. Returns {"start", "scene", "analytic"}."""
     out_dir = Path(out_dir)
@@ -429,6 +486,8 @@ def run_accuracy(config: Config | None, out_dir: Path, checkpoint: Path | None =
         except ValueError as err:
             raise ConfigError(f"the config does not fit the checkpoint's packing: {err}") from None
         levels = scene_ladders(start.config, quick, fluid)
+        if ladders is not None:
+            levels = [lv for lv in levels if lv.ladder in ladders]
         scene_result = run_scene_ladders(start, levels, samples, on_level)
     analytic_result = analytic_ladders(quick) if analytic else None
     write_csv(out_dir / "accuracy.csv", scene_result, analytic_result)

@@ -280,13 +280,12 @@ def profile_fluid(n_grains: int, start: dict, dt: float, skin: float, permeabili
                       fl.ux, fl.uz, fl.work, fl.corners, fl.partial, kick, threads <= 1)
 
     def solve():
-        F.fluid_solve(s.width, z_bot, z_top, dt_f, fl.params, fl.state, fl.pressure, fl.s, fl.s_old, fl.ux, fl.uz,
-                      fl.permeability, fl.div_u, fl.work)
+        F.fluid_solve(s.width, z_bot, z_top, dt_f, fl)
 
     out = {"n_grains": n_grains, "threads": threads, "dt": dt, "grid": list(fl.pressure.shape),
            "deposit": best_seconds(begin, calls, 3) * 1e6,          # (reads neither P nor the solver state)
            "solve": best_seconds(solve, calls, 3, reset) * 1e6,
-           "drag": best_seconds(lambda: F.fluid_drag(s.n, fl.work, fl.corners, *sim.drag, 0), calls, 3) * 1e6,
+           "drag": best_seconds(lambda: F.fluid_drag(s.n, s.width, fl, *sim.drag, 0), calls, 3) * 1e6,
            "cg_iterations": float(fl.state[L.S_ITERATIONS]),
            "explicit": bool(fl.state[L.S_EXPLICIT_UPDATES] > fstate[L.S_EXPLICIT_UPDATES]),
            "solver": sim.config.fluid.solver}

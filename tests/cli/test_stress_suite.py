@@ -90,12 +90,18 @@ def check_high_permeability_explicit(sim, s):
     assert 100 < sim.fluid.state[L.S_SUBSTEPS] < 10_000
 
 
-def check_low_permeability(sim, s):
-    sane(s)
+def check_nearly_undrained(sim, s):
+    """Stable (the guards would have stopped it otherwise) with bounded pressures that matter; no
+    energy created: the kinetic energy stays below what the loading could supply."""
+    sane(s, kinetic=energy_supplied(sim, s))
     sigma, beta = sim.config.loading.normal_stress, sim.config.fluid.compressibility
     peak = max(-s["pressure_min"].min(), s["pressure_max"].max())
     assert peak < 10 * sigma and 1.0 + beta * s["pressure_min"].min() > 0.0
-    assert peak > 0.1 * sigma                                     # undrained: pressures matter
+    assert peak > 0.05 * sigma                                    # undrained: pressures matter
+
+
+def check_low_permeability(sim, s):
+    check_nearly_undrained(sim, s)
     assert s["deborah"].max() > 10.0
 
 
@@ -153,7 +159,10 @@ STABLE = {  # scene -> (check, loading time of the default-suite run [t0]; None:
     "soft_grains_stable": (check_soft_grains_stable, None),
     "high_permeability": (check_high_permeability, None),
     "high_permeability_explicit": (check_high_permeability_explicit, None),
-    "low_permeability": (check_low_permeability, 3000.0),
+    "low_permeability": (check_low_permeability, 10000.0),
+    "low_permeability_fine_grid": (check_low_permeability, 10000.0),
+    "nearly_undrained_k7": (check_nearly_undrained, 10000.0),
+    "nearly_undrained_k8": (check_nearly_undrained, 10000.0),
     "high_velocity": (check_high_velocity, None),
     "slow_loading": (check_slow_loading, 5000.0),
     "zero_friction": (check_zero_friction, None),
@@ -167,7 +176,7 @@ SHORTENED = sorted(name for name, (_, short) in STABLE.items() if short is not N
 
 
 def test_every_scene_file_is_covered():
-    covered = set(STABLE) | {"soft_grains", "dt_beyond_bound", "low_permeability_fine_grid"}
+    covered = set(STABLE) | {"soft_grains", "dt_beyond_bound"}
     assert {p.stem for p in STRESS.glob("*.yaml")} == covered
     for path in STRESS.glob("*.yaml"):
         assert "EXPECTED:" in path.read_text(), path
@@ -198,15 +207,6 @@ def test_soft_grains_stop_with_runaway_overlap():
 def test_dt_beyond_bound_is_refused():
     with pytest.raises(ConfigError, match=r"numerics.dt = 1.2 is above the stability bound 0.904\d* t0"):
         run_scene("dt_beyond_bound", None)
-
-
-def test_undrained_fine_grid_stops_with_energy_blow_up():
-    """The instability's onset depends on the packing (5,000-20,000 t0 for most seeds, after
-    30,000 t0 for seed 21): loaded for up to 100,000 t0, the run stops at the blow-up."""
-    with pytest.raises(PhysicsError, match="kinetic-energy blow-up") as info:
-        run_scene("low_permeability_fine_grid", 100000.0)
-    message = str(info.value)
-    assert "fluid.cell_size (now 2.5 d" in message and "numerics.dt_safety" in message
 
 
 @pytest.mark.parametrize("name, code, words", [

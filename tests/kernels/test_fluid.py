@@ -195,7 +195,8 @@ def test_drag_equals_minus_integral_of_uniform_gradient():
     width, z_bot, z_top = 30.0, 1.5, 21.5
     x, z, radius = random_layer(width=width, z_bot=z_bot, z_top=z_top)
     v = np.zeros_like(x)
-    grid = FluidGrid.from_config(FluidConfig(), width, z_bot, z_top, x.size)
+    # the gradient form with the deposit's own (unfiltered) solid fraction: the identity below
+    grid = FluidGrid.from_config(FluidConfig(filter_width=0, cell_size=2.5), width, z_bot, z_top, x.size)
     assert grid.init(x, z, v, v, radius, z_bot, z_top) == L.STATUS_OK
     assert (grid.solid_fraction > 0).all()
     nx, nz = grid.nx, grid.nz

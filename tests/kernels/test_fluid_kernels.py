@@ -385,13 +385,17 @@ def test_explicit_bound_equals_ftcs_formula_for_uniform_diffusivity():
 
 
 def test_from_config_and_kernel_args():
-    grid = FluidGrid.from_config(FluidConfig(), 200.0, 1.0, 51.0, 10_000)
+    grid = FluidGrid.from_config(FluidConfig(cell_size=2.5), 200.0, 1.0, 51.0, 10_000)
     assert (grid.nx, grid.nz) == (80, 20)
     assert grid.pressure.shape == (80, 20) and grid.drag_x.shape == (10_000,)
     assert grid.params[L.P_KAPPA_C] == 1e-5
     assert grid.params[L.P_SOLVER] == L.SOLVER_AUTO
-    assert len(grid.kernel_args()) == 14
-    thin = FluidGrid.from_config(FluidConfig(cell_size=20.0), 5.0, 0.0, 3.0, 4)
+    assert grid.params[L.P_FILTER_WIDTH] == FluidConfig().filter_width
+    assert len(grid.kernel_args()) == 3 and len(grid.record()) == len(L.FluidArrays._fields)
+    default = FluidGrid.from_config(FluidConfig(filter_width=4.0), 200.0, 1.0, 51.0, 10)   # h = w / 2
+    assert (default.nx, default.nz) == (100, 25)
+    assert default.taps_x.shape == (100,) and default.kernel_z.shape == (25, 25)
+    thin = FluidGrid.from_config(FluidConfig(cell_size=20.0, filter_width=20.0), 5.0, 0.0, 3.0, 4)
     assert (thin.nx, thin.nz) == (1, 2)
     explicit = FluidGrid.from_config(FluidConfig(solver="explicit"), 20.0, 0.0, 10.0, 4)
     assert explicit.params[L.P_SOLVER] == L.SOLVER_EXPLICIT
@@ -481,10 +485,13 @@ def test_observe_snapshot_and_failure_messages():
     vx = np.full(x.size, 2e-3)
     grid = FluidGrid(5, 4, width, z_bot, z_top, x.size, 1e-5, 36.0, 1.43e-7)
     grid.init(x, z, vx, 0 * vx, radius, z_bot, z_top)
-    row = grid.observe()
-    assert set(row) == {"pressure_mean", "pressure_min", "pressure_max", "deborah", "fluid_updates", "explicit_updates"}
+    row = grid.observe(-7e-4, vx, 0 * vx)
+    assert set(row) == {"pressure_mean", "pressure_min", "pressure_max", "deborah", "deborah_grid", "fluid_energy",
+                        "drag_power", "fluid_updates", "explicit_updates"}
+    assert row["drag_power"] == pytest.approx(float(np.dot(grid.drag_x, vx)), rel=1e-12)
     assert row["fluid_updates"] == row["explicit_updates"] == 0.0
-    assert row["deborah"] == pytest.approx(5.0 * 2e-3 / grid.mean_diffusivity())
+    assert row["deborah"] == pytest.approx(5.0 * 7e-4 / grid.mean_diffusivity())       # the wall's speed
+    assert row["deborah_grid"] == pytest.approx(5.0 * 2e-3 / grid.mean_diffusivity())  # the grid's largest
     fields = grid.snapshot_fields()
     assert fields["pressure"].shape == fields["porosity"].shape == (5, 4)
     for status in (1, 2, 7):
