@@ -37,7 +37,7 @@ from .seedboot import seed_fraction, seed_median
 
 __all__ = ["wilson", "bootstrap_median", "regime_rows", "thesis_point", "REGIME_COLUMNS",
            "RATIO_MEDIANS", "FRACTIONS", "ThesisPoint", "delay_rows", "onset_delay", "DELAY_COLUMNS",
-           "DELAY_EDGES"]
+           "DELAY_EDGES", "delay_points"]
 
 Z95 = 1.959963984540054
 RATIO_MEDIANS = ("peak_velocity_ratio", "stress_drop_ratio", "duration_ratio")
@@ -195,6 +195,15 @@ def onset_delay(row: dict) -> float:
     """Onset of the undrained branch's compared slip less the drained one's [t0] (negative: the
     undrained branch slipped first)."""
     return _num(row, "undrained_onset") - _num(row, "drained_onset")
+
+
+def delay_points(pair_rows: list[dict]) -> list[dict]:
+    """The pairs :func:`delay_rows` counts (classified, not transient, with both onsets), each as
+    kappa_c, seed, delay (:func:`onset_delay`), strength_difference and the two ratios."""
+    return [{"kappa_c": _num(r, "permeability"), "seed": str(r.get("seed", "")), "delay": onset_delay(r),
+             "strength_difference": _num(r, "strength_difference"),
+             "peak_velocity_ratio": _num(r, "peak_velocity_ratio"), "stress_drop_ratio": _num(r, "stress_drop_ratio")}
+            for r in _classified(pair_rows) if not _flag(r, "transient") and np.isfinite(onset_delay(r))]
 
 
 def delay_rows(pair_rows: list[dict], edges=DELAY_EDGES, seed_key: str = "seed") -> list[dict]:

@@ -68,3 +68,17 @@ def register(app: typer.Typer):
         out.print(f"{report.submitted} pieces run in {report.wall_seconds:.1f} s", highlight=False)
         if report.survey.by_state("failed"):
             raise typer.Exit(EXIT_PHYSICS)
+
+    @app.command()
+    @guarded
+    def regime(
+        pairs: Path = typer.Argument(..., help="a pair table: a campaign's table.csv or a pairs.csv (rows of kind 'pair')"),
+        out_dir: Path = typer.Option(..., "--out", help="folder for regime.csv, delay.csv, regime_map.png and regime_delay.png"),
+        title: str = typer.Option("", "--title", help="title line of the figures"),
+    ):
+        """Write the regime map (per seed, pooled, seed-level and per-pair intervals) and the onset-delay
+        view from a table of pairs; nothing is simulated."""
+        from ..workflows.regime_report import read_pairs, write_regime
+
+        for name, path in write_regime(read_pairs(pairs), out_dir, out_dir, title).items():
+            out.print(f"{name}: {path}", highlight=False)

@@ -518,18 +518,11 @@ def write_results(s: Survey, log=print) -> dict:
 
 
 def _regime_outputs(pair_rows: list[dict], s: Survey, figs: Path) -> dict:
-    """regime.csv and figures/regime_map.png: the findings against De, the thesis placed
-    (analysis.regime), for a study campaign with two permeabilities or more."""
-    from ..analysis.campaign_table import write_table
-    from ..analysis.regime import REGIME_COLUMNS, regime_rows, thesis_point
-    from ..plots.regime import regime_figure
+    """regime.csv, delay.csv and their figures (workflows.regime_report), for a study campaign with
+    two permeabilities or more."""
+    from .regime_report import write_regime
 
-    rows = regime_rows(pair_rows)
-    out = {"regime_csv": write_table(rows, [], s.root / "regime.csv", columns=list(REGIME_COLUMNS))}
-    if rows:
-        out["regime_map"] = regime_figure(rows, thesis_point(), figs / "regime_map.png",
-                                          f"{s.spec.name}: drained/undrained findings against De")
-    return out
+    return write_regime(pair_rows, s.root, figs, s.spec.name)
 
 
 def _value(config: Config, key: str) -> float:
