@@ -75,10 +75,22 @@ def register(app: typer.Typer):
         pairs: Path = typer.Argument(..., help="a pair table: a campaign's table.csv or a pairs.csv (rows of kind 'pair')"),
         out_dir: Path = typer.Option(..., "--out", help="folder for regime.csv, delay.csv, regime_map.png and regime_delay.png"),
         title: str = typer.Option("", "--title", help="title line of the figures"),
+        where: List[str] = typer.Option([], "--where", help="KEY=VALUE: only the pairs whose swept column KEY holds "
+                                        "VALUE (e.g. packing.n_grains=3640); repeatable"),
     ):
         """Write the regime map (per seed, pooled, seed-level and per-pair intervals) and the onset-delay
         view from a table of pairs; nothing is simulated."""
-        from ..workflows.regime_report import read_pairs, write_regime
+        from ..errors import InputError
+        from ..workflows.regime_report import read_pairs, select, write_regime
 
-        for name, path in write_regime(read_pairs(pairs), out_dir, out_dir, title).items():
+        conditions = {}
+        for item in where:
+            key, sep, value = item.partition("=")
+            if not sep or not key.strip():
+                raise InputError(f"--where {item!r}: give KEY=VALUE, e.g. loading.normal_stress=3e-4")
+            conditions[key.strip()] = value.strip()
+        rows = select(read_pairs(pairs), conditions)
+        if not rows:
+            raise InputError(f"{pairs}: no pair rows" + (f" with {', '.join(where)}" if where else ""))
+        for name, path in write_regime(rows, out_dir, out_dir, title).items():
             out.print(f"{name}: {path}", highlight=False)

@@ -519,10 +519,23 @@ def write_results(s: Survey, log=print) -> dict:
 
 def _regime_outputs(pair_rows: list[dict], s: Survey, figs: Path) -> dict:
     """regime.csv, delay.csv and their figures (workflows.regime_report), for a study campaign with
-    two permeabilities or more."""
-    from .regime_report import write_regime
+    two permeabilities or more; a campaign that sweeps more than seeds gets one set per value of
+    its swept keys, under regime/<key>-<value>_.../ (permeabilities and other swept values are
+    never pooled)."""
+    from .campaign_spec import point_name
+    from .regime_report import by_swept, write_regime
 
-    return write_regime(pair_rows, s.root, figs, s.spec.name)
+    keys = [k for k in s.spec.swept_keys() if k != "seed"]
+    if not keys:
+        return write_regime(pair_rows, s.root, figs, s.spec.name)
+    out = {}
+    for values, rows in by_swept(pair_rows, keys):
+        name = point_name(values)
+        where = ", ".join(f"{k} = {v}" for k, v in values.items())
+        for key, path in write_regime(rows, s.root / "regime" / name, s.root / "regime" / name,
+                                      f"{s.spec.name}, {where}").items():
+            out[f"{key}[{name}]"] = path
+    return out
 
 
 def _value(config: Config, key: str) -> float:

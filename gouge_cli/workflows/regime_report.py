@@ -26,6 +26,31 @@ def read_pairs(path: str | Path) -> list[dict]:
     return [r for r in rows if r["kind"] == "pair"]
 
 
+def select(pair_rows: list[dict], where: dict[str, float]) -> list[dict]:
+    """The pair rows whose swept columns hold the given values (compared as numbers when both are)."""
+    def same(a, b) -> bool:
+        try:
+            return float(a) == float(b)
+        except (TypeError, ValueError):
+            return str(a) == str(b)
+
+    for key in where:
+        if pair_rows and key not in pair_rows[0]:
+            raise InputError(f"--where {key}: no such column in the pair table "
+                             f"(columns: {', '.join(k for k in pair_rows[0] if '.' in k or k == 'seed')})")
+    return [r for r in pair_rows if all(same(r.get(k), v) for k, v in where.items())]
+
+
+def by_swept(pair_rows: list[dict], keys: list[str]) -> list[tuple[dict, list[dict]]]:
+    """The pair rows split by the values of the swept keys (seed excluded: the regime map pools
+    seeds), in order of appearance: a sweep over thickness or sigma is never pooled."""
+    keys = [k for k in keys if k != "seed"]
+    groups: dict = {}
+    for r in pair_rows:
+        groups.setdefault(tuple(r.get(k) for k in keys), []).append(r)
+    return [(dict(zip(keys, values)), rows) for values, rows in groups.items()]
+
+
 def write_regime(pair_rows: list[dict], root: Path, figs: Path, title: str = "") -> dict:
     """regime.csv and delay.csv under ``root``, regime_map.png and regime_delay.png under ``figs``."""
     from ..analysis.campaign_table import write_table

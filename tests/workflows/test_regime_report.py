@@ -67,3 +67,24 @@ def test_gouge_regime_refuses_a_table_without_pairs(tmp_path):
     assert "not a pair table" in res.output
     res = runner.invoke(app, ["regime", str(tmp_path / "none.csv"), "--out", str(tmp_path / "out")])
     assert res.exit_code == 2
+
+
+def test_where_selects_one_value_of_a_swept_column(tmp_path):
+    pairs = _pairs(tmp_path / "pairs.csv")
+    res = runner.invoke(app, ["regime", str(pairs), "--out", str(tmp_path / "out"), "--where", "seed=7"])
+    assert res.exit_code == 0, res.output
+    regime = _read(tmp_path / "out" / "regime.csv")
+    assert {r["seed"] for r in regime} == {"all"} and int(regime[0]["n_pairs"]) == 4     # one seed: no split
+    for bad in (["--where", "nonsense"], ["--where", "packing.n_grains=3640"], ["--where", "seed=99"]):
+        res = runner.invoke(app, ["regime", str(pairs), "--out", str(tmp_path / "out2"), *bad])
+        assert res.exit_code == 2, (bad, res.output)
+
+
+def test_by_swept_never_pools_swept_values():
+    from gouge_cli.workflows.regime_report import by_swept, select
+
+    rows = [{"seed": s, "loading.normal_stress": sig, "permeability": 1e-5} for sig in ("0.0001", "0.001") for s in (1, 2)]
+    groups = by_swept(rows, ["loading.normal_stress", "seed"])
+    assert [g for g, _ in groups] == [{"loading.normal_stress": "0.0001"}, {"loading.normal_stress": "0.001"}]
+    assert all(len(rs) == 2 for _, rs in groups)
+    assert len(select(rows, {"loading.normal_stress": "1e-4"})) == 2          # compared as numbers
