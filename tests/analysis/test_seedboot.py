@@ -106,14 +106,15 @@ def _coverage(n_seeds, rho, reps, mu=0.3, n_pairs=10, rng_seed=11):
     return hit_seed / reps, hit_wilson / reps
 
 
-@pytest.mark.parametrize("n_seeds,rho,least", [(10, 0.25, 0.90), (10, 0.0, 0.92), (3, 0.25, 0.83)])
+@pytest.mark.parametrize("n_seeds,rho,least", [(10, 0.25, 0.92), (10, 0.0, 0.95), (3, 0.25, 0.82)])
 def test_coverage_from_a_two_level_binomial_model(n_seeds, rho, least):
-    """400 data sets (fixed generator): the standard error of a coverage near 0.93 is 0.013.
-    Measured (this generator): 10 seeds, rho 0.25: 0.93 (Wilson 0.66); 10 seeds, rho 0: 0.99
-    (Wilson 0.94; the second stage counts the pairs' noise twice, so it errs wide); 3 seeds, rho
-    0.25: 0.88 (Wilson 0.69). The bound is the measured value less about 2.5 standard errors; the
-    same check fails the Wilson interval wherever seeds differ."""
+    """400 data sets (fixed generators): the standard error of a coverage c is sqrt(c (1 - c) / 400),
+    0.011 at 0.95 and 0.017 at 0.86. Measured with these generators: 10 seeds, rho 0.25: 0.95
+    (Wilson 0.70); 10 seeds, rho 0: 0.99 (Wilson 0.95; the second stage counts the pairs' noise
+    twice, so it errs wide); 3 seeds, rho 0.25: 0.86 (Wilson 0.72); 3 seeds, rho 0.05: 0.95 (Wilson
+    0.84). Each bound is the measured coverage less about 2.5 standard errors; where seeds differ,
+    the same check fails the per-pair Wilson interval."""
     seed_cov, wilson_cov = _coverage(n_seeds, rho, 400)
     assert seed_cov >= least
     if rho > 0:
-        assert wilson_cov < least - 0.08          # the check can fail: it fails the per-pair view
+        assert wilson_cov < least                 # the check can fail: it fails the per-pair view
