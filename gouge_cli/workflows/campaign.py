@@ -8,6 +8,7 @@ Layout of ``<out>/<name>/``::
       ledger/run.json           one record per piece: state (running | done | failed | error),
       ledger/fork_NNN.json      settings it ran with, host, pid (and slurm_job), attempts, cause, result
     table.csv  phase_diagram.csv  figures/
+    regime.csv  delay.csv       the regime map (two permeabilities or more; regime/<value>/ per swept value)
 
 A *piece* is one Dask task: "advance this run to completion" or "fork slip N of this run at the
 study's permeabilities" (:func:`advance_run`, :func:`advance_fork`). A run piece whose worker
