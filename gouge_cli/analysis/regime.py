@@ -6,16 +6,23 @@ for each group:
 
 * the fractions of Type I, Type II and tie pairs (the pair definition's rule, with its tie band),
   of Type I by the sign of S_u - S_d alone (no tie band, as the thesis counted), and of complex
-  (-C) pairs, each with a 95 % Wilson score interval;
+  (-C) pairs;
 * the shares of pairs whose undrained branch is slower (peak velocity ratio < 1) and has the
-  smaller stress drop (stress-drop ratio < 1), with Wilson intervals;
-* the medians of the peak-velocity, stress-drop and duration ratios with 95 % percentile-bootstrap
-  intervals (a fixed generator seed: the same table gives the same intervals);
+  smaller stress drop (stress-drop ratio < 1);
+* the medians of the peak-velocity, stress-drop and duration ratios;
 * the median Deborah number of the undrained branches at the compared slip's onset and the
   largest during it (columns ``deborah_onset`` / ``deborah_max`` of the pair table).
 
-:func:`thesis_point` places the thesis on the same axes: its De from its own parameters and its
-Table 3 counts with their intervals.
+Two kinds of 95 % interval. The *per-pair* view treats every pair as independent: Wilson score
+intervals for fractions (columns ``<key>_lo`` / ``<key>_hi``) and percentile-bootstrap intervals
+over pairs for medians. The *seed-level* view, on the pooled row, treats the seed as the sampling
+unit (``analysis.seedboot``: seeds resampled, then pairs within them; ``<key>_seed_lo`` /
+``<key>_seed_hi``), beside the range of the per-seed fractions (``<key>_seed_min`` /
+``<key>_seed_max``). Both use fixed generator seeds: the same table gives the same intervals.
+
+:func:`delay_rows` asks whether "undrained slower" holds for slips at comparable stored stress
+(the shares against the undrained branch's onset delay). :func:`thesis_point` places the thesis on
+the same axes: its De from its own parameters and its Table 3 counts with their intervals.
 """
 
 from __future__ import annotations
@@ -26,8 +33,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .seedboot import seed_fraction, seed_median
+
 __all__ = ["wilson", "bootstrap_median", "regime_rows", "thesis_point", "REGIME_COLUMNS",
-           "RATIO_MEDIANS", "ThesisPoint"]
+           "RATIO_MEDIANS", "FRACTIONS", "ThesisPoint", "delay_rows", "onset_delay", "DELAY_COLUMNS",
+           "DELAY_EDGES", "delay_points"]
 
 Z95 = 1.959963984540054
 RATIO_MEDIANS = ("peak_velocity_ratio", "stress_drop_ratio", "duration_ratio")
@@ -70,30 +80,53 @@ def _flag(row: dict, key: str) -> bool:
     return v is True or str(v).strip().lower() in ("true", "1")
 
 
+#: the fractions of a group: each a 0/1 outcome per classified pair (NaN: not counted)
+FRACTIONS = ("type_I", "type_II", "tie", "type_I_sign", "complex", "slower", "smaller_drop")
+
+
+def _classified(rows: list[dict]) -> list[dict]:
+    return [r for r in rows if str(r.get("base_type")) in ("I", "II", "tie")]
+
+
+def _below_one(v: float) -> float:
+    return float(v < 1.0) if np.isfinite(v) else _NAN
+
+
+def _outcomes(rows: list[dict]) -> dict[str, list[float]]:
+    """Per classified pair: each fraction's 0/1 outcome (NaN where not counted: a ratio that is
+    not finite) and each ratio's value."""
+    cl = _classified(rows)
+    out = {
+        "type_I": [float(r["base_type"] == "I") for r in cl],
+        "type_II": [float(r["base_type"] == "II") for r in cl],
+        "tie": [float(r["base_type"] == "tie") for r in cl],
+        "type_I_sign": [float(_num(r, "strength_difference") < 0) for r in cl],
+        "complex": [float(_flag(r, "complex")) for r in cl],
+        "slower": [_below_one(_num(r, "peak_velocity_ratio")) for r in cl],
+        "smaller_drop": [_below_one(_num(r, "stress_drop_ratio")) for r in cl],
+    }
+    for col in RATIO_MEDIANS:
+        out[col] = [_num(r, col) for r in cl]
+    return out
+
+
 def _group_stats(rows: list[dict]) -> dict:
-    """Statistics of one group of pairs (one permeability, one seed or pooled)."""
-    classified = [r for r in rows if str(r.get("base_type")) in ("I", "II", "tie")]
-    n = len(classified)
+    """Statistics of one group of pairs (one permeability, one seed or pooled): the per-pair view
+    (Wilson intervals for fractions, pair bootstrap for medians)."""
+    n = len(_classified(rows))
     out: dict = {"n_pairs": len(rows), "n_classified": n,
                  "n_none": len(rows) - n}
-    counts = {
-        "type_I": sum(r["base_type"] == "I" for r in classified),
-        "type_II": sum(r["base_type"] == "II" for r in classified),
-        "tie": sum(r["base_type"] == "tie" for r in classified),
-        "type_I_sign": sum(_num(r, "strength_difference") < 0 for r in classified),
-        "complex": sum(_flag(r, "complex") for r in classified),
-    }
-    for key, k in counts.items():
-        out[f"n_{key}"] = k
-        out[key], out[f"{key}_lo"], out[f"{key}_hi"] = wilson(k, n)
-    for key, col in (("slower", "peak_velocity_ratio"), ("smaller_drop", "stress_drop_ratio")):
-        vals = [_num(r, col) for r in classified]
-        vals = [v for v in vals if np.isfinite(v)]
-        k = sum(v < 1.0 for v in vals)
-        out[f"n_{key}"], out[f"n_{key}_of"] = k, len(vals)
+    oc = _outcomes(rows)
+    for key in FRACTIONS:
+        vals = [v for v in oc[key] if np.isfinite(v)]
+        k = int(sum(vals))
+        if key in ("slower", "smaller_drop"):
+            out[f"n_{key}"], out[f"n_{key}_of"] = k, len(vals)
+        else:
+            out[f"n_{key}"] = k
         out[key], out[f"{key}_lo"], out[f"{key}_hi"] = wilson(k, len(vals))
     for col in RATIO_MEDIANS:
-        m, lo, hi = bootstrap_median([_num(r, col) for r in classified])
+        m, lo, hi = bootstrap_median(oc[col])
         out[f"{col}_median"], out[f"{col}_lo"], out[f"{col}_hi"] = m, lo, hi
     for col in ("deborah_onset", "deborah_max", "deborah_mean"):
         vals = [_num(r, col) for r in rows]
@@ -104,13 +137,34 @@ def _group_stats(rows: list[dict]) -> dict:
     return out
 
 
+def _seed_stats(by_seed: list[list[dict]]) -> dict:
+    """The seed-level view of a pooled group (one list of pair rows per seed): the number of
+    seeds, for each fraction the range of the per-seed fractions and the 95 % seed-level interval
+    (``analysis.seedboot``: seeds resampled, then pairs within them), and the seed-level
+    intervals of the ratio medians. NaN for a single seed (there is no seed to resample)."""
+    per_seed = [_outcomes(rows) for rows in by_seed]
+    several = len(by_seed) > 1
+    out: dict = {"n_seeds": len(by_seed)}
+    for key in FRACTIONS:
+        fr = [np.nanmean(oc[key]) for oc in per_seed if np.isfinite(oc[key]).any()]
+        out[f"{key}_seed_min"] = min(fr) if fr else _NAN
+        out[f"{key}_seed_max"] = max(fr) if fr else _NAN
+        _, lo, hi = seed_fraction([oc[key] for oc in per_seed]) if several else (_NAN, _NAN, _NAN)
+        out[f"{key}_seed_lo"], out[f"{key}_seed_hi"] = lo, hi
+    for col in RATIO_MEDIANS:
+        _, lo, hi = seed_median([oc[col] for oc in per_seed]) if several else (_NAN, _NAN, _NAN)
+        out[f"{col}_seed_lo"], out[f"{col}_seed_hi"] = lo, hi
+    return out
+
+
 def regime_rows(pair_rows: list[dict], seed_key: str = "seed") -> list[dict]:
     """One row per (permeability, seed) and per permeability pooled over seeds ("all").
 
     pair_rows: pair rows of a campaign table (``kind == 'pair'``) with permeability, base_type,
     complex, strength_difference, the three ratios, deborah_onset / deborah_max and, if present,
     ``transient`` (transient slips are left out) and the seed column. Permeabilities are never
-    pooled with each other.
+    pooled with each other. The pooled row carries the seed-level view too (:func:`_seed_stats`);
+    a seed's own row has NaN there.
     """
     rows = [r for r in pair_rows if not _flag(r, "transient")]
     perms = sorted({_num(r, "permeability") for r in rows})
@@ -118,15 +172,81 @@ def regime_rows(pair_rows: list[dict], seed_key: str = "seed") -> list[dict]:
     for perm in perms:
         at = [r for r in rows if _num(r, "permeability") == perm]
         seeds = sorted({str(r.get(seed_key, "")) for r in at})
-        groups = [(s, [r for r in at if str(r.get(seed_key, "")) == s]) for s in seeds] if len(seeds) > 1 else []
-        groups.append(("all", at))
-        for seed, group in groups:
-            out.append({"kappa_c": perm, "seed": seed, **_group_stats(group)})
+        by_seed = [[r for r in at if str(r.get(seed_key, "")) == s] for s in seeds]
+        if len(seeds) > 1:
+            for seed, group in zip(seeds, by_seed):
+                out.append({"kappa_c": perm, "seed": seed, **_group_stats(group), **_seed_stats([group])})
+        out.append({"kappa_c": perm, "seed": "all", **_group_stats(at), **_seed_stats(by_seed)})
     return out
 
 
 #: columns of regime.csv (the keys of a group's statistics, after kappa_c and seed)
-REGIME_COLUMNS = ["kappa_c", "seed", *_group_stats([]).keys()]
+REGIME_COLUMNS = ["kappa_c", "seed", *_group_stats([]).keys(), *_seed_stats([]).keys()]
+
+
+# --------------------------------------------------------------------------- slower, at equal footing
+
+#: edges [t0] of the onset-delay bins: within about half a drained slip's duration (~16,000 t0 in
+#: the study scene), within about 1.25 of it, and beyond
+DELAY_EDGES = (7500.0, 20000.0)
+
+
+def onset_delay(row: dict) -> float:
+    """Onset of the undrained branch's compared slip less the drained one's [t0] (negative: the
+    undrained branch slipped first)."""
+    return _num(row, "undrained_onset") - _num(row, "drained_onset")
+
+
+def delay_points(pair_rows: list[dict]) -> list[dict]:
+    """The pairs :func:`delay_rows` counts (classified, not transient, with both onsets), each as
+    kappa_c, seed, delay (:func:`onset_delay`), strength_difference and the two ratios."""
+    return [{"kappa_c": _num(r, "permeability"), "seed": str(r.get("seed", "")), "delay": onset_delay(r),
+             "strength_difference": _num(r, "strength_difference"),
+             "peak_velocity_ratio": _num(r, "peak_velocity_ratio"), "stress_drop_ratio": _num(r, "stress_drop_ratio")}
+            for r in _classified(pair_rows) if not _flag(r, "transient") and np.isfinite(onset_delay(r))]
+
+
+def delay_rows(pair_rows: list[dict], edges=DELAY_EDGES, seed_key: str = "seed") -> list[dict]:
+    """The thesis's "undrained slower, smaller drop" at equal footing: the slower and
+    smaller-drop shares of the classified, non-transient pairs binned by |onset delay|
+    (:func:`onset_delay`; bins [0, e1), [e1, e2), ..., [e_last, inf) t0), per permeability and
+    pooled over permeabilities ("all": the same slips counted once per kappa_c), each with its
+    Wilson (per-pair) and seed-level interval and the per-seed range; with the bin's median
+    |delay| and median S_u - S_d (the stress the undrained branch stored beyond the drained one)."""
+    rows = [r for r in _classified(pair_rows) if not _flag(r, "transient")
+            and np.isfinite(onset_delay(r))]
+    bounds = [0.0, *edges, math.inf]
+    perms = sorted({_num(r, "permeability") for r in rows})
+    out = []
+    for perm in [*perms, "all"]:
+        at = rows if perm == "all" else [r for r in rows if _num(r, "permeability") == perm]
+        for lo_e, hi_e in zip(bounds[:-1], bounds[1:]):
+            group = [r for r in at if lo_e <= abs(onset_delay(r)) < hi_e]
+            seeds = sorted({str(r.get(seed_key, "")) for r in group})
+            by_seed = [[r for r in group if str(r.get(seed_key, "")) == s] for s in seeds]
+            row = {"kappa_c": perm, "delay_from": lo_e, "delay_to": hi_e, "n_pairs": len(group),
+                   "delay_abs_median": statistics.median(abs(onset_delay(r)) for r in group) if group else _NAN,
+                   "strength_difference_median": (statistics.median(_num(r, "strength_difference") for r in group)
+                                                  if group else _NAN)}
+            stats = _group_stats(group)
+            seed_stats = _seed_stats(by_seed) if by_seed else {}
+            for key in ("slower", "smaller_drop"):
+                row[f"n_{key}"] = stats[f"n_{key}"]
+                for suffix in ("", "_lo", "_hi"):
+                    row[f"{key}{suffix}"] = stats[f"{key}{suffix}"]
+                for suffix in ("_seed_lo", "_seed_hi", "_seed_min", "_seed_max"):
+                    row[f"{key}{suffix}"] = seed_stats.get(f"{key}{suffix}", _NAN)
+            row["n_seeds"] = len(seeds)
+            out.append({c: row[c] for c in DELAY_COLUMNS})
+    return out
+
+
+#: columns of delay.csv
+DELAY_COLUMNS = ["kappa_c", "delay_from", "delay_to", "n_pairs", "n_seeds", "delay_abs_median",
+                 "strength_difference_median",
+                 *[f"{p}{key}{s}" for key in ("slower", "smaller_drop")
+                   for p, s in (("n_", ""), ("", ""), ("", "_lo"), ("", "_hi"), ("", "_seed_lo"),
+                                ("", "_seed_hi"), ("", "_seed_min"), ("", "_seed_max"))]]
 
 
 # --------------------------------------------------------------------------- the thesis on the map

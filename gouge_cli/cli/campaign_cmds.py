@@ -68,3 +68,29 @@ def register(app: typer.Typer):
         out.print(f"{report.submitted} pieces run in {report.wall_seconds:.1f} s", highlight=False)
         if report.survey.by_state("failed"):
             raise typer.Exit(EXIT_PHYSICS)
+
+    @app.command()
+    @guarded
+    def regime(
+        pairs: Path = typer.Argument(..., help="a pair table: a campaign's table.csv or a pairs.csv (rows of kind 'pair')"),
+        out_dir: Path = typer.Option(..., "--out", help="folder for regime.csv, delay.csv, regime_map.png and regime_delay.png"),
+        title: str = typer.Option("", "--title", help="title line of the figures"),
+        where: List[str] = typer.Option([], "--where", help="KEY=VALUE: only the pairs whose swept column KEY holds "
+                                        "VALUE (e.g. packing.n_grains=3640); repeatable"),
+    ):
+        """Write the regime map (per seed, pooled, seed-level and per-pair intervals) and the onset-delay
+        view from a table of pairs; nothing is simulated."""
+        from ..errors import InputError
+        from ..workflows.regime_report import read_pairs, select, write_regime
+
+        conditions = {}
+        for item in where:
+            key, sep, value = item.partition("=")
+            if not sep or not key.strip():
+                raise InputError(f"--where {item!r}: give KEY=VALUE, e.g. loading.normal_stress=3e-4")
+            conditions[key.strip()] = value.strip()
+        rows = select(read_pairs(pairs), conditions)
+        if not rows:
+            raise InputError(f"{pairs}: no pair rows" + (f" with {', '.join(where)}" if where else ""))
+        for name, path in write_regime(rows, out_dir, out_dir, title).items():
+            out.print(f"{name}: {path}", highlight=False)

@@ -8,6 +8,7 @@ Layout of ``<out>/<name>/``::
       ledger/run.json           one record per piece: state (running | done | failed | error),
       ledger/fork_NNN.json      settings it ran with, host, pid (and slurm_job), attempts, cause, result
     table.csv  phase_diagram.csv  figures/
+    regime.csv  delay.csv       the regime map (two permeabilities or more; regime/<value>/ per swept value)
 
 A *piece* is one Dask task: "advance this run to completion" or "fork slip N of this run at the
 study's permeabilities" (:func:`advance_run`, :func:`advance_fork`). A run piece whose worker
@@ -518,17 +519,23 @@ def write_results(s: Survey, log=print) -> dict:
 
 
 def _regime_outputs(pair_rows: list[dict], s: Survey, figs: Path) -> dict:
-    """regime.csv and figures/regime_map.png: the findings against De, the thesis placed
-    (analysis.regime), for a study campaign with two permeabilities or more."""
-    from ..analysis.campaign_table import write_table
-    from ..analysis.regime import REGIME_COLUMNS, regime_rows, thesis_point
-    from ..plots.regime import regime_figure
+    """regime.csv, delay.csv and their figures (workflows.regime_report), for a study campaign with
+    two permeabilities or more; a campaign that sweeps more than seeds gets one set per value of
+    its swept keys, under regime/<key>-<value>_.../ (permeabilities and other swept values are
+    never pooled)."""
+    from .campaign_spec import point_name
+    from .regime_report import by_swept, write_regime
 
-    rows = regime_rows(pair_rows)
-    out = {"regime_csv": write_table(rows, [], s.root / "regime.csv", columns=list(REGIME_COLUMNS))}
-    if rows:
-        out["regime_map"] = regime_figure(rows, thesis_point(), figs / "regime_map.png",
-                                          f"{s.spec.name}: drained/undrained findings against De")
+    keys = [k for k in s.spec.swept_keys() if k != "seed"]
+    if not keys:
+        return write_regime(pair_rows, s.root, figs, s.spec.name)
+    out = {}
+    for values, rows in by_swept(pair_rows, keys):
+        name = point_name(values)
+        where = ", ".join(f"{k} = {v}" for k, v in values.items())
+        for key, path in write_regime(rows, s.root / "regime" / name, s.root / "regime" / name,
+                                      f"{s.spec.name}, {where}").items():
+            out[f"{key}[{name}]"] = path
     return out
 
 

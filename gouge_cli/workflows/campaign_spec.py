@@ -252,7 +252,7 @@ def base_path(spec: CampaignSpec, spec_path: Path) -> Path:
 
 def _label(value: Any) -> str:
     text = f"{value:g}" if isinstance(value, float) else str(value)
-    return re.sub(r"[^A-Za-z0-9.+-]", "", text)
+    return re.sub(r"[^A-Za-z0-9.-]", "", text)          # a run name takes no "+" (2e+06 -> 2e06)
 
 
 def point_name(overrides: dict) -> str:

@@ -90,3 +90,49 @@ def test_regime_figure_is_written(tmp_path):
              for k, de in ((1e-5, 0.03), (1e-6, 0.3)) for s in (3, 7) for b in ("I", "II", "II")]
     path = regime_figure(regime_rows(pairs), thesis_point(), tmp_path / "regime.png", "test")
     assert path.stat().st_size > 10_000
+
+
+def test_pooled_rows_carry_the_seed_level_view_and_seed_rows_do_not():
+    from gouge_cli.analysis.seedboot import seed_fraction, seed_median
+
+    # seed 3: 1 Type I of 4, seed 7: 3 of 4 (the per-seed fractions 0.25 and 0.75)
+    pairs = [_pair(1e-5, s, b, -0.01 if b == "I" else 0.01, v, 1.0, 0.1)
+             for s in (3, 7) for b, v in zip(("I", "II", "II", "II") if s == 3
+                                                                        else ("I", "I", "I", "II"),
+                                                                        (0.8, 0.9, 1.1, 1.2))]
+    by = {r["seed"]: r for r in regime_rows(pairs)}
+    a = by["all"]
+    assert a["n_seeds"] == 2 and by["3"]["n_seeds"] == 1
+    assert (a["type_I_seed_min"], a["type_I_seed_max"]) == (0.25, 0.75)
+    assert (by["3"]["type_I_seed_min"], by["7"]["type_I_seed_max"]) == (0.25, 0.75)
+    assert (a["type_I_seed_lo"], a["type_I_seed_hi"]) == seed_fraction([[1, 0, 0, 0], [1, 1, 1, 0]])[1:]
+    assert (a["peak_velocity_ratio_seed_lo"], a["peak_velocity_ratio_seed_hi"]) == \
+        seed_median([[0.8, 0.9, 1.1, 1.2]] * 2)[1:]
+    assert a["type_I_seed_lo"] <= a["type_I"] <= a["type_I_seed_hi"]
+    assert math.isnan(by["3"]["type_I_seed_lo"]) and math.isnan(by["7"]["slower_seed_hi"])
+
+
+def test_delay_rows_bin_by_onset_delay_per_permeability_and_pooled():
+    from gouge_cli.analysis.regime import DELAY_COLUMNS, DELAY_EDGES, delay_rows, onset_delay
+
+    def p(perm, seed, delay, pvr, sdr, transient=False):
+        r = _pair(perm, seed, "II" if delay > 0 else "I", 1e-6 * delay, pvr, sdr, 0.1, transient=transient)
+        r.update(drained_onset=1.0e5, undrained_onset=1.0e5 + delay)
+        return r
+
+    pairs = [p(1e-5, 3, -2000, 0.8, 0.9), p(1e-5, 7, 5000, 0.9, 1.1), p(1e-5, 7, 30000, 1.4, 2.0),
+             p(1e-6, 3, 10000, 0.7, 0.6), p(1e-6, 3, 40000, 1.2, 0.9), p(1e-6, 7, 100, 1.1, 1.2, True)]
+    assert onset_delay(pairs[0]) == -2000
+    rows = delay_rows(pairs)
+    assert all(list(r) == DELAY_COLUMNS for r in rows)
+    assert len(rows) == 3 * (len(DELAY_EDGES) + 1)
+    by = {(r["kappa_c"], r["delay_from"]): r for r in rows}
+    near = by[(1e-5, 0.0)]                       # |-2000| and 5000: both slower, one smaller drop
+    assert (near["n_pairs"], near["n_slower"], near["n_smaller_drop"], near["n_seeds"]) == (2, 2, 1, 2)
+    assert near["delay_abs_median"] == 3500
+    far = by[(1e-5, DELAY_EDGES[1])]
+    assert (far["n_pairs"], far["n_slower"], far["slower"]) == (1, 0, 0.0)
+    pooled = by[("all", 0.0)]                    # the transient pair is left out
+    assert pooled["n_pairs"] == 2
+    assert by[("all", DELAY_EDGES[0])]["n_pairs"] == 1 and by[("all", DELAY_EDGES[1])]["n_pairs"] == 2
+    assert by[(1e-6, 0.0)]["n_pairs"] == 0 and math.isnan(by[(1e-6, 0.0)]["slower"])

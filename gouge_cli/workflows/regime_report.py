@@ -1,0 +1,72 @@
+"""The regime map's outputs from a table of pairs: regime.csv, delay.csv and their figures.
+
+Used by `gouge campaign` (a study campaign with two permeabilities or more) and by `gouge regime
+PAIRS.csv` (the same outputs again from a committed pair table, without simulating anything).
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+from ..errors import InputError
+
+
+def read_pairs(path: str | Path) -> list[dict]:
+    """The pair rows (``kind == 'pair'``) of a campaign table or of a file of pairs."""
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: no such file (give a campaign's table.csv or a pairs.csv)")
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    need = {"kind", "permeability", "base_type", "peak_velocity_ratio", "stress_drop_ratio", "deborah_max"}
+    missing = need - set(rows[0] if rows else need)
+    if missing:
+        raise InputError(f"{path}: not a pair table; missing column(s) {', '.join(sorted(missing))}")
+    return [r for r in rows if r["kind"] == "pair"]
+
+
+def select(pair_rows: list[dict], where: dict[str, float]) -> list[dict]:
+    """The pair rows whose swept columns hold the given values (compared as numbers when both are)."""
+    def same(a, b) -> bool:
+        try:
+            return float(a) == float(b)
+        except (TypeError, ValueError):
+            return str(a) == str(b)
+
+    for key in where:
+        if pair_rows and key not in pair_rows[0]:
+            raise InputError(f"--where {key}: no such column in the pair table "
+                             f"(columns: {', '.join(k for k in pair_rows[0] if '.' in k or k == 'seed')})")
+    return [r for r in pair_rows if all(same(r.get(k), v) for k, v in where.items())]
+
+
+def by_swept(pair_rows: list[dict], keys: list[str]) -> list[tuple[dict, list[dict]]]:
+    """The pair rows split by the values of the swept keys (seed excluded: the regime map pools
+    seeds), in order of appearance: a sweep over thickness or sigma is never pooled."""
+    keys = [k for k in keys if k != "seed"]
+    groups: dict = {}
+    for r in pair_rows:
+        groups.setdefault(tuple(r.get(k) for k in keys), []).append(r)
+    return [(dict(zip(keys, values)), rows) for values, rows in groups.items()]
+
+
+def write_regime(pair_rows: list[dict], root: Path, figs: Path, title: str = "") -> dict:
+    """regime.csv and delay.csv under ``root``, regime_map.png and regime_delay.png under ``figs``."""
+    from ..analysis.campaign_table import write_table
+    from ..analysis.regime import DELAY_COLUMNS, REGIME_COLUMNS, delay_rows, regime_rows, thesis_point
+    from ..plots.regime import delay_figure, regime_figure
+
+    root, figs = Path(root), Path(figs)
+    rows = regime_rows(pair_rows)
+    out = {"regime_csv": write_table(rows, [], root / "regime.csv", columns=list(REGIME_COLUMNS))}
+    if rows:
+        out["regime_map"] = regime_figure(rows, thesis_point(), figs / "regime_map.png",
+                                          f"{title}: drained/undrained findings against De" if title else "")
+    delay = delay_rows(pair_rows)
+    out["delay_csv"] = write_table(delay, [], root / "delay.csv", columns=list(DELAY_COLUMNS))
+    if any(r["n_pairs"] for r in delay):
+        out["regime_delay"] = delay_figure(pair_rows, delay, figs / "regime_delay.png",
+                                           f"{title}: undrained slower, smaller drop against the onset delay"
+                                           if title else "")
+    return out

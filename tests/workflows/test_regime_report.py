@@ -1,0 +1,90 @@
+"""`gouge regime PAIRS.csv --out DIR`: the regime map's tables and figures again from a pair table,
+with nothing simulated; the same numbers as analysis.regime on the same rows."""
+
+from __future__ import annotations
+
+import csv
+
+import pytest
+from typer.testing import CliRunner
+
+from gouge_cli.analysis.regime import DELAY_COLUMNS, REGIME_COLUMNS, regime_rows
+from gouge_cli.cli.main import app
+
+runner = CliRunner()
+
+
+def _pairs(path):
+    cols = ["kind", "seed", "permeability", "base_type", "complex", "strength_difference", "peak_velocity_ratio",
+            "stress_drop_ratio", "duration_ratio", "deborah_onset", "deborah_max", "deborah_mean",
+            "drained_onset", "undrained_onset", "transient"]
+    rows = [["run", 3] + [""] * (len(cols) - 2)]
+    for perm, de in ((1e-5, 0.1), (1e-6, 1.0)):
+        for seed in (3, 7, 11):
+            for i, (b, v, d) in enumerate((("I", 0.8, -2000), ("II", 1.2, 30000), ("II", 0.9, 9000), ("tie", 0.7, 100))):
+                rows.append(["pair", seed, perm, b, i % 2 == 0, -0.01 if b == "I" else 0.01, v, v + 0.05, 1.1,
+                             de / 10, de * (1 + 0.1 * i), de / 5, 1e5, 1e5 + d, seed == 3 and i == 3])
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(cols)
+        w.writerows(rows)
+    return path
+
+
+def _read(path):
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_gouge_regime_writes_the_map_from_a_pair_table(tmp_path):
+    pairs = _pairs(tmp_path / "pairs.csv")
+    res = runner.invoke(app, ["regime", str(pairs), "--out", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    out = tmp_path / "out"
+    for name in ("regime_map.png", "regime_delay.png"):
+        assert (out / name).stat().st_size > 10_000
+    regime = _read(out / "regime.csv")
+    assert list(regime[0]) == REGIME_COLUMNS
+    pooled = {float(r["kappa_c"]): r for r in regime if r["seed"] == "all"}
+    assert set(pooled) == {1e-5, 1e-6}
+    assert int(pooled[1e-5]["n_pairs"]) == 11 and int(pooled[1e-5]["n_seeds"]) == 3     # one transient left out
+    expected = [r for r in regime_rows([r for r in _read(pairs) if r["kind"] == "pair"]) if r["seed"] == "all"]
+    for e in expected:
+        got = pooled[e["kappa_c"]]
+        for key in ("type_I", "type_I_lo", "type_I_seed_lo", "type_I_seed_hi", "peak_velocity_ratio_seed_hi"):
+            assert float(got[key]) == pytest.approx(e[key], rel=1e-12), key
+    delay = _read(out / "delay.csv")
+    assert list(delay[0]) == DELAY_COLUMNS
+    near = [r for r in delay if r["kappa_c"] == "all" and float(r["delay_from"]) == 0.0][0]
+    assert int(near["n_pairs"]) == 2 * (3 + 3 - 1)          # the delays -2000 and 100, one transient
+
+
+def test_gouge_regime_refuses_a_table_without_pairs(tmp_path):
+    bad = tmp_path / "runs.csv"
+    bad.write_text("kind,point,seed\nrun,a,3\n")
+    res = runner.invoke(app, ["regime", str(bad), "--out", str(tmp_path / "out")])
+    assert res.exit_code == 2
+    assert "not a pair table" in res.output
+    res = runner.invoke(app, ["regime", str(tmp_path / "none.csv"), "--out", str(tmp_path / "out")])
+    assert res.exit_code == 2
+
+
+def test_where_selects_one_value_of_a_swept_column(tmp_path):
+    pairs = _pairs(tmp_path / "pairs.csv")
+    res = runner.invoke(app, ["regime", str(pairs), "--out", str(tmp_path / "out"), "--where", "seed=7"])
+    assert res.exit_code == 0, res.output
+    regime = _read(tmp_path / "out" / "regime.csv")
+    assert {r["seed"] for r in regime} == {"all"} and int(regime[0]["n_pairs"]) == 4     # one seed: no split
+    for bad in (["--where", "nonsense"], ["--where", "packing.n_grains=3640"], ["--where", "seed=99"]):
+        res = runner.invoke(app, ["regime", str(pairs), "--out", str(tmp_path / "out2"), *bad])
+        assert res.exit_code == 2, (bad, res.output)
+
+
+def test_by_swept_never_pools_swept_values():
+    from gouge_cli.workflows.regime_report import by_swept, select
+
+    rows = [{"seed": s, "loading.normal_stress": sig, "permeability": 1e-5} for sig in ("0.0001", "0.001") for s in (1, 2)]
+    groups = by_swept(rows, ["loading.normal_stress", "seed"])
+    assert [g for g, _ in groups] == [{"loading.normal_stress": "0.0001"}, {"loading.normal_stress": "0.001"}]
+    assert all(len(rs) == 2 for _, rs in groups)
+    assert len(select(rows, {"loading.normal_stress": "1e-4"})) == 2          # compared as numbers
