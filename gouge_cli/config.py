@@ -234,8 +234,9 @@ class FluidConfig(_Section):
                             "is at most a third of backward Euler's), implicit otherwise")
     step: Time = Field(
         0.25, gt=0, le=1000,
-        description="fluid update period dt_f, rounded to whole DEM steps [t0]; the drag is lagged by up to "
-                    "dt_f, and dt_f above ~1-2 t0 destabilises undrained (kappa_c <~ 1e-4) coupling")
+        description="[t0] fluid update period dt_f, rounded to whole DEM steps; between updates the drag is "
+                    "that of the pressure extrapolated to the interval's middle (accuracy: `gouge accuracy`, "
+                    "ladder fluid.step)")
     explicit_safety: float = Field(0.5, gt=0, le=1.0, description="fraction of the FTCS bound per sub-step [-]")
 
     @model_validator(mode="after")

@@ -29,8 +29,6 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     other."""
     x, z, vx, vz, radius = grains.x, grains.z, grains.vx, grains.vz, grains.radius
     force_x, force_z, inv_mass, body = grains.force_x, grains.force_z, grains.inv_mass, grains.body
-    fstate, s, s_old, ux, uz, work = fluid.state, fluid.s, fluid.s_old, fluid.ux, fluid.uz, fluid.work
-    corners, partial = fluid.corners, fluid.partial
     n = x.shape[0]
     width = params[WIDTH]
     dt_f = interval * params[DT]
@@ -49,9 +47,9 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
             continue
         z_top = wall[W_Z]
         overlap = not (close or n < 2)      # the next step's drift runs while the grid is solved
-        status = fluid_begin(x, z, vx, vz, radius, n, width, z_bottom, z_top, dt_f, fstate, s, s_old, ux, uz, work,
-                             corners, partial, (owed, force_x, force_z, inv_mass, body, half, params[BG_DAMPING],
-                                                wall[W_VX], wall[W_VZ]), serial, serial or not overlap)
+        kick = (owed, force_x, force_z, inv_mass, body, half, params[BG_DAMPING], wall[W_VX], wall[W_VZ])
+        status = fluid_begin(x, z, vx, vz, radius, n, width, z_bottom, z_top, dt_f, fluid, kick, serial,
+                             serial or not overlap)
         if status == 0:
             if not overlap:
                 status = fluid_solve(width, z_bottom, z_top, dt_f, fluid)
@@ -121,6 +119,6 @@ def _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, fluid):
     out[claim]), then out[done] set; returns whether this thread did it."""
     if fetch_add(out, claim, 1) != 0:
         return False
-    fluid_finish_deposit(width, z_bot, z_top, fluid.s, fluid.ux, fluid.uz, fluid.work, fluid.partial)
+    fluid_finish_deposit(width, z_bot, z_top, fluid)
     fetch_add(out, done, 1)
     return True

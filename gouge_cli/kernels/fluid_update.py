@@ -176,8 +176,7 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid, drag_x,
     fluid_solve (the grid only) and fluid_drag, so that a caller can move the grains while
     the grid is solved.
     """
-    status = fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid.state, fluid.s, fluid.s_old,
-                         fluid.ux, fluid.uz, fluid.work, fluid.corners, fluid.partial, grain_kick)
+    status = fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid, grain_kick)
     if status != STATUS_OK:
         return status
     status = fluid_solve(Lx, z_bot, z_top, dt_f, fluid)
@@ -192,25 +191,26 @@ def _plane_velocities(state, z_bot, z_top, dt_f):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, state, s, s_old, ux, uz, work, corners, partial,
-                grain_kick, serial=False, finish=True):
+def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid, grain_kick, serial=False, finish=True):
     """First part of fluid_update (same arguments): s^n kept, deposit s^{n+1} and u_rel, the
     only part that reads the grains' positions and velocities; serial: plain loops (one thread).
     finish False (not serial): the deposit stops after the grains' moments; fluid_finish_deposit
     must then run before fluid_solve. Returns a status."""
     if not (z_top - z_bot > 0.0 and dt_f > 0.0):
         return STATUS_SOLVER
-    w_bot, w_top = _plane_velocities(state, z_bot, z_top, dt_f)
-    copy_grid(s, s_old)
-    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz, work[G_SX], work[G_SZ], corners, partial,
-            grain_kick, serial, finish)
+    w_bot, w_top = _plane_velocities(fluid.state, z_bot, z_top, dt_f)
+    work = fluid.work
+    copy_grid(fluid.s, fluid.s_old)
+    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, fluid.s, fluid.ux, fluid.uz, work[G_SX],
+            work[G_SZ], fluid.corners, fluid.partial, grain_kick, serial, finish)
     return STATUS_OK
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def fluid_finish_deposit(Lx, z_bot, z_top, s, ux, uz, work, partial):
+def fluid_finish_deposit(Lx, z_bot, z_top, fluid):
     """The deposit's last part after fluid_begin(finish=False), on this thread (grid only)."""
-    deposit_finish(Lx, z_bot, z_top, s, ux, uz, work[G_SX], work[G_SZ], partial)
+    work = fluid.work
+    deposit_finish(Lx, z_bot, z_top, fluid.s, fluid.ux, fluid.uz, work[G_SX], work[G_SZ], fluid.partial)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")

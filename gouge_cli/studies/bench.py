@@ -276,8 +276,7 @@ def profile_fluid(n_grains: int, start: dict, dt: float, skin: float, permeabili
         fl.pressure[:] = pressure
 
     def begin():
-        F.fluid_begin(s.x, s.z, s.vx, s.vz, s.radius, s.n, s.width, z_bot, z_top, dt_f, fl.state, fl.s, fl.s_old,
-                      fl.ux, fl.uz, fl.work, fl.corners, fl.partial, kick, threads <= 1)
+        F.fluid_begin(s.x, s.z, s.vx, s.vz, s.radius, s.n, s.width, z_bot, z_top, dt_f, fl, kick, threads <= 1)
 
     def solve():
         F.fluid_solve(s.width, z_bot, z_top, dt_f, fl)
