@@ -115,18 +115,16 @@ G_P = 8              # CG direction
 G_Q = 9              # operator times direction; explicit scratch
 G_CP = 10            # tridiagonal factor: modified upper coefficient, transposed (nz, nx)
 G_DINV = 11          # tridiagonal factor: inverse pivot, transposed (nz, nx)
-G_GX = 12            # dP/dx at cell centres
-G_GZ = 13            # dP/dz at cell centres
-G_FQ = 14            # the consistent drag's fields (kernels.drag.drag_triples): q = P/s,
-G_FX = 15            # r_x and r_z = (P/s^2) ds/dx, ds/dz, each filtered back by S^T
-G_FZ = 16
-G_SX = 17            # ds/dx consistent with the deposit
-G_SZ = 18            # ds/dz consistent with the deposit
-G_TZT = 19           # tz transposed (nz, nx), for the z-line solves (kernels.pressure)
-G_LINE = 20          # the z-line solves' right-hand side and solution, transposed (nz, nx)
-G_PREV = 21          # P^n at the start of an update; then the pressure extrapolated for the drag
-G_TMP = 22           # the filter's scratch (kernels.filter)
-N_GRID_WORK = 23
+G_FQ = 12            # the consistent drag's fields (kernels.drag.drag_triples): q = P/s,
+G_FX = 13            # r_x and r_z = (P/s^2) ds/dx, ds/dz, each filtered back by S^T
+G_FZ = 14
+G_SX = 15            # ds/dx consistent with the deposit
+G_SZ = 16            # ds/dz consistent with the deposit
+G_TZT = 17           # tz transposed (nz, nx), for the z-line solves (kernels.pressure)
+G_LINE = 18          # the z-line solves' right-hand side and solution, transposed (nz, nx)
+G_PREV = 19          # P^n at the start of an update; then the pressure extrapolated for the drag
+G_TMP = 20           # the filter's scratch (kernels.filter)
+N_GRID_WORK = 21
 
 # the grid's arrays as kernels.coupled takes them, addressed by name (model.fluid.FluidGrid.record;
 # shapes: kernels.fluid_update's module doc)
