@@ -206,3 +206,19 @@ def test_config_reference_shows_units_and_links(site):
     assert "docs/physics/" not in _text(out / "html" / "reference" / "config.html")
     assert 'href="../physics/timestep.html' in html
     assert not re.search(r"<td><ul", html)          # no cell turned into a bullet list
+
+
+def test_equations_render_without_a_network(site):
+    """MathJax is served from the site itself (sphinx-mathjax-offline), no page loads it from a CDN, and
+    the physics pages hold display equations, the numerical implementation page among them."""
+    out, proc = site
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    html = out / "html"
+    assert (html / "_static" / "mathjax" / "tex-chtml.js").is_file()
+    for page in html.rglob("*.html"):
+        text = page.read_text()
+        assert "cdn.jsdelivr.net" not in text and "cdnjs" not in text, page
+    fluid = (html / "physics" / "fluid.html").read_text()
+    assert 'src="../_static/mathjax/tex-chtml.js"' in fluid
+    assert fluid.count('class="math') >= 6
+    assert (html / "physics" / "numerics.html").is_file()
