@@ -18,8 +18,15 @@ by the functions the CLI uses (analysis.catalog, analysis.forkpairs.classify_for
 definition), so the numbers are those of ``gouge slips --json``, ``gouge analyze`` and pair.json.
 Opening and reading never write a byte of a run (analyze, figures and the launchers write what
 their commands write). A run in progress opens (its status says 'running') and shows the rows
-flushed so far. Units are the dimensionless scales of the run file
-(length d, stress E, time t0, velocity v0); every variable carries ``units`` and ``description``.
+flushed so far.
+
+Units are the dimensionless scales of the run file (length d, stress E, time t0, velocity v0,
+density rho_s; V_s and sigma the run's loading velocity and normal stress); every variable carries
+``units``, ``long_name`` and ``description``, and a dimensionless one has ``units`` '1'. These
+scale names are not pint's units (pint reads ``d`` as a day): convert with :func:`to_si`
+(``run.to_si(obj)``), whose results carry SI units that pint and pint-xarray read. Every time is
+counted from the start of loading unless its name says ``clock`` (the stored clock, which also
+counts the compaction).
 Errors are gouge_cli.errors exceptions with the CLI's message; ``exc.exit_code`` is the CLI's code.
 """
 
