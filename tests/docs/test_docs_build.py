@@ -196,7 +196,7 @@ def test_table_cells_keep_a_dash_and_link_doc_paths():
     becomes a link to the page."""
     assert gouge_docs._cell("-") == "\\-"
     assert gouge_docs._cell("Time step (docs/physics/timestep.md).") == "Time step (:doc:`/physics/timestep`)."
-    assert gouge_docs._cell("a_b") == "a\\_b"
+    assert gouge_docs._cell("*x* and |y|") == "\\*x\\* and \\|y\\|"
 
 
 def test_config_reference_shows_units_and_links(site):
