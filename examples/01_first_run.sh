@@ -2,8 +2,9 @@
 # %% [markdown]
 # # Your first stick-slip run
 #
-# This tutorial runs the demo scene, reads its slip catalog and draws its figures. The demo
-# (`configs/demo.yaml`) is a layer of 1,000 dry grains, 30 d wide and about 26 d thick, under a
+# This tutorial runs the tutorial scene, reads its slip catalog and draws its figures. The scene
+# (`configs/tutorial.yaml`) is the demo of `make demo` (`configs/demo.yaml`) loaded for 60,000 t0
+# instead of 150,000, so that it slips about three times in a third of the demo's time: a layer of 1,000 dry grains, 30 d wide and about 26 d thick, under a
 # normal stress of 3e-4 E (24 MPa with the thesis's material), pulled through a stiff spring
 # (k = 1e-4 E/d) at V_s = 4e-5 v0. Everything is in the dimensionless units of
 # {doc}`../physics/units`: lengths in grain diameters d, stresses in Young's modulus E, times in
@@ -14,7 +15,7 @@
 # keeps a checkpoint from just before each one. `--out` names the run directory (the default is
 # `runs/<name>`), `--quiet` leaves out the progress bar.
 # %%
-gouge run configs/demo.yaml --out runs/first --quiet
+gouge run configs/tutorial.yaml --out runs/first --quiet
 # %% [markdown]
 # The last line gives the status, the step count and the speed in grain-steps per second. The
 # run directory holds the validated config, the run file and the checkpoints

@@ -7,15 +7,16 @@
 # from the checkpoint the run kept just before a slip. This tutorial uses the run of
 # {doc}`01_first_run`; the first cell makes it if it is not there.
 # %%
-test -f runs/first/run.h5 || gouge run configs/demo.yaml --out runs/first --quiet
+test -f runs/first/run.h5 || gouge run configs/tutorial.yaml --out runs/first --quiet
 # %% [markdown]
 # Fork slip 2 with an undrained branch at kappa_c = 1e-5 d^2 (the thesis's "Permeability 1e-5";
 # {doc}`../physics/fluid`). The drained branch is the dry model: it retraces the loading run's slip
 # bit for bit. Each branch stops when its first slip ends. With `--perm`, the fork also writes
-# `pair.json`, the verdict on the pair; the command prints a summary of both.
+# `pair.json`, the verdict on the pair; the command prints a summary of both as JSON, of which
+# the cell shows the pair's entry.
 # %%
-gouge restart runs/first --slip 2 --perm 1e-5 > restart.json
-python -c "import json; r = json.load(open('restart.json')); print(json.dumps(r['pair']['pairs'][0], indent=1)[:1500])"
+gouge restart runs/first --slip 2 --perm 1e-5 \
+  | python -c "import json, sys; r = json.load(sys.stdin); print(json.dumps(r['pair']['pairs'][0], indent=1)[:1500])"
 # %% [markdown]
 # ## Reading the pair
 #

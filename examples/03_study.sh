@@ -9,7 +9,7 @@
 # of the run of {doc}`01_first_run` (slip 2 was forked in {doc}`02_fork_pair`: the study finds
 # its finished branches and does not run them again).
 # %%
-test -f runs/first/run.h5 || gouge run configs/demo.yaml --out runs/first --quiet
+test -f runs/first/run.h5 || gouge run configs/tutorial.yaml --out runs/first --quiet
 gouge study runs/first --perm 1e-5 --slips 2-3 --jobs 2 --quiet | tail -n 25
 # %% [markdown]
 # The study writes `runs/first/study/`: `table.csv` (one row per pair, the thesis's Table 3

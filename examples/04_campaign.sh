@@ -6,10 +6,13 @@
 # (`set`), a `sweep` (a `grid` of values, a list of `points`, `seeds`) and per point an `action`:
 # `run` (the loading run) or `study` (the run, then every slip forked drained and undrained at
 # `study.permeabilities`). Each piece of work is one Dask task; where it runs does not change the
-# results. This tutorial sweeps the normal stress of a short demo run over two values:
+# results. This tutorial sweeps the normal stress of a short demo run over two values (the spec
+# goes to `runs/`, which git ignores, as do its outputs, `out: runs/campaigns`):
 # %%
-cat > sweep.yaml <<'YAML'
+mkdir -p runs
+cat > runs/sweep.yaml <<'YAML'
 name: sigma_sweep
+out: runs/campaigns
 base: configs/demo.yaml
 set: {run.duration: 40000}
 sweep:
@@ -17,20 +20,21 @@ sweep:
     loading.normal_stress: [2.0e-4, 3.0e-4]
 action: run
 YAML
-gouge campaign sweep.yaml --workers 2
+gouge campaign runs/sweep.yaml --workers 2
 # %% [markdown]
-# Each point is a run directory `campaigns/<name>/<point>/` with `point.yaml` (its overrides,
+# Each point is a run directory `<out>/<name>/<point>/` (here under `runs/campaigns/sigma_sweep/`)
+# with `point.yaml` (its overrides,
 # resolved config and the `gouge run` command that reproduces it bit for bit) and a ledger that
 # records each piece's state. `--status` reads the ledgers and runs nothing; so does a second
 # `gouge campaign` of a finished spec:
 # %%
-gouge campaign sweep.yaml --status
+gouge campaign runs/sweep.yaml --status
 # %% [markdown]
 # `table.csv` has one row per run (the swept values, the number of slips, the mean and spread of
 # their stress drop, peak velocity, duration, recurrence, static strength and slip) and, for
 # `action: study`, one per pair ({ref}`ref-campaign-table`):
 # %%
-cut -d, -f1-8 campaigns/sigma_sweep/table.csv
+cut -d, -f1-8 runs/campaigns/sigma_sweep/table.csv
 # %% [markdown]
 # ## The phase diagram
 #

@@ -5,7 +5,7 @@
 # This tutorial exports the forked slip of {doc}`02_fork_pair` for ParaView and renders it as a
 # movie. The first cell makes the run and the fork if they are not there.
 # %%
-test -f runs/first/run.h5 || gouge run configs/demo.yaml --out runs/first --quiet
+test -f runs/first/run.h5 || gouge run configs/tutorial.yaml --out runs/first --quiet
 test -f runs/first/forks/slip_002/pair.json || gouge restart runs/first --slip 2 --perm 1e-5 --quiet > /dev/null
 # %% [markdown]
 # ## ParaView

@@ -34,8 +34,6 @@
 import os
 from pathlib import Path
 
-import matplotlib.pyplot as plt
-
 import gouge_cli as gouge
 from gouge_cli.plots.axes import series, table_scatter, wall_velocity
 
@@ -100,6 +98,16 @@ columns = ["onset_time", "duration", "static_strength", "stress_drop", "peak_vel
 print(run.slips[columns].to_string(float_format=lambda v: f"{v:.4g}"))
 
 # %% [markdown]
+# The table is indexed by the slip number; `df.attrs["units"]` gives each column's unit (`1` for a
+# dimensionless one, as pint spells it; `t0`, `d`, `E`, `v0` the scales of the docs' *Units and scales* page).
+# `run.to_si` converts a table or a series to SI units in one call, by the run's scales:
+
+# %%
+si = run.to_si(run.slips[["onset_time", "duration", "slip", "stress_drop", "m_eff"]])
+print({column: si.attrs["units"][column] for column in si.columns})
+print(si.to_string(float_format=lambda v: f"{v:.4g}"))
+
+# %% [markdown]
 # ## A grain snapshot
 
 # %%
@@ -111,7 +119,9 @@ print(f"snapshot at t = {snap.attrs['time']:.6g} t0 since loading: {snap.sizes['
 # ## Drained and undrained twins of one slip, with the block-slider fit
 #
 # `run.pair(slip, perm)` puts both branches on one time axis and classifies them with the one pair
-# definition: the type and measures below are those of the fork's `pair.json`.
+# definition: the type and measures below are those of the fork's `pair.json`. Every time in the
+# API is counted from the start of loading, as in `run.slips` and `pair.json`; a name with `clock`
+# in it is on the stored clock (which also counts the compaction).
 
 # %%
 fork = run.fork(slip)
@@ -120,7 +130,10 @@ ax = wall_velocity(pair)
 save(ax, "wall_velocity")
 print(pair)
 print(pair.measures[["type", "criteria", "drained_strength", "undrained_strength", "peak_velocity_ratio",
-                     "stress_drop_ratio", "duration_ratio"]].to_string())
+                     "stress_drop_ratio", "duration_ratio", "drained_onset"]].to_string())
+event = pair.events["drained"]
+print(f"drained compared slip: onset {event.onset_time:.1f} t0 since loading (stored clock {event.onset_clock:.1f}); "
+      f"in run.slips: {run.slips.loc[slip, 'onset_time']:.1f}")
 
 # %% [markdown]
 # ## The pairs of a study: one table, ready for `groupby`
@@ -134,4 +147,3 @@ print(pairs.groupby(["permeability", "type"]).size())
 # %%
 ax = table_scatter(pairs, "permeability", "stress_drop_ratio", by="type")
 save(ax, "pairs")
-plt.close("all")

@@ -1,21 +1,32 @@
 """gouge from Python: runs, slips, snapshots, pairs, studies and campaigns as xarray and pandas
 objects, and the workflows (run, restart, study) launched from a notebook.
 
+Usage::
+
     import gouge_cli as gouge
-    run = gouge.open_run("runs/demo")
-    run.series                   # xarray.Dataset, lazy; coordinates time [t0 since loading] and time_s [s]
-    run.slips                    # pandas.DataFrame, one row per slip (catalog, Eq. 3 fit, m_eff, checkpoint)
-    run.snapshot(-1)             # xarray.Dataset of grains (and pore-pressure/porosity grids when wet)
-    pair = run.pair(2, 1e-3)     # drained and undrained branches of slip 2 on one time axis + pair.json's measures
-    gouge.open_study("runs/demo")      # pandas.DataFrame, one row per pair
+
+    run = gouge.open_run("runs/demo")  # what `make demo` wrote
+    run.series                         # xarray.Dataset, lazy; time [t0 since loading], time_s [s]
+    run.slips                          # pandas.DataFrame, one row per slip (catalog, Eq. 3 fit, checkpoint)
+    run.snapshot(-1)                   # xarray.Dataset of grains (and pressure/porosity grids when wet)
+    fork = gouge.restart(run, slip=4, perm=1e-5)   # drained + undrained branches of slip 4
+    pair = run.pair(4, 1e-5)           # both branches on one time axis, with pair.json's measures
+    gouge.open_study("runs/demo")      # pandas.DataFrame, one row per drained/undrained pair
 
 Everything is read through :mod:`gouge_cli.io.runfile` (the one reader of run.h5) and computed
 by the functions the CLI uses (analysis.catalog, analysis.forkpairs.classify_fork: the one pair
 definition), so the numbers are those of ``gouge slips --json``, ``gouge analyze`` and pair.json.
 Opening and reading never write a byte of a run (analyze, figures and the launchers write what
 their commands write). A run in progress opens (its status says 'running') and shows the rows
-flushed so far. Units are the dimensionless scales of the run file
-(length d, stress E, time t0, velocity v0); every variable carries ``units`` and ``description``.
+flushed so far.
+
+Units are the dimensionless scales of the run file (length d, stress E, time t0, velocity v0,
+density rho_s; V_s and sigma the run's loading velocity and normal stress); every variable carries
+``units``, ``long_name`` and ``description``, and a dimensionless one has ``units`` '1'. These
+scale names are not pint's units (pint reads ``d`` as a day): convert with :func:`to_si`
+(``run.to_si(obj)``), whose results carry SI units that pint and pint-xarray read. Every time is
+counted from the start of loading unless its name says ``clock`` (the stored clock, which also
+counts the compaction).
 Errors are gouge_cli.errors exceptions with the CLI's message; ``exc.exit_code`` is the CLI's code.
 """
 
@@ -41,7 +52,7 @@ from .io.filedoc import ANALYSIS_UNITS, SLIP_ATTRS, TIME_ORIGIN
 from .io.runfile import RunInfo, RunReader, read_series_items
 
 __all__ = ["Run", "Fork", "Pair", "open_run", "open_study", "open_campaign", "analyze", "figures", "run", "restart",
-           "study"]
+           "study", "to_si", "Snapshots"]
 
 _NAN = float("nan")
 TIME_DOC = "time since loading began (stored clock minus the clock at the loading start)"
@@ -68,15 +79,111 @@ class _SeriesArray(BackendArray):
         return np.asarray(read_series_items(self.h5_path, self.name, key), dtype=np.float64)
 
 
+def _unit(unit: str) -> str:
+    """A run file's unit as pint spells it: the dimensionless '-' is '1'; the scales (d, E, t0, v0,
+    rho_s, V_s, sigma) stay as named units (:func:`to_si` converts them; docs/physics/units.md)."""
+    return "1" if unit in ("-", "") else unit
+
+
 def _attrs(unit: str, description: str) -> dict:
-    return {"units": unit, "description": description}
+    return {"units": _unit(unit), "long_name": description, "description": description}
+
+
+#: SI unit and Run.scales key of each of the run file's unit symbols ('V_s' and 'sigma': the run's own)
+_SI = {"d": ("m", "length_m"), "E": ("Pa", "stress_pa"), "t0": ("s", "time_s"), "v0": ("m / s", "velocity_m_s"),
+       "rho_s": ("kg / m**3", "density_kg_m3"), "rho": ("kg / m**3", "density_kg_m3")}
+_BASE = {"m": {"m": 1}, "Pa": {"Pa": 1}, "s": {"s": 1}, "m / s": {"m": 1, "s": -1}, "kg / m**3": {"kg": 1, "m": -3}}
+
+
+def _si_of(unit: str, scales: dict, V_s: float, sigma: float) -> tuple[float, str] | None:
+    """(factor, SI unit) turning a value in ``unit`` (e.g. 'E d^3', '1/t0', 'rho_s d^2') into SI; None
+    when the unit is not made of the run's scales (already SI, like 'MPa', or a word)."""
+    unit = _unit(unit.strip())
+    if unit == "1":
+        return 1.0, "1"
+    factor, dims = 1.0, {}
+    for sign, part in ((1, unit.split("/")[0]), *((-1, q) for q in unit.split("/")[1:])):
+        for token in part.split():
+            name, _, power = token.partition("^")
+            n = sign * (float(power) if power else 1.0)
+            if name == "1":
+                continue
+            if name == "V_s":
+                f, base = V_s * scales["velocity_m_s"], "m / s"
+            elif name == "sigma":
+                f, base = sigma * scales["stress_pa"], "Pa"
+            elif name in _SI:
+                base, key = _SI[name]
+                f = scales[key]
+            else:
+                return None
+            factor *= f ** n
+            for b, e in _BASE[base].items():
+                dims[b] = dims.get(b, 0) + e * n
+    up = [f"{b}**{e:g}" if e != 1 else b for b, e in dims.items() if e > 0]
+    down = [f"{b}**{-e:g}" if e != -1 else b for b, e in dims.items() if e < 0]
+    text = " * ".join(up) or "1"
+    return factor, text + "".join(f" / {d}" for d in down)
+
+
+def to_si(obj, scales: dict, V_s: float = _NAN, sigma: float = _NAN):
+    """A copy of ``obj`` in SI units: an xarray DataArray or Dataset (each variable and coordinate by
+    its ``units`` attribute) or a pandas DataFrame (each column by ``df.attrs["units"]``). Values in
+    units made of the scales (d, E, t0, v0, rho_s; V_s and sigma of the run) are multiplied by their
+    SI size and their unit becomes the SI one ('E d^3' -> 'Pa * m**3'); the rest is left as it is.
+    ``scales``: :attr:`Run.scales`. :meth:`Run.to_si` and :meth:`Pair.to_si` fill in the run's."""
+    def convert(unit, kind: str):
+        si = _si_of(str(unit), scales, V_s, sigma) if unit is not None and kind in "iuf" else None
+        return None if si is None or si[1] == "1" else si
+
+    if isinstance(obj, pd.DataFrame):
+        out = obj.copy()
+        units = dict(obj.attrs.get("units", {}))
+        for column in out.columns:
+            si = convert(units.get(column), out[column].dtype.kind)
+            if si is not None:
+                out[column] = out[column] * si[0]
+                units[column] = si[1]
+        out.attrs["units"] = units
+        return out
+    if isinstance(obj, xr.DataArray):
+        name = obj.name if obj.name is not None else "_value"
+        out = to_si(obj.to_dataset(name=name) if name not in obj.coords else obj.coords.to_dataset(), scales, V_s,
+                    sigma)
+        return out[name].rename(obj.name)
+    if isinstance(obj, xr.Dataset):
+        out = obj.copy()
+        for name in list(out.variables):
+            var = out.variables[name]
+            si = convert(var.attrs.get("units"), var.dtype.kind)
+            if si is None:
+                continue
+            new = (var.dims, var.values * si[0], dict(var.attrs, units=si[1]))
+            if name in out.coords:
+                out = out.assign_coords({name: new})
+            else:
+                out[name] = new
+        return out
+    raise TypeError(f"to_si takes an xarray DataArray or Dataset or a pandas DataFrame, not {type(obj).__name__}")
 
 
 class Run:
     """One run directory (a loading run or a fork branch), read-only. Build with :func:`open_run`.
 
-    info: the :class:`~gouge_cli.io.runfile.RunInfo` (k, V_s, sigma, m_b, status, ...);
-    time_offset: the stored clock at the loading start [t0] (every time here is since then).
+    Attributes:
+        info: The run's ``RunInfo`` (k, V_s, sigma, m_b, status, permeability, branch, ...).
+        time_offset: The stored clock at the loading start [t0]; every time here is counted from then.
+        allow_running: Whether a run still running may be opened (it shows the rows flushed so far).
+
+    Example:
+        >>> import gouge_cli as gouge
+        >>> run = gouge.open_run("runs/demo")
+        >>> run.status
+        'finished'
+        >>> run.series["tau_over_sigma"].dims
+        ('time',)
+        >>> int(run.slips.index[0])
+        1
     """
 
     def __init__(self, path: Path | str, allow_running: bool = True):
@@ -95,15 +202,17 @@ class Run:
     # what the run is ------------------------------------------------------
     @property
     def path(self) -> Path:
+        """The run directory."""
         return self.info.run_dir
 
     @property
     def status(self) -> str:
+        """How the run stands, as stored in its file ('finished', 'running', 'interrupted', ...)."""
         return self.info.status
 
     @property
     def scales(self) -> dict:
-        """SI value of each unit: length_m, stress_pa, density_kg_m3, velocity_m_s, time_s."""
+        """The SI value of each unit (length_m, stress_pa, density_kg_m3, velocity_m_s, time_s)."""
         return json.loads(self._attributes.get("scales") or "{}")
 
     @property
@@ -113,14 +222,31 @@ class Run:
 
     @property
     def provenance(self) -> dict:
-        """What wrote the file (version, commit, command, libraries, CPU, threads); ``resumed``:
-        the latest `gouge resume`'s, when there was one; ``final_state_hash`` when it stopped."""
+        """What wrote the file (version, commit, command, libraries, CPU, threads).
+
+        Key ``resumed`` holds the latest ``gouge resume``'s record, when there was one, and
+        ``final_state_hash`` the state hash when the run stopped."""
         out = json.loads(self._attributes.get("provenance") or "{}")
         if self._attributes.get("provenance_resumed"):
             out["resumed"] = json.loads(self._attributes["provenance_resumed"])
         if self._attributes.get("final_state_hash"):
             out["final_state_hash"] = self._attributes["final_state_hash"]
         return out
+
+    def to_si(self, obj):
+        """A series, snapshot or slip table of this run (or any xarray/pandas object with units) in
+        SI units, by the run's scales (:func:`to_si`).
+
+        Example:
+            >>> si = run.to_si(run.slips)
+            >>> si.attrs["units"]["onset_time"]
+            's'
+            >>> bool(abs(si["onset_time"].iloc[0] - si["onset_time_s"].iloc[0]) <= 1e-9 * abs(si["onset_time_s"].iloc[0]))
+            True
+            >>> run.to_si(run.series["time"]).attrs["units"]
+            's'
+        """
+        return to_si(obj, self.scales, float(self.info.V_s), float(self.info.sigma))
 
     def __repr__(self) -> str:
         return (f"<gouge Run {self.info.describe()}: status {self.status}, {self.info.n_samples} samples, "
@@ -129,9 +255,19 @@ class Run:
     # time series ----------------------------------------------------------
     @property
     def series(self) -> xr.Dataset:
-        """Every /series column as a lazy variable over ``time`` [t0 since loading]; coordinates
-        ``time_s`` [s] and ``clock`` (the stored clock since compaction began) [t0]. Only the time
-        column is read on opening; a variable is read (the slice asked for) when its values are used."""
+        """Every /series column as a lazy variable over ``time`` [t0 since loading].
+
+        Coordinates ``time_s`` [s] and ``clock`` (the stored clock since compaction began) [t0].
+        Only the time column is read on opening; a variable is read (the slice asked for) when its
+        values are used.
+
+        Example:
+            >>> ds = run.series
+            >>> ds["tau_over_sigma"].attrs["description"]
+            'spring shear stress k (V_s t + s0 - x) / normal stress'
+            >>> float(ds["time"][0]) >= 0 or float(ds["time"][0]) < 0
+            True
+        """
         if self._series is None:
             self._series = self._build_series()
         return self._series
@@ -154,8 +290,8 @@ class Run:
         attrs = {"run": str(info.run_dir), "status": info.status, "k": info.k, "V_s": info.V_s,
                  "sigma": info.sigma, "m_b": info.m_b, "permeability": info.permeability or _NAN,
                  "seed": int(self._attributes.get("seed", -1)), "time_origin": TIME_DOC,
-                 "units": "dimensionless: length d, stress E, time t0, velocity v0 (SI sizes: scales)",
-                 "scales": json.dumps(self.scales)}
+                 "units": "dimensionless: length d, stress E, time t0, velocity v0 (SI sizes: scales, to_si)",
+                 "scales": dict(self.scales)}
         if info.branch is not None:
             attrs.update(branch=info.branch, fork_slip=int(info.fork_slip))
         return xr.Dataset(data, coords=self._time_coords(self._clock), attrs=attrs)
@@ -163,13 +299,23 @@ class Run:
     # slips ----------------------------------------------------------------
     @property
     def slips(self) -> pd.DataFrame:
-        """The slip catalog, one row per slip (index: number): the columns of
-        RUN/analysis/catalog.csv (onset_time, end_time since loading began, onset_clock the stored
-        clock; static_strength, stress_drop [tau/sigma]; velocities over V_s; SI columns beside),
-        the Eq. 3 block-slider fit (fit_amplitude, fit_half_period, fit_r2, fit_ok: it passes the
-        fit bar, fit_verdict: holds / failed / inapplicable, fit_reason, m_eff = k (T_fit/pi)^2 [rho_s d^2],
-        m_eff_over_m_b) and checkpoint_path (the file `gouge restart --slip N` forks from, or None).
-        ``df.attrs["units"]``: the unit of each column."""
+        """The slip catalog as a DataFrame, one row per slip, indexed by the slip number.
+
+        Columns are those of RUN/analysis/catalog.csv (onset_time and end_time since loading
+        began, onset_clock on the stored clock [t0]; static_strength and stress_drop [tau/sigma];
+        velocities over V_s; SI columns beside), the Eq. 3 block-slider fit (fit_amplitude,
+        fit_half_period, fit_r2, fit_ok (it passes the fit bar), fit_verdict (holds, failed or
+        inapplicable), fit_reason, m_eff = k (T_fit/pi)^2 [rho_s d^2], m_eff_over_m_b) and
+        checkpoint_path (the file ``gouge restart --slip N`` forks from, or None).
+        ``df.attrs["units"]`` holds the unit of each column.
+
+        Example:
+            >>> slips = run.slips
+            >>> slips.attrs["units"]["onset_time"]
+            't0'
+            >>> bool((slips["stress_drop"] > 0).all())
+            True
+        """
         if self._slips is None:
             self._slips = self._build_slips()
         return self._slips.copy()
@@ -186,21 +332,36 @@ class Run:
                        checkpoint_path=str(self.path / row["checkpoint"]) if row["checkpoint"] else None)
         columns = list(CATALOG_COLUMNS) + ["fit_amplitude", "fit_half_period", "fit_r2", "fit_ok", "fit_verdict",
                                            "fit_reason", "m_eff", "m_eff_over_m_b", "checkpoint_path"]
-        df = pd.DataFrame(rows, columns=columns).set_index("number", drop=False)
-        df.index.name = None
-        df.attrs["units"] = {c: SLIP_UNITS.get(c, "-") for c in columns}
+        df = pd.DataFrame(rows, columns=columns).set_index("number")
+        df.attrs["units"] = {c: _unit(SLIP_UNITS.get(c, "-")) for c in df.columns}
         return df
 
     # snapshots ------------------------------------------------------------
     @property
     def snapshots(self) -> "Snapshots":
-        """The grain snapshots: ``len``, ``[i]`` (a Dataset, as :meth:`snapshot`), ``.times`` [t0 since loading]."""
+        """The grain snapshots, a sequence of Datasets read when indexed (see :class:`Snapshots`).
+
+        Example:
+            >>> len(run.snapshots) == len(run.snapshots.times)
+            True
+        """
         return Snapshots(self)
 
     def snapshot(self, i: int = -1) -> xr.Dataset:
-        """Snapshot ``i`` (in time order; -1 the last): grains (x, z, radius, vx, vz, spin, body over
-        ``grain``, the original grain number), contacts (contact_i/j, contact_fx/fz over ``contact``)
-        and, for a wet run, pressure and porosity over cell centres ``x_cell``, ``z_cell`` [d]."""
+        """Snapshot ``i`` in time order (-1 the last) as a Dataset.
+
+        It holds the grains (x, z, radius, vx, vz, spin, body over ``grain``, the original grain
+        number), the contacts (contact_i/j, contact_fx/fz over ``contact``) and, for a wet run, the
+        pressure and porosity over cell centres ``x_cell``, ``z_cell`` [d].
+
+        Raises:
+            ~gouge_cli.errors.AnalysisError: The run has no snapshot ``i``.
+
+        Example:
+            >>> snap = run.snapshot(-1)
+            >>> snap["x"].dims, snap["x"].attrs["units"]
+            (('grain',), 'd')
+        """
         if not self._snapshot_names:
             raise AnalysisError(f"{self.info.describe()} has no snapshots (output.snapshot_interval)")
         try:
@@ -231,16 +392,32 @@ class Run:
             coords["z_cell"] = ("z_cell", z0 + (np.arange(nz) + 0.5) * dz, _attrs("d", "cell centre across the layer"))
         t = snap["time"] - self.time_offset
         attrs = {"step": snap["step"], "time": t, "time_s": t * float(self.scales.get("time_s", _NAN)),
-                 "clock": snap["time"], "time_units": "t0 since loading began", "width": self.info.width}
+                 "clock": snap["time"], "time_units": "t0 since loading began (clock: the stored clock [t0])",
+                 "width": self.info.width}
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
     # forks and pairs ------------------------------------------------------
     @property
     def forks(self) -> dict[int, "Fork"]:
-        """The forks under RUN/forks, by slip number."""
+        """The forks under RUN/forks, by slip number.
+
+        Example:
+            >>> slip = min(run.forks)
+            >>> run.forks[slip].slip == slip
+            True
+        """
         return {int(d.name.split("_")[-1]): Fork(d) for d in fork_dirs(self.path)}
 
     def fork(self, slip: int) -> "Fork":
+        """The fork of slip ``slip`` (RUN/forks/slip_NNN, made by :func:`restart`).
+
+        Raises:
+            ~gouge_cli.errors.SlipNotFoundError: The slip has not been forked (the message lists the forked slips).
+
+        Example:
+            >>> run.fork(slip)
+            <gouge Fork of slip ...: drained, perm_...>
+        """
         forks = fork_dirs(self.path)
         for d in forks:
             if int(d.name.split("_")[-1]) == int(slip):
@@ -250,13 +427,30 @@ class Run:
                                 f"`gouge restart {self.path} --slip {slip} --perm K` makes one")
 
     def pair(self, slip: int, perm: float | None = None, main: str = "first") -> "Pair":
-        """The drained/undrained pair of slip ``slip`` at permeability ``perm`` [d^2] (None: the
-        only undrained branch), classified as pair.json and `gouge analyze` do."""
+        """The drained/undrained pair of slip ``slip`` at permeability ``perm`` [d^2].
+
+        ``perm`` None takes the only undrained branch; ``main`` picks the compared event of each
+        branch ('first', the forked slip, or 'largest'). The pair is classified as pair.json and
+        ``gouge analyze`` do.
+
+        Example:
+            >>> pair = run.pair(slip)
+            >>> pair.branch.startswith("perm_")
+            True
+        """
         return self.fork(slip).pair(perm, main)
 
 
 class Snapshots:
-    """The snapshots of a run, in time order (a sequence of Datasets, read when indexed)."""
+    """The snapshots of a run in time order, a sequence of Datasets read when indexed.
+
+    ``len(snaps)``, ``snaps[i]`` (as :meth:`Run.snapshot`) and iteration work as for a list.
+
+    Example:
+        >>> snaps = run.snapshots
+        >>> snaps[-1].attrs["step"] == snaps.steps[-1]
+        True
+    """
 
     def __init__(self, run: Run):
         self.run = run
@@ -272,16 +466,27 @@ class Snapshots:
 
     @property
     def times(self) -> np.ndarray:
-        """(S,) snapshot times [t0 since loading]."""
+        """The snapshot times [t0 since loading], shape (S,)."""
         return self.run._snapshot_clock - self.run.time_offset
 
     @property
     def steps(self) -> list[int]:
+        """The step number of each snapshot."""
         return [int(n) for n in self.run._snapshot_names]
 
 
 class Fork:
-    """RUN/forks/slip_NNN: the drained branch and the undrained ``perm_K`` branches of one slip."""
+    """The branches of one forked slip (RUN/forks/slip_NNN), drained and undrained ``perm_K``.
+
+    Attributes:
+        path: The fork directory.
+        slip: The forked slip's number.
+
+    Example:
+        >>> fork = run.fork(slip)
+        >>> fork.drained.info.branch, sorted(fork.undrained) == sorted(fork.pairs["permeability"])
+        ('drained', True)
+    """
 
     def __init__(self, fork_dir: Path | str):
         self.path = Path(fork_dir)
@@ -291,20 +496,32 @@ class Fork:
 
     @property
     def drained(self) -> Run | None:
+        """The drained branch (the dry twin), or None when it has not been run."""
         return Run(self._drained_dir) if self._drained_dir is not None else None
 
     @property
     def undrained(self) -> dict[float, Run]:
-        """Undrained branches by permeability kappa_c [d^2]."""
+        """The undrained branches by permeability kappa_c [d^2]."""
         runs = [Run(d) for d in self._undrained_dirs]
         return {r.info.permeability: r for r in runs}
 
     @property
     def pairs(self) -> pd.DataFrame:
-        """One row per undrained branch: the rows of pair.json / pairs.csv (analysis.forkpairs.PAIR_COLUMNS)."""
+        """One row per undrained branch, the rows of pair.json and pairs.csv (PAIR_COLUMNS)."""
         return _pair_frame([p.row for p in classify_fork(self.path)])
 
     def pair(self, perm: float | None = None, main: str = "first") -> "Pair":
+        """The pair of the drained branch and the undrained branch at ``perm`` [d^2].
+
+        ``perm`` None takes the only undrained branch; ``main`` as in :meth:`Run.pair`.
+
+        Raises:
+            ~gouge_cli.errors.AnalysisError: No undrained branch at ``perm`` (the message lists them).
+
+        Example:
+            >>> fork.pair().permeability == min(fork.undrained)
+            True
+        """
         pairs = classify_fork(self.path, main)
         if perm is None and len(pairs) == 1:
             return Pair(pairs[0])
@@ -323,8 +540,19 @@ class Fork:
 class Pair:
     """One drained/undrained pair, classified by the one pair definition (analysis.pairs).
 
-    row: the pair.json / pairs.csv row (type, criteria, strengths, ratios, onsets [stored clock]);
-    result: the :class:`~gouge_cli.analysis.pairs.PairResult` (compared slips, Eq. 3 fits).
+    Attributes:
+        row: The record as pair.json / pairs.csv store it (type, criteria, strengths, ratios; onsets
+            since loading [t0]).
+        result: The ``PairResult`` of the pair definition (compared slips, Eq. 3 fits).
+        drained: The drained branch, a :class:`Run`.
+        undrained: The undrained branch, a :class:`Run`.
+
+    Example:
+        >>> pair = run.pair(slip)
+        >>> pair.series["wall_vx"].dims
+        ('branch', 'time')
+        >>> [str(b) for b in pair.series["branch"].values]
+        ['drained', 'undrained']
     """
 
     def __init__(self, fork_pair):
@@ -337,41 +565,72 @@ class Pair:
 
     @property
     def type(self) -> str:
+        """The pair type, I, II or tie, with -C when the undrained slip is complex (:doc:`/physics/pairs`)."""
         return self.row["type"]
 
     @property
     def branch(self) -> str:
+        """The undrained branch's name (``perm_K``)."""
         return self.row["branch"]
 
     @property
     def permeability(self) -> float:
+        """The undrained branch's permeability prefactor kappa_c [d^2]."""
         return float(self.row["permeability"])
 
     @property
     def time_offset(self) -> float:
-        """The clock at the parent's loading start [t0]: times here are since then."""
+        """The stored clock at the parent's loading start [t0]; times here are counted from then."""
         return self.drained.time_offset
 
     @property
     def measures(self) -> pd.Series:
-        """The pair measures and type (the pair.json row) as a Series."""
+        """The pair measures and type (the pair.json row) as a Series; onsets since loading [t0]."""
         return pd.Series(self.row)
+
+    def to_si(self, obj):
+        """:meth:`Run.to_si` with the drained branch's scales (both branches share them)."""
+        return self.drained.to_si(obj)
 
     @property
     def events(self) -> dict:
-        """{"drained", "undrained"}: the compared slips (driver.detector.Slip, stored clock) or None."""
-        return {"drained": self.result.drained_slip, "undrained": self.result.undrained_slip}
+        """The compared slip of each branch (keys drained, undrained; a pandas Series or None).
+
+        Times are since loading began [t0] (onset_time, end_time, peak_time), as in
+        :attr:`Run.slips`; the same on the stored clock are onset_clock, end_clock, peak_clock.
+        ``.attrs["units"]`` holds the unit of each field.
+
+        Example:
+            >>> event = pair.events["drained"]
+            >>> bool(abs(event.onset_clock - event.onset_time - pair.time_offset) < 1e-6)
+            True
+        """
+        return {"drained": self._event(self.result.drained_slip), "undrained": self._event(self.result.undrained_slip)}
+
+    def _event(self, slip) -> pd.Series | None:
+        if slip is None:
+            return None
+        fields = {k: v for k, v in slip.to_dict().items() if k != "subevents"}
+        fields["n_subevents"] = len(slip.subevents)
+        for key in ("onset_time", "end_time", "peak_time"):
+            fields[key.replace("_time", "_clock")] = fields[key]
+            fields[key] = fields[key] - self.time_offset
+        event = pd.Series(fields, name=self.branch)
+        event.attrs["units"] = {k: _unit(SLIP_UNITS.get(k, "-")) for k in fields}
+        return event
 
     @property
     def fits(self) -> dict:
-        """{"drained", "undrained"}: Eq. 3 block-slider fits of the compared slips (BlockSliderFit or None)."""
+        """The Eq. 3 block-slider fit of each branch's compared slip (keys drained, undrained; or None)."""
         return {"drained": self.result.drained_fit, "undrained": self.result.undrained_fit}
 
     @property
     def series(self) -> xr.Dataset:
-        """Both branches over one time axis [t0 since loading] (union of their samples, NaN where a
-        branch has none), dimension ``branch`` = drained, undrained; units and descriptions as in
-        :attr:`Run.series`. Loaded (forks are short)."""
+        """Both branches over one time axis [t0 since loading], with dimension ``branch``.
+
+        The time axis is the union of the branches' samples (NaN where a branch has none);
+        ``branch`` is drained, undrained; units and descriptions as in :attr:`Run.series`. Loaded
+        into memory (forks are short)."""
         if self._series is None:
             parts = [self.drained.series.reset_coords(drop=True).load(),
                      self.undrained.series.reset_coords(drop=True).load()]
@@ -392,8 +651,15 @@ class Pair:
         return self._series
 
     def fit_curve(self, branch: str = "drained", points: int = 200) -> xr.DataArray | None:
-        """The Eq. 3 fit V(t) = A sin(omega (t - t_0)) of a branch's compared slip over its half period
-        (time since loading [t0], velocity [v0]); None when there is no fit."""
+        """The Eq. 3 fit V(t) = A sin(omega (t - t_0)) of a branch's compared slip over its half period.
+
+        Time since loading [t0], velocity [v0]; None when there is no fit.
+
+        Example:
+            >>> curve = pair.fit_curve("drained")
+            >>> curve is None or curve.attrs["units"] == "v0"
+            True
+        """
         fit = self.fits[branch]
         if fit is None or not np.isfinite(fit.omega):
             return None
@@ -410,22 +676,42 @@ class Pair:
 
 def _pair_frame(rows: list[dict], extra: tuple = ()) -> pd.DataFrame:
     df = pd.DataFrame(rows, columns=list(extra) + list(PAIR_COLUMNS))
-    df.attrs["units"] = {c: ANALYSIS_UNITS.get(c, "-") for c in df.columns}
+    df.attrs["units"] = {c: _unit(ANALYSIS_UNITS.get(c, "-")) for c in df.columns}
     df.attrs["units"].update(permeability="d^2", drained_onset="t0", drained_end="t0", undrained_onset="t0",
                              undrained_end="t0", k="E/d", V_s="v0", sigma="E")
     return df
 
 
 def open_run(path: Path | str, allow_running: bool = True) -> Run:
-    """Open a run directory (or its run.h5) read-only. ``allow_running=False`` refuses a run whose
-    status is 'running', as the analysis commands do (RunStillRunningError)."""
+    """Open a run directory (or its run.h5) read-only.
+
+    Args:
+        path: The run directory (a loading run or a fork branch) or its run.h5.
+        allow_running: False refuses a run whose status is 'running', as the analysis commands do.
+
+    Raises:
+        ~gouge_cli.errors.NotARunError: ``path`` holds no run file.
+        ~gouge_cli.errors.RunStillRunningError: The run is running and ``allow_running`` is False.
+
+    Example:
+        >>> import gouge_cli as gouge
+        >>> gouge.open_run("runs/demo")
+        <gouge Run ...: status finished, ... samples, ... snapshots>
+    """
     return Run(path, allow_running)
 
 
 def open_study(path: Path | str, main: str = "first") -> pd.DataFrame:
-    """Every drained/undrained pair of a study (a run directory with forks) as one DataFrame: the
-    pairs.csv columns plus seed, k, sigma, V_s and transient (thesis rule, analysis.study). Forks that
-    cannot be classified yet are listed in ``df.attrs["skipped"]``."""
+    """Every drained/undrained pair of a study (a run directory with forks) as one DataFrame.
+
+    The columns are those of pairs.csv plus seed, k, sigma, V_s and transient (the thesis's rule).
+    Forks that cannot be classified yet are listed in ``df.attrs["skipped"]``.
+
+    Example:
+        >>> pairs = gouge.open_study("runs/demo")
+        >>> {"slip", "permeability", "type", "transient"} <= set(pairs.columns)
+        True
+    """
     parent = Run(path, allow_running=False)
     pairs, skipped = run_pairs(parent.path, main=main)
     with RunReader(parent.path) as r:
@@ -439,9 +725,16 @@ def open_study(path: Path | str, main: str = "first") -> pd.DataFrame:
 
 
 def open_campaign(spec_or_folder: Path | str) -> pd.DataFrame:
-    """The campaign table (what table.csv holds: ``kind`` 'run' or 'pair', the point, its swept
-    values, the run statistics or the pair columns) of the finished pieces, from a campaign file
-    or its output folder (which holds campaign.yaml), plus seed and permeability columns."""
+    """The campaign table of the finished pieces, from a campaign file or its output folder.
+
+    The rows are those of table.csv (``kind`` 'run' or 'pair', the point, its swept values, the
+    run statistics or the pair columns) plus seed and permeability columns. The output folder
+    holds the campaign.yaml it was run with.
+
+    Example:
+        >>> table = gouge.open_campaign("runs/sweep.yaml")  # doctest: +SKIP
+        >>> table.groupby("loading.normal_stress")["stress_drop_mean"].mean()  # doctest: +SKIP
+    """
     from .analysis.campaign_table import campaign_table
     from .workflows.campaign import done_points, survey
     from .workflows.campaign_spec import load_spec
@@ -472,9 +765,16 @@ def _run_dir(run) -> Path:
 
 
 def analyze(run: Run | Path | str, notch: bool = True, main: str = "first", write: bool = True):
-    """`gouge analyze` of one run: its :class:`~gouge_cli.analysis.report.RunAnalysis` (catalog,
-    fits, pairs, summary); ``write``: also ``RUN/analysis/*.csv``, summary.json and /analysis in run.h5
-    (the only API call besides the launchers that writes into a run)."""
+    """``gouge analyze`` of one run; returns its ``RunAnalysis`` (catalog, fits, pairs, summary).
+
+    ``write`` also writes ``RUN/analysis/*.csv``, summary.json and /analysis in run.h5 (the only API
+    call besides the launchers that writes into a run).
+
+    Example:
+        >>> analysis = gouge.analyze("runs/demo", write=False)
+        >>> len(analysis.catalog) == len(gouge.open_run("runs/demo").slips)
+        True
+    """
     from .analysis.report import analyze_run, write_analysis
 
     analysis = analyze_run(_run_dir(run), notch=notch, main=main)
@@ -485,8 +785,15 @@ def analyze(run: Run | Path | str, notch: bool = True, main: str = "first", writ
 
 def figures(run_dir: Run | Path | str, slip: int | None = None, out_dir: Path | str | None = None,
             notch: bool = True, main: str = "first") -> list[Path]:
-    """`gouge plot`: the PNG figures of a run (and of slip ``slip`` and its fork) into ``out_dir``
-    (default RUN/figures); returns the files (gouge_cli.plots.make_figures)."""
+    """``gouge plot``: the PNG figures of a run (and of slip ``slip`` and its fork); returns the files.
+
+    ``out_dir`` defaults to RUN/figures.
+
+    Example:
+        >>> files = gouge.figures("runs/demo", out_dir="figures")
+        >>> all(f.suffix == ".png" for f in files)
+        True
+    """
     from .plots import make_figures
 
     return make_figures(run_dir=_run_dir(run_dir), slip=slip, out_dir=out_dir, notch=notch, main=main)
@@ -507,9 +814,23 @@ def _sets(overrides) -> list[str]:
 
 def run(config: Config | Path | str, out: Path | str | None = None, overrides=None, force: bool = False,
         quiet: bool = True) -> Run:
-    """`gouge run`: compact, then load; returns the opened run. ``config``: a Config, a YAML path or a
-    scene name; ``overrides``: {dotted key: value} (as --set). An interrupted run (Ctrl-C) comes back
-    with status 'interrupted'; bad input raises the CLI's exceptions (``exc.exit_code``)."""
+    """``gouge run``: compact, then load; returns the opened run.
+
+    Args:
+        config: A Config, a YAML path or a scene name.
+        out: The run directory (default runs/<name>).
+        overrides: {dotted key: value}, as ``--set``.
+        force: Replace what a previous run left in ``out``.
+        quiet: No progress bar.
+
+    An interrupted run (Ctrl-C) comes back with status 'interrupted'; bad input raises the CLI's
+    exceptions (``exc.exit_code``).
+
+    Example:
+        >>> run = gouge.run("configs/tutorial.yaml", out="runs/first")  # doctest: +SKIP
+        >>> run.status  # doctest: +SKIP
+        'finished'
+    """
     from .workflows.run import default_run_dir, run_scene
 
     if isinstance(config, Config):
@@ -523,8 +844,16 @@ def run(config: Config | Path | str, out: Path | str | None = None, overrides=No
 
 def restart(run: Run | Path | str, slip: int, perm=(), overrides=None, duration: float | None = None,
             force: bool = False, main: str = "first", quiet: bool = True) -> Fork:
-    """`gouge restart`: drained and undrained (one per ``perm`` [d^2]) branches of slip ``slip``; writes
-    pair.json when ``perm`` is given; returns the opened :class:`Fork`."""
+    """``gouge restart``: drained and undrained branches of slip ``slip``; returns the opened :class:`Fork`.
+
+    One undrained branch per ``perm`` [d^2]; pair.json is written when ``perm`` is given.
+    ``duration`` [t0] bounds each branch (default: until its first slip ends).
+
+    Example:
+        >>> fork = gouge.restart("runs/first", slip=2, perm=1e-5)  # doctest: +SKIP
+        >>> fork.pair(1e-5).type  # doctest: +SKIP
+        'II'
+    """
     from .workflows.fork import run_fork
     from .workflows.pairs import write_pair_json
 
@@ -539,9 +868,15 @@ def restart(run: Run | Path | str, slip: int, perm=(), overrides=None, duration:
 
 def study(target: Path | str, perm, slips=None, main: str = "first", jobs: int | None = None,
           out: Path | str | None = None, overrides=None, figures: bool = False, quiet: bool = True) -> pd.DataFrame:
-    """`gouge study`: the loading run (a config is run first), drained + undrained forks of every
-    non-transient slip (or ``slips``, e.g. [3, 4] or "3-12"), pair types and RUN/study; returns
-    :func:`open_study` of the run."""
+    """``gouge study``: drained and undrained forks of every slip; returns :func:`open_study` of the run.
+
+    ``target`` is a run directory or a config (the loading run is run first); ``slips`` (e.g.
+    [3, 4] or "3-12") replaces every non-transient slip. Writes the pair types and RUN/study.
+
+    Example:
+        >>> pairs = gouge.study("runs/first", perm=1e-5, slips="2-3")  # doctest: +SKIP
+        >>> pairs.groupby("type").size()  # doctest: +SKIP
+    """
     from .workflows.study import parse_slips, run_study
 
     perms = [perm] if isinstance(perm, (int, float)) else list(perm)

@@ -19,7 +19,8 @@ from . import __version__
 from .config import Config, FluidConfig
 from .units import _UNITS
 
-_UNIT = re.compile(r"\s*\[([^\]]+)\]")
+# the unit: the first "[...]" that does not follow a word (not the extra of "pip install 'gouge[gpu]'")
+_UNIT = re.compile(r"\s*(?<![\w'\"])\[([^\]\s][^\]]*)\]")
 _BOUNDS = (("gt", ">"), ("ge", ">="), ("lt", "<"), ("le", "<="))
 SCHEMA_ID = "https://gouge.invalid/config.schema.json"
 
@@ -51,8 +52,8 @@ def _section_model(field):
 
 
 def split_description(text: str | None) -> tuple[str, str]:
-    """(unit, description) from a field description holding ``[unit]`` (the first bracket);
-    unit '' if none."""
+    """(unit, description) from a field description holding ``[unit]`` (the first bracket that does
+    not follow a word, so that ``gouge[gpu]`` is no unit); unit '' if none."""
     text = text or ""
     m = _UNIT.search(text)
     if not m:

@@ -14,17 +14,25 @@ Tutorials (MyST, used in ``docs/tutorials/*.md``):
 ``{gouge-tutorial} examples/NN_name.sh``: a literate shell script. ``# %% [markdown]`` starts a text
 cell (its lines lose their leading ``# ``), ``# %%`` a code cell. The script runs once (until it
 changes; then every tutorial runs again, in page order) in a scratch directory they share
-(:func:`tutorial_dir`),
-holding links to ``configs/`` and ``examples/``, with ``gouge`` as
-``python -m gouge_cli.cli`` of this checkout; each code cell is shown with its output. A text cell's
-``![alt](path)`` of a file the script wrote is copied into the docs. By default the scene is
-reduced: ``gouge run`` gets ``$GOUGE_EXAMPLE_SET`` appended (see :data:`REDUCED`); set
-``GOUGE_DOCS_FULL=1`` to run the tutorials as written, ``GOUGE_DOCS_SKIP_TUTORIALS=1`` to build
-the pages without running them (a quick check of the prose). A failing cell fails the build.
+(:func:`tutorial_dir`), holding links to ``configs/`` and ``examples/``, with ``gouge`` as
+``python -m gouge_cli.cli`` of this checkout; each code cell is shown with its output, and the
+commands run are exactly those shown (the tutorials use the fast scene ``configs/tutorial.yaml``).
+A text cell's ``![alt](path)`` of a file the script wrote is copied into the docs.
+
+``{gouge-tutorial} examples/name.py``: a notebook in the percent format (the same cell markers),
+run cell by cell in one Python process like a Jupyter kernel (:func:`run_notebook`): a cell's
+printed output and the value of its last expression are shown, and every matplotlib figure it left
+open is saved and shown below it. The page links a downloadable ``.ipynb`` of the same cells
+(:func:`write_ipynb`, plain JSON in the nbformat 4 layout). ``:env: NAME=VALUE ...`` sets
+environment variables for the run (shown on the page).
+
+``GOUGE_DOCS_SKIP_TUTORIALS=1`` builds the pages without running them (a quick check of the prose).
+A failing cell fails the build.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -36,12 +44,11 @@ import typing
 from pathlib import Path
 
 from docutils import nodes
-from docutils.parsers.rst import Directive
+from docutils.parsers.rst import Directive, directives
 from docutils.statemachine import StringList
 from sphinx.util.nodes import nested_parse_with_titles
 
 ROOT = Path(__file__).resolve().parents[2]
-REDUCED = "--set run.duration=60000"          # the demo's first slips (~3) instead of ~11
 CELL = "@@gouge-cell@@"
 
 
@@ -69,9 +76,18 @@ def _roles_to_literals(text: str) -> str:
     return re.sub(r":\w+:`~?([^`]+)`", r"``\1``", text)
 
 
+DOC_PATH = re.compile(r"\bdocs/([\w/]+)\.md\b")
+
+
 def _cell(text) -> str:
-    """One list-table cell (reST), on one logical line."""
-    return _plain(_roles_to_literals(str(text)).replace("\n", " ").strip()) or " "
+    """One list-table cell (reST), on one logical line: a source path ``docs/x/y.md`` becomes a link to
+    that page, and a cell that reST would read as a list ("-", the dimensionless unit) stays text."""
+    text = _roles_to_literals(str(text)).replace("\n", " ").strip()
+    pieces = DOC_PATH.split(text)
+    out = "".join(f":doc:`/{piece}`" if i % 2 else _plain(piece) for i, piece in enumerate(pieces))
+    if re.match(r"[-*+](\s|$)", out):
+        out = "\\" + out
+    return out or " "
 
 
 def list_table(header: list[str], rows: list[list], widths: str = "auto") -> str:
@@ -259,36 +275,110 @@ def split_cells(source: str) -> list[tuple[str, str]]:
     return [c for c in cells if c[1].strip()]
 
 
-def run_tutorial(script: Path, workdir: Path, full: bool = False, timeout: float = 1800) -> list[str]:
-    """Run the code cells of ``script`` in ``workdir``; returns each code cell's output.
-    Raises RuntimeError (with the output so far) when a cell fails."""
-    cells = [text for kind, text in split_cells(script.read_text()) if kind == "code"]
+def _links(workdir: Path):
     workdir.mkdir(parents=True, exist_ok=True)
     for name in ("configs", "examples"):
         link = workdir / name
         if not link.exists():
             link.symlink_to(ROOT / name)
+
+
+def _env(extra: dict | None = None) -> dict:
+    return dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
+                MPLBACKEND="Agg", COLUMNS="100", TERM="dumb", **(extra or {}))
+
+
+def run_tutorial(script: Path, workdir: Path, timeout: float = 1800) -> list[str]:
+    """Run the code cells of ``script`` in ``workdir``; returns each code cell's output.
+    Raises RuntimeError (with the output so far) when a cell fails."""
+    cells = [text for kind, text in split_cells(script.read_text()) if kind == "code"]
+    _links(workdir)
     preamble = textwrap.dedent(f"""\
         set -euo pipefail
         export PATH="{Path(sys.executable).parent}:$PATH"
-        gouge() {{
-          if [ "${{1:-}}" = run ] && [ -n "${{GOUGE_EXAMPLE_SET:-}}" ]; then
-            "{sys.executable}" -m gouge_cli.cli "$@" $GOUGE_EXAMPLE_SET
-          else
-            "{sys.executable}" -m gouge_cli.cli "$@"
-          fi
-        }}
+        gouge() {{ "{sys.executable}" -m gouge_cli.cli "$@"; }}
         """)
     body = "".join(f"echo '{CELL}'\n{c}\n" for c in cells)
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep),
-               GOUGE_EXAMPLE_SET="" if full else REDUCED, MPLBACKEND="Agg", COLUMNS="100", TERM="dumb")
-    proc = subprocess.run(["bash", "-c", preamble + body], cwd=workdir, env=env, capture_output=True, text=True,
+    proc = subprocess.run(["bash", "-c", preamble + body], cwd=workdir, env=_env(), capture_output=True, text=True,
                           timeout=timeout)
     outs = proc.stdout.split(CELL + "\n")[1:]
     if proc.returncode != 0:
         raise RuntimeError(f"{script.name}: cell {len(outs)} failed (exit {proc.returncode}):\n"
                            f"{cells[len(outs) - 1] if outs else ''}\n{proc.stdout[-2000:]}\n{proc.stderr[-3000:]}")
     return [o.rstrip("\n") for o in outs]
+
+
+NOTEBOOK_DRIVER = r"""
+import ast, json, sys
+from pathlib import Path
+
+import matplotlib
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
+cells, figdir, mark, fig_mark = json.loads(Path(sys.argv[1]).read_text()), Path(sys.argv[2]), sys.argv[3], sys.argv[4]
+namespace = {"__name__": "__main__"}
+for i, code in enumerate(cells, 1):
+    print(mark, flush=True)
+    tree = ast.parse(code)
+    last = ast.Expression(tree.body.pop().value) if tree.body and isinstance(tree.body[-1], ast.Expr) else None
+    exec(compile(tree, f"<cell {i}>", "exec"), namespace)
+    if last is not None:
+        value = eval(compile(last, f"<cell {i}>", "eval"), namespace)
+        if value is not None and not type(value).__module__.startswith("matplotlib"):
+            print(repr(value))
+    for k, number in enumerate(plt.get_fignums(), 1):
+        figdir.mkdir(parents=True, exist_ok=True)
+        name = f"cell{i}_{k}.png"
+        plt.figure(number).savefig(figdir / name, dpi=100, bbox_inches="tight")
+        print(fig_mark + name)
+    plt.close("all")
+    sys.stdout.flush()
+"""
+FIGURE = "@@gouge-figure@@"
+
+
+def run_notebook(script: Path, workdir: Path, figdir: Path, env: dict | None = None,
+                 timeout: float = 1800) -> list[tuple[str, list[str]]]:
+    """Run the code cells of a percent-format Python script in one process, as a notebook kernel
+    would, in ``workdir``; returns (output, figure file names in ``figdir``) per code cell: the
+    printed text, the repr of a cell's last expression (unless None or a matplotlib object), and
+    every figure the cell left open. Raises RuntimeError (with the output so far) when a cell fails."""
+    cells = [text for kind, text in split_cells(script.read_text()) if kind == "code"]
+    _links(workdir)
+    shutil.rmtree(figdir, ignore_errors=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        spec = Path(tmp) / "cells.json"
+        spec.write_text(json.dumps(cells))
+        proc = subprocess.run([sys.executable, "-c", NOTEBOOK_DRIVER, str(spec), str(figdir), CELL, FIGURE],
+                              cwd=workdir, env=_env(env), capture_output=True, text=True, timeout=timeout)
+    outs = proc.stdout.split(CELL + "\n")[1:]
+    if proc.returncode != 0:
+        raise RuntimeError(f"{script.name}: cell {len(outs)} failed (exit {proc.returncode}):\n"
+                           f"{cells[len(outs) - 1] if outs else ''}\n{proc.stdout[-2000:]}\n{proc.stderr[-3000:]}")
+    result = []
+    for out in outs:
+        lines = out.rstrip("\n").splitlines()
+        figs = [line[len(FIGURE):] for line in lines if line.startswith(FIGURE)]
+        result.append(("\n".join(line for line in lines if not line.startswith(FIGURE)), figs))
+    return result
+
+
+def write_ipynb(script: Path, target: Path) -> Path:
+    """The cells of a percent-format script as a Jupyter notebook (nbformat 4 JSON, no outputs)."""
+    def lines(text):
+        out = text.splitlines(keepends=True)
+        return out[:-1] + [out[-1].rstrip("\n")] if out else []
+
+    cells = [{"cell_type": kind, "metadata": {}, "source": lines(text)} if kind == "markdown" else
+             {"cell_type": "code", "execution_count": None, "metadata": {}, "outputs": [], "source": lines(text)}
+             for kind, text in split_cells(script.read_text())]
+    notebook = {"nbformat": 4, "nbformat_minor": 4, "cells": cells,
+                "metadata": {"kernelspec": {"display_name": "Python 3", "language": "python", "name": "python3"},
+                             "language_info": {"name": "python"}}}
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_text(json.dumps(notebook, indent=1, ensure_ascii=False) + "\n")
+    return target
 
 
 def tutorial_dir(outdir) -> Path:
@@ -306,29 +396,41 @@ def _shorten(text: str, limit: int = 60) -> str:
 
 class TutorialDirective(Directive):
     required_arguments = 1
+    option_spec = {"env": directives.unchanged}
 
     def run(self):
         env = self.state.document.settings.env
         script = ROOT / self.arguments[0]
         env.note_dependency(str(script))
-        full = os.environ.get("GOUGE_DOCS_FULL") == "1"
         work = tutorial_dir(env.app.outdir)
+        gen = Path(env.srcdir) / "_generated" / script.stem
         skip = os.environ.get("GOUGE_DOCS_SKIP_TUTORIALS") == "1"
+        notebook = script.suffix == ".py"
+        extra = dict(item.split("=", 1) for item in (self.options.get("env") or "").split())
+        n_code = sum(kind == "code" for kind, _ in split_cells(script.read_text()))
         if skip:
-            outputs = ["" for kind, _ in split_cells(script.read_text()) if kind == "code"]
+            outputs = [("", [])] * n_code
         else:
             try:
-                outputs = run_tutorial(script, work, full)
+                if notebook:
+                    outputs = run_notebook(script, work, gen, extra)
+                else:
+                    outputs = [(o, []) for o in run_tutorial(script, work)]
             except (RuntimeError, subprocess.TimeoutExpired) as err:
                 raise self.error(str(err)) from None
-        gen = Path(env.srcdir) / "_generated" / script.stem
-        parts, i = [], 0
-        mode = "full scene" if full else f"reduced scene (`gouge run ... {REDUCED}`)"
-        note = (f":::{{note}}\nThis page is `{self.arguments[0]}`, run when the docs were built, on the "
-                f"{mode}; the outputs below are that run's.\n:::\n")
+        how = "the cells run in order in one Python process" if notebook else "the commands run as shown"
+        where = f" with {', '.join(f'`{k}={v}`' for k, v in extra.items())}" if extra else ""
+        note = (f"This page is `{self.arguments[0]}`, run when the docs were built ({how}, in a scratch "
+                f"directory holding `configs/` and `examples/`{where}); the outputs below are that run's.")
         if skip:
-            note = (f":::{{note}}\nThis page is `{self.arguments[0]}`; this build did not run it "
-                    "(GOUGE_DOCS_SKIP_TUTORIALS=1), so it shows no outputs.\n:::\n")
+            note = (f"This page is `{self.arguments[0]}`; this build did not run it "
+                    "(GOUGE_DOCS_SKIP_TUTORIALS=1), so it shows no outputs.")
+        if notebook:
+            ipynb = write_ipynb(script, gen / f"{script.stem}.ipynb")
+            note += (f" Download it as a notebook: {{download}}`{ipynb.name} </_generated/{script.stem}/{ipynb.name}>` "
+                     "(or open the `.py` file itself in Jupyter with the jupytext plugin).")
+        note = f":::{{note}}\n{note}\n:::\n"
+        parts, i = [], 0
         for kind, text in split_cells(script.read_text()):
             if note and (kind == "code" or parts):
                 parts.append(note)
@@ -346,9 +448,11 @@ class TutorialDirective(Directive):
                     return f"![{m.group(1)}](/_generated/{script.stem}/{src.name})"
                 parts.append(re.sub(r"!\[([^\]]*)\]\(([^)]+)\)", image, text) + "\n")
             else:
-                parts.append(f"```bash\n{text}\n```\n")
-                if outputs[i].strip():
-                    parts.append(f"```text\n{_shorten(outputs[i])}\n```\n")
+                output, figs = outputs[i]
+                parts.append(f"```{'python' if notebook else 'bash'}\n{text}\n```\n")
+                if output.strip():
+                    parts.append(f"```text\n{_shorten(output)}\n```\n")
+                parts += [f"![figure of cell {i + 1}](/_generated/{script.stem}/{f})\n" for f in figs]
                 i += 1
         return _parse(self, "\n".join(parts))
 

@@ -23,7 +23,7 @@ PAIR_COLUMNS = (
     "base_type", "complex", "criteria", "undrained_event", "drained_strength", "undrained_strength",
     "strength_difference", "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
     "undrained_peak_over_Vs", "n_undrained_slips", "n_subevents", "drained_onset", "drained_end",
-    "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_ok", "drained_fit_verdict",
+    "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_verdict",
     "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "note",
 )
 
@@ -182,7 +182,6 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 "undrained_onset": _when(u_main, "onset_time", origin),
                 "undrained_end": _when(u_main, "end_time", origin),
                 "drained_fit_r2": _r2(result.drained_fit),
-                "drained_fit_ok": bool(result.drained_fit is not None and result.drained_fit.success),
                 "drained_fit_verdict": _verdict(result.drained_fit),
                 "undrained_fit_r2": _r2(result.undrained_fit),
                 "undrained_fit_verdict": _verdict(result.undrained_fit),

@@ -37,10 +37,23 @@ def _is_number(text: str) -> bool:
     return True
 
 
-def _table(title: str, columns: list[tuple[str, str]], rows: list[dict], width: int | None = None):
+class _Natural:
+    """A renderable drawn at its own width whatever the console's (``--wide``: lines may run past
+    the terminal's edge, to be read with ``less -S`` or a wide window, but no value is cut)."""
+
+    def __init__(self, renderable, width: int):
+        self.renderable, self.width = renderable, width
+
+    def __rich_console__(self, console, options):
+        yield from console.render(self.renderable, options.update_width(max(self.width, options.max_width)))
+
+
+def _table(title: str, columns: list[tuple[str, str]], rows: list[dict], width: int | None = None,
+           wide: bool = False, digits: int = 4):
     """A rich table of ``rows``, never truncating a value: when the columns do not fit the console
     (``width``; default the output console's), they are split into several tables, each repeating
-    the first (key) column."""
+    the first (key) column; ``wide``: one table at its full width, past the console's edge if need be;
+    ``digits``: significant digits of a float."""
     from rich.console import Group
     from rich.markup import escape
     from rich.table import Table
@@ -48,11 +61,11 @@ def _table(title: str, columns: list[tuple[str, str]], rows: list[dict], width: 
     from .common import out
 
     width = width or out.width
-    cells = [[_fmt(row.get(key)) for key, _ in columns] for row in rows]
+    cells = [[_fmt(row.get(key), digits) for key, _ in columns] for row in rows]
     need = [max([len(header)] + [len(c[i]) for c in cells]) + 3 for i, (_, header) in enumerate(columns)]
     chunks, current, used = [], [], need[0] + 4
     for i in range(1, len(columns)):
-        if current and used + need[i] > width:
+        if current and used + need[i] > width and not wide:
             chunks.append(current)
             current, used = [], need[0] + 4
         current.append(i)
@@ -61,7 +74,7 @@ def _table(title: str, columns: list[tuple[str, str]], rows: list[dict], width: 
     tables = []
     for n, chunk in enumerate(chunks):
         part = f" ({n + 1}/{len(chunks)})" if len(chunks) > 1 else ""
-        table = Table(title=title + part, title_justify="left")
+        table = Table(title=escape(title + part), title_justify="left")
         for i in [0] + chunk:
             numeric = all(_is_number(c[i]) for c in cells)
             table.add_column(escape(columns[i][1]), justify="right" if numeric else "left", no_wrap=True,
@@ -69,6 +82,8 @@ def _table(title: str, columns: list[tuple[str, str]], rows: list[dict], width: 
         for c in cells:
             table.add_row(*[escape(c[i]) for i in [0] + chunk])
         tables.append(table)
+    if wide:
+        return _Natural(tables[0], used + 1)
     return tables[0] if len(tables) == 1 else Group(*tables)
 
 
@@ -93,7 +108,7 @@ _PAIRS = [("slip", "slip"), ("branch", "branch"), ("deborah_slip", "De"), ("regi
           ("undrained_fit_verdict", "undrained fit")]
 
 
-def _print_run(out, analysis, written: dict):
+def _print_run(out, analysis, written: dict, wide: bool = False):
     from rich.markup import escape
 
     from ..units import ResultUnits
@@ -107,18 +122,19 @@ def _print_run(out, analysis, written: dict):
               "velocities in V_s; stresses in σ", highlight=False)
     columns = _CATALOG if info.has_fluid else _CATALOG[:-2]
     shown = [dict(r, onset_time_ms=r["onset_time_s"] * 1e3, duration_us=r["duration_s"] * 1e6) for r in analysis.catalog]
-    out.print(_table(f"slips ({len(analysis.catalog)})", columns, shown))
+    out.print(_table(f"slips ({len(analysis.catalog)})", columns, shown, wide=wide))
     stats = [{"quantity": k, **v} for k, v in analysis.summary.items() if v["n"]]
     out.print(_table("over all slips of this run", [("quantity", "quantity"), ("mean", "mean"), ("std", "std"),
-                                                    ("min", "min"), ("max", "max"), ("n", "n")], stats))
+                                                    ("min", "min"), ("max", "max"), ("n", "n")], stats, wide=wide))
     notch = "notch-filtered" if analysis.notch else "unfiltered"
     fits = [dict(r, duration_us=r["duration_s"] * 1e6) for r in analysis.fits]
-    out.print(_table(f"block-slider fits (thesis Eq. 3) and mean μ_d (Eq. 7, {notch})", _FITS, fits))
+    out.print(_table(f"block-slider fits (thesis Eq. 3) and mean μ_d (Eq. 7, {notch})", _FITS, fits, wide=wide))
     for row in analysis.fits:
         if row["reason"]:
             out.print(f"  slip {row['number']}: {escape(row['reason'])}", highlight=False)
     if analysis.pairs:
-        out.print(_table("drained / undrained pairs (times since loading began)", _PAIRS, analysis.pair_rows))
+        out.print(_table("drained / undrained pairs (times since loading began)", _PAIRS, analysis.pair_rows,
+                         wide=wide))
         for row in analysis.pair_rows:
             for text in (row["fit_reason"], row["note"]):
                 if text:
@@ -167,6 +183,8 @@ def register(app: typer.Typer) -> None:
         as_json: bool = typer.Option(False, "--json", help="machine-readable output (NaN as null)"),
         main: str = typer.Option("first", "--main", help="compared event of each branch: first (the forked "
                                  "slip) or largest"),
+        wide: bool = typer.Option(False, "--wide", help="one table per section at its full width, past the terminal's edge if "
+                              "need be (default: split to fit)"),
     ):
         """Slip catalog, block-slider fits, μ_d(t) and drained/undrained pair types.
 
@@ -195,7 +213,7 @@ def register(app: typer.Typer) -> None:
                 continue
             done.append((analysis, written))
             if not as_json:
-                _print_run(out, analysis, written)
+                _print_run(out, analysis, written, wide)
         all_pairs = [p for a, _ in done for p in a.pairs]
         summary = campaign(all_pairs) if all_pairs else None
         if as_json:

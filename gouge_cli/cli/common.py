@@ -5,6 +5,7 @@ codes: 0 done, 2 bad input, 3 physics failure or full disk, 130 interrupted)."""
 from __future__ import annotations
 
 import functools
+import os
 import sys
 
 import typer
@@ -14,7 +15,8 @@ from rich.markup import escape
 from ..errors import EXIT_BAD_INPUT, ConfigError, InputError, PhysicsFailure, bounded, describe
 
 
-_WIDE = None if sys.stdout.isatty() else 200
+# a terminal's width, or $COLUMNS when set (a pipe, the docs' tutorials); else 200 columns for a pipe
+_WIDE = None if sys.stdout.isatty() or os.environ.get("COLUMNS", "").isdigit() else 200
 
 
 

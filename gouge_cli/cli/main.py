@@ -121,11 +121,11 @@ def resume(
 def slips(
     run_dir: Optional[Path] = typer.Argument(None, help="run directory (default: the latest under runs/)"),
     as_json: bool = typer.Option(False, "--json", help="machine-readable output"),
+    wide: bool = typer.Option(False, "--wide", help="one table at its full width, past the terminal's edge if need be "
+                          "(default: split to fit)"),
 ):
     """List the slips detected in a run (the catalog written while it ran)."""
     import json
-
-    from rich.table import Table
 
     from ..io.runfile import slip_catalog
     from ..io.rundir import refuse_if_in_progress
@@ -142,7 +142,7 @@ def slips(
 
     from ..io.runfile import RunReader
     from ..units import ResultUnits
-    from .analysis_cmds import _fmt
+    from .analysis_cmds import _table
 
     with RunReader(target, allow_running=True) as reader:
         info = reader.info
@@ -153,17 +153,13 @@ def slips(
                                ("peak_velocity_over_Vs", units.V_s_m_s, "peak_velocity_m_s"),
                                ("stress_drop", units.sigma_MPa, "stress_drop_MPa")):
             e[si] = e[key] * scale if e.get(key) is not None else None
-    table = Table(title=escape(f"slips of {target}: times in t0 since loading began (stored clock − {origin:.6g} t0); "
-                        f"{units.caption()}"), title_justify="left")
-    cols = (("number", "#"), ("onset_time", "onset [t0]"), ("onset_time_ms", "onset [ms]"),
+    out.print(escape(f"slips of {target}: times in t0 since loading began (stored clock − {origin:.6g} t0); "
+                     f"{units.caption()}"), highlight=False)
+    cols = [("number", "#"), ("onset_time", "onset [t0]"), ("onset_time_ms", "onset [ms]"),
             ("duration", "duration [t0]"), ("duration_us", "duration [µs]"), ("static_strength", "τs/σ"),
             ("stress_drop", "Δτ/σ"), ("stress_drop_MPa", "Δτ [MPa]"), ("peak_velocity_over_Vs", "v_peak/V_s"),
-            ("peak_velocity_m_s", "v_peak [m/s]"), ("slip", "slip [d]"), ("checkpoint", "checkpoint"))
-    for _, header in cols:
-        table.add_column(escape(header), justify="right", no_wrap=True)
-    for e in catalog:
-        table.add_row(*["–" if e.get(c) is None else escape(_fmt(e[c], 5)) for c, _ in cols])
-    out.print(table)
+            ("peak_velocity_m_s", "v_peak [m/s]"), ("slip", "slip [d]"), ("checkpoint", "checkpoint")]
+    out.print(_table(f"slips ({len(catalog)})", cols, catalog, wide=wide, digits=5))
 
 
 @app.command("config")

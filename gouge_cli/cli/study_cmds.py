@@ -36,6 +36,8 @@ def register(app: typer.Typer) -> None:
         figures: bool = typer.Option(True, "--figures/--no-figures", help="draw RUN/study/figures"),
         quiet: bool = typer.Option(False, "--quiet"),
         yes: bool = typer.Option(False, "--yes", help="start a loading run estimated above 1 h without asking"),
+        wide: bool = typer.Option(False, "--wide", help="one table per section at its full width, past the terminal's edge "
+                              "if need be (default: split to fit)"),
     ):
         """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
         from ..analysis.forkpairs import perm_text
@@ -59,12 +61,13 @@ def register(app: typer.Typer) -> None:
         except StudyInterrupted as e:
             fail(str(e), EXIT_INTERRUPTED)
         out.print(_table(f"study of {result.run_dir} ({len(result.rows)} pairs; full table in study/table.csv)",
-                         _COLUMNS, result.rows))
+                         _COLUMNS, result.rows, wide=wide))
         for g in result.summary:
             side = [{"quantity": a, "this study": b, "thesis": c} for a, b, c in summary_lines(g)]
             regimes = ", ".join(f"{k} {v}" for k, v in g["regimes"].items())
             out.print(_table(f"κ_c = {perm_text(g['permeability'])} d² ({regimes}): summary (transient slips left "
                              "out) next to the thesis (κ_c = 1e-05)",
-                             [("quantity", "quantity"), ("this study", "this study"), ("thesis", "thesis")], side))
+                             [("quantity", "quantity"), ("this study", "this study"), ("thesis", "thesis")], side,
+                             wide=wide))
         out.print(f"ran {len(result.ran)} branches, {len(result.skipped)} done before; wrote "
                   f"{result.run_dir / 'study'}", highlight=False)

@@ -34,7 +34,7 @@ def wall_velocity(pair, ax=None, fit: bool = True, since_onset: bool = True, sha
     events = pair.events
     origin = 0.0
     if since_onset and events["drained"] is not None:
-        origin = float(events["drained"].onset_time) - pair.time_offset
+        origin = float(events["drained"].onset_time)          # since loading (Pair.events)
     t = ds["time"].values - origin
     for branch in ("drained", "undrained"):
         v = ds["wall_vx"].sel(branch=branch).values / V_s
@@ -42,7 +42,7 @@ def wall_velocity(pair, ax=None, fit: bool = True, since_onset: bool = True, sha
         ax.plot(t, v, color=_COLOR[branch], lw=1.0, label=label)
         event = events[branch]
         if shade and event is not None:
-            ax.axvspan(event.onset_time - pair.time_offset - origin, event.end_time - pair.time_offset - origin,
+            ax.axvspan(event.onset_time - origin, event.end_time - origin,
                        color=_COLOR[branch], alpha=0.08, lw=0)
         curve = pair.fit_curve(branch) if fit else None
         if curve is not None:

@@ -95,3 +95,34 @@ def test_missing_config_path_suggests_the_shipped_one(tmp_path, monkeypatch):
     out = runner.invoke(app, ["config", "configs/demo.yaml"])
     assert out.exit_code == EXIT_BAD_INPUT
     assert str(ROOT / "configs" / "demo.yaml") in out.output and "configs/configs" not in out.output
+
+
+def test_a_bracket_after_a_word_is_no_unit():
+    """`pip install 'gouge[gpu]'` in a description is no unit: numerics.device has none, and every unit is
+    one of the scales' (d, E, t0, ...), never a word of the text."""
+    from gouge_cli.config_doc import key_rows
+
+    assert split_description("where: cpu or gpu (pip install 'gouge[gpu]'), same bits")[0] == ""
+    assert split_description("time step [t0]; default dt_safety * bound") == ("t0", "time step; default dt_safety * bound")
+    rows = {r["key"]: r for r in key_rows()}
+    assert rows["numerics.device"]["unit"] == ""
+    assert "gouge[gpu]" in rows["numerics.device"]["meaning"]
+    line = next(x for x in commented_defaults().splitlines() if x.strip().startswith("device:"))
+    assert "[gpu]" not in line.split("#", 1)[1].split("gouge")[0]
+    allowed = {"", "-", "t0", "d", "E", "1/t0", "m", "Pa", "kg/m3", "rho_s", "E/d", "v0", "rho d^2", "d^2", "1/E",
+               "E t0"}
+    assert {r["unit"] for r in rows.values()} <= allowed
+
+
+def test_getting_started_lists_every_extra():
+    """The extras of pyproject.toml are all named in Getting started's install section."""
+    import re
+
+    toml = (ROOT / "pyproject.toml").read_text()
+    block = toml.split("[project.optional-dependencies]", 1)[1].split("\n[", 1)[0]
+    extras = re.findall(r"^([\w-]+)\s*=", block, flags=re.M)
+    assert "gpu" in extras and "docs" in extras
+    page = (ROOT / "docs" / "getting_started.md").read_text()
+    sentence = page[page.index("Extras:"):].split("\n\n")[0]
+    for name in extras:
+        assert re.search(rf"`{re.escape(name)}`", sentence), name

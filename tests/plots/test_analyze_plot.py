@@ -160,3 +160,64 @@ def test_plot_missing_slip_is_bad_input(forked_run):
     result = gouge("plot", forked_run, "--slip", 99)
     assert result.exit_code == EXIT_BAD_INPUT
     assert "no slip number 99" in result.output
+
+
+def _at_80_columns(*args) -> str:
+    """A command's output through a pipe with COLUMNS=80 (what an 80-column terminal gets)."""
+    import os
+    import subprocess
+    import sys
+
+    env = dict(os.environ, COLUMNS="80", TERM="dumb")
+    proc = subprocess.run([sys.executable, "-m", "gouge_cli.cli", *map(str, args)], capture_output=True, text=True,
+                          env=env)
+    assert proc.returncode == 0, proc.stderr
+    return proc.stdout
+
+
+def _table_lines(text: str) -> list[str]:
+    return [line for line in text.splitlines() if line[:1] in "┏┃┡│└╇┗"]
+
+
+def test_tables_are_readable_at_80_columns(forked_run):
+    """`gouge slips` and `gouge analyze` at 80 columns: no value cut (no ellipsis), no table line past the
+    edge, every column header whole and every slip's row in each split table; --wide keeps one table."""
+    from gouge_cli.cli.analysis_cmds import _CATALOG, _FITS, _PAIRS, _fmt
+
+    catalog = json.loads(gouge("slips", forked_run, "--json").output)
+    text = _at_80_columns("slips", forked_run)
+    lines = _table_lines(text)
+    assert lines and "…" not in text and max(map(len, lines)) <= 80, text
+    for header in ("#", "onset [t0]", "duration [µs]", "τs/σ", "Δτ/σ", "Δτ [MPa]", "v_peak/V_s", "slip [d]",
+                   "checkpoint"):
+        assert header in text, header
+    parts = text.count("slips (")
+    assert parts >= 2                                    # 12 columns do not fit 80: split
+    first_cells = [line.split("│")[1].strip() for line in lines if line.startswith("│")]
+    for e in catalog:
+        assert f" {_fmt(e['static_strength'], 5)} " in text
+        assert first_cells.count(str(e["number"])) == parts        # the key column in every part
+    wide = _at_80_columns("slips", forked_run, "--wide")
+    assert "(1/" not in wide and max(map(len, _table_lines(wide))) > 80 and "…" not in wide
+
+    text = _at_80_columns("analyze", forked_run)
+    lines = _table_lines(text)
+    assert "…" not in text and max(map(len, lines)) <= 80, text
+    for _, header in _CATALOG[:-2] + _FITS + _PAIRS:
+        assert header in text, header
+
+
+def test_split_tables_fit_any_width():
+    """The table helper of analyze, slips and study splits any number of columns to the width asked."""
+    from rich.console import Console
+
+    from gouge_cli.cli.analysis_cmds import _table
+
+    columns = [("key", "#")] + [(f"c{i}", f"column number {i} [unit]") for i in range(12)]
+    rows = [dict(key=n, **{f"c{i}": 12345.678 * n + i / 7 for i in range(12)}) for n in range(1, 4)]
+    for width in (60, 80, 100, 140):
+        console = Console(width=width, record=True, file=open("/dev/null", "w"))
+        console.print(_table("a table", columns, rows, width=width))
+        text = console.export_text()
+        assert "…" not in text and max(map(len, text.splitlines())) <= width
+        assert all(h in text for _, h in columns)
