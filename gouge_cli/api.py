@@ -38,6 +38,7 @@ from .analysis.study import transient_slips
 from .config import Config, build_config, load_config
 from .errors import AnalysisError, ConfigError, SlipNotFoundError
 from .io.filedoc import ANALYSIS_UNITS, SLIP_ATTRS, TIME_ORIGIN
+from .io.layout import RunLayout
 from .io.runfile import RunInfo, RunReader, read_series_items
 
 __all__ = ["Run", "Fork", "Pair", "open_run", "open_study", "open_campaign", "analyze", "figures", "run", "restart",
@@ -531,7 +532,7 @@ def restart(run: Run | Path | str, slip: int, perm=(), overrides=None, duration:
     run_dir = _run_dir(run)
     perms = [perm] if isinstance(perm, (int, float)) else list(perm)
     run_fork(run_dir, slip, perms, _sets(overrides), duration, force=force, quiet=quiet)
-    fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
+    fork_dir = RunLayout(run_dir).fork(slip).root
     if perms:
         write_pair_json(fork_dir, main)
     return Fork(fork_dir)

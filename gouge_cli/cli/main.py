@@ -84,6 +84,7 @@ def restart(
     import json
 
     from ..io.filedoc import json_safe
+    from ..io.layout import RunLayout
     from ..workflows.fork import run_fork
     from ..workflows.pairs import write_pair_json
 
@@ -96,7 +97,7 @@ def restart(
         fail(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
     summary = run_fork(target, slip, perm, set_, duration, force=force, quiet=quiet)
     if perm:
-        summary["pair"] = write_pair_json(target / "forks" / f"slip_{slip:03d}", main)
+        summary["pair"] = write_pair_json(RunLayout(target).fork(slip).root, main)
     out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
 
 

@@ -38,7 +38,7 @@ def register(app: typer.Typer) -> None:
         yes: bool = typer.Option(False, "--yes", help="start a loading run estimated above 1 h without asking"),
     ):
         """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
-        from ..analysis.forkpairs import perm_text
+        from ..io.layout import perm_text
         from ..analysis.study import summary_lines
         from ..errors import StudyInterrupted
         from ..workflows.study import parse_slips, run_study

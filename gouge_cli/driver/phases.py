@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..io import provenance
 from ..io.checkpoint import snapshot_of, write_checkpoint
+from ..io.layout import RunLayout
 from ..io.rundir import ensure_space
 from ..io.runfile import RunFile
 from ..kernels import layout as L
@@ -35,9 +36,9 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     recorder with its ring, energy guard) carry on. Returns (status, recorder); raises
     PhysicsError after recording it."""
     config = sim.config
-    ck_dir = out_dir / "checkpoints" if checkpoints else None
+    layout = RunLayout(out_dir) if checkpoints else None
     saved = resume_from.extra if resume_from is not None else {}
-    recorder = SlipRecorder(config, sim, writer, ck_dir, saved.get("slip_recorder"),
+    recorder = SlipRecorder(config, sim, writer, layout, saved.get("slip_recorder"),
                             resume_from.attached if resume_from is not None else None)
     guards = guard_callbacks(sim)
     guards[0].action.load_state_dict(saved.get("guards", {}))
@@ -71,14 +72,14 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
                             info=f"tau/sigma {row['tau_over_sigma']:.3f}, slips {recorder.count}")
 
     def latest(s: Simulation):
-        if ck_dir is not None:
+        if layout is not None:
             writer.flush()
             rec_state, ring = recorder.full_state()
             extra = {"phase": "loading", "slip_recorder": rec_state, "guards": guards[0].action.state_dict()}
             if scaling is not None:             # stick scaling: its state
                 scaling.tally(s)
                 extra["stick_scaling"] = scaling.state_dict()
-            write_checkpoint(ck_dir / "latest.h5", snapshot_of(s, extra, ring))
+            write_checkpoint(layout.latest, snapshot_of(s, extra, ring))
 
     def keep(s: Simulation):                    # stick scaling: ring states carry the energy guard's history
         recorder.keep(s, {"guards": guards[0].action.state_dict()})
@@ -176,7 +177,7 @@ def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False,
     compaction (on its 100 t0 checks) and on Ctrl-C, so that `gouge resume` continues a
     compaction too. Progress is shown toward the settling criterion (progress.SettleReport)."""
     config = sim.config
-    latest = out_dir / "checkpoints" / "latest.h5"
+    latest = RunLayout(out_dir).latest
     chunk = sim.steps_for(100.0)
     every = max(1, int(round(config.output.checkpoint_interval / 100.0)))
 

@@ -15,11 +15,10 @@ drops (too small) discards its pending state.
 from __future__ import annotations
 
 from collections import deque
-from pathlib import Path
-
 import numpy as np
 
 from ..io.checkpoint import Checkpoint, snapshot_of, write_checkpoint
+from ..io.layout import RunLayout
 from ..config import Config
 from .detector import Slip, SlipDetector
 from ..kernels.layout import W_VX
@@ -45,11 +44,12 @@ def make_detector(config: Config) -> SlipDetector:
 class SlipRecorder:
     """Time-series callback: detect slips, persist the pre-slip checkpoint, write the catalog."""
 
-    def __init__(self, config: Config, sim, run_file, checkpoint_dir: Path | None, state: dict | None = None,
+    def __init__(self, config: Config, sim, run_file, layout: RunLayout | None, state: dict | None = None,
                  attached: dict | None = None):
+        """`layout`: the run directory whose slip checkpoints it writes (None: none written)."""
         self.config = config
         self.run_file = run_file
-        self.checkpoint_dir = checkpoint_dir
+        self.layout = layout
         self.lead = lead_time(config)
         self.ring_every = self.ring_steps(sim)
         self.ring: deque[Checkpoint] = deque(maxlen=config.slips.ring)
@@ -178,14 +178,14 @@ class SlipRecorder:
         self._deborah.clear()
         entry["checkpoint"] = ""
         entry["checkpoint_time"] = float("nan")
-        if self.pending is not None and self.checkpoint_dir is not None:
-            name = f"slip_{self.count:03d}.h5"
+        if self.pending is not None and self.layout is not None:
+            path = self.layout.slip_checkpoint(self.count)
             extra = dict(self.pending.extra)
             extra.update(slip=self.count, onset_time=slip.onset_time)
-            write_checkpoint(self.checkpoint_dir / name,
+            write_checkpoint(path,
                              Checkpoint(self.pending.config, self.pending.state, self.pending.fluid, extra,
                                         provenance=self.pending.provenance))
-            entry["checkpoint"] = f"checkpoints/{name}"
+            entry["checkpoint"] = self.layout.relative(path)
             entry["checkpoint_time"] = self.pending.time
         self.slips.append(entry)
         if self.run_file is not None:

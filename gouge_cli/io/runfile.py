@@ -61,6 +61,7 @@ from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, d
 from ..kernels import layout as L
 from ..kernels import measure as M
 from .integrity import SEAL, STRUCTURE_ERRORS, check_seal, read, seal, seal_tree, stored_seal, structure_error
+from .layout import RUN_FILE, RunLayout
 from .rundir import open_run_file
 
 # name -> (unit, description); units are the dimensionless scales of docs/physics/units.md
@@ -278,7 +279,7 @@ def run_status(h5_path: Path) -> str | None:
 
 def slip_catalog(run_dir: Path) -> list[dict]:
     """The run's slip catalog (one dict of attributes per slip, in order; [] if none)."""
-    with open_run_file(Path(run_dir) / "run.h5") as h5:
+    with open_run_file(RunLayout(run_dir).run_file) as h5:
         return read_slips(h5) or []
 
 
@@ -357,9 +358,9 @@ def _locate(path: Path) -> tuple[Path, Path]:
         return path.parent, path
     if not path.exists():
         raise NotARunError(f"{path} does not exist")
-    h5_path = path / "run.h5"
+    h5_path = RunLayout(path).run_file
     if not h5_path.is_file():
-        raise NotARunError(f"{path} is not a gouge run directory (no run.h5 in it); "
+        raise NotARunError(f"{path} is not a gouge run directory (no {RUN_FILE} in it); "
                            "give the directory that `gouge run --out` or `gouge restart` wrote")
     return path, h5_path
 

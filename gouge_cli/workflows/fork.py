@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..analysis.forkpairs import branch_name
+from ..io.layout import RunLayout, branch_name
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint
 from ..config import build_config, Config
@@ -104,7 +104,7 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     if duration is None:
         span = float(entry["end_time"]) - ck.time
         duration = 5.0 * span + 2.0 * lead_time(ck.config)
-    out_dir = run_dir / "forks" / f"slip_{slip:03d}" / name
+    out_dir = RunLayout(run_dir).fork(slip).branch(perm).root
     out_dir.mkdir(parents=True, exist_ok=True)
     with RunLock(out_dir, f"gouge restart --slip {slip} ({name})"):
         return _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet)
@@ -113,7 +113,7 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
 def _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet):
     t0 = time.perf_counter()
     sim = Simulation(config, arrays=ck.state)
-    writer = RunFile(out_dir / "run.h5", config, sim.dt, extra_attrs={
+    writer = RunFile(RunLayout(out_dir).run_file, config, sim.dt, extra_attrs={
         "parent_run": os.path.relpath(run_dir, out_dir), "parent_checkpoint": str(entry["checkpoint"]),
         "fork_slip": slip, "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
         "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
@@ -165,11 +165,12 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     note = provenance.risk_line(ck.provenance, f"the checkpoint of slip {slip}")
     if note:
         print(note, file=sys.stderr, flush=True)
-    fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
+    fork = RunLayout(run_dir).fork(slip)
+    fork_dir = fork.root
     names = [None] + list(perms)
-    finished = {p: branch_status(fork_dir / branch_name(p)) == "finished" for p in names}
+    finished = {p: branch_status(fork.branch(p).root) == "finished" for p in names}
     if all(finished.values()) and not force:
-        last = fork_dir / branch_name(names[-1]) / "run.h5"
+        last = fork.branch(names[-1]).run_file
         raise RunDirError(f"{last} exists (finished); pass --force to run this branch again")
     kept = [] if force else [_finished_branch(fork_dir, p) for p in names if finished[p]]
     branches = names if force else [p for p in names if not finished[p]]
