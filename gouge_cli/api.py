@@ -360,7 +360,7 @@ class Pair:
 
     @property
     def events(self) -> dict:
-        """{"drained", "undrained"}: the compared slips (driver.detector.Slip, stored clock) or None."""
+        """{"drained", "undrained"}: the compared slips (model.slip_rule.Slip, stored clock) or None."""
         return {"drained": self.result.drained_slip, "undrained": self.result.undrained_slip}
 
     @property

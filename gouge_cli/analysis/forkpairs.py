@@ -81,7 +81,7 @@ def deborah_during(time, deborah, slip) -> tuple[float, float]:
 
 def pair_definition(info: RunInfo, main: str = "first") -> PairDefinition:
     """The pair definition with this run's detector thresholds."""
-    return PairDefinition.for_run(info.slip_params, main=main)
+    return PairDefinition.for_run(info.slip_rule, main=main)
 
 
 

@@ -272,6 +272,21 @@ class Simulation:
             row.update(self.fluid.observe())
         return row
 
+    def contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(i, j, fx, fz): the touching pairs by original grain id and the contact force on i
+        (kernels.measure.contact_list), shape (m,) each, for snapshots."""
+        s, p = self.state, self.params
+        npairs = int(s.start[-1])
+        ci = np.empty(npairs, np.int32)
+        cj = np.empty(npairs, np.int32)
+        cfx = np.empty(npairs)
+        cfz = np.empty(npairs)
+        m = M.contact_list(s.x, s.z, s.radius, s.start, s.index, s.shear, s.width, p[L.C_NORMAL],
+                           p[L.C_TANGENTIAL], p[L.FRICTION], ci, cj, cfx, cfz)
+        ci[:m] = s.id[ci[:m]]
+        cj[:m] = s.id[cj[:m]]
+        return ci[:m], cj[:m], cfx[:m], cfz[:m]
+
     def measure(self) -> dict:
         """observe(), shared by the callbacks of one step: while run fires a step's callbacks
         (which leave the state alone), the first that measures (guards, the series writer,

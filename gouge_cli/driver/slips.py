@@ -20,7 +20,7 @@ import numpy as np
 from ..io.checkpoint import Checkpoint, snapshot_of, write_checkpoint
 from ..io.layout import RunLayout
 from ..config import Config
-from .detector import Slip, SlipDetector
+from ..model.slip_rule import Slip, SlipDetector, SlipRule
 from ..kernels.layout import W_VX
 
 RING_PER_LEAD = 4      # pre-slip ring states kept per slips.lead (spaced lead / RING_PER_LEAD)
@@ -35,12 +35,6 @@ def lead_time(config: Config) -> float:
     return s.lead_stress * config.loading.normal_stress / rate
 
 
-def make_detector(config: Config) -> SlipDetector:
-    s = config.slips
-    return SlipDetector(config.loading.velocity, s.start_factor, s.end_factor, s.min_duration,
-                        s.min_slip, s.merge_gap)
-
-
 class SlipRecorder:
     """Time-series callback: detect slips, persist the pre-slip checkpoint, write the catalog."""
 
@@ -53,11 +47,11 @@ class SlipRecorder:
         self.lead = lead_time(config)
         self.ring_every = self.ring_steps(sim)
         self.ring: deque[Checkpoint] = deque(maxlen=config.slips.ring)
-        self.hi = config.slips.start_factor * config.loading.velocity
-        self.lo = config.slips.end_factor * config.loading.velocity
+        self.rule = SlipRule.from_config(config)
+        self.hi, self.lo = self.rule.hi, self.rule.lo
         state = state or {}
         self.detector = (SlipDetector.from_state_dict(state["detector"]) if "detector" in state
-                         else make_detector(config))
+                         else self.rule.detector())
         self.count = int(state.get("count", 0))
         self.last_quiet = float(state.get("last_quiet", sim.state.time))
         self.above = bool(state.get("above", False))

@@ -62,7 +62,7 @@ def overview_figure(reader: RunReader, catalog: list[dict], path: Path, max_poin
             ax.text(0.5, 0.5, f"no {name} series", transform=ax.transAxes, ha="center", color="0.5")
         shade_slips(ax, spans)
         ax.set_ylabel(LABEL[label])
-    hi = reader.info.slip_params["start_factor"]
+    hi = reader.info.slip_rule.start_factor
     axes[1].axhline(hi, color="0.55", lw=0.7, ls=":", label=f"slip trigger {hi:g} V_s")
     axes[1].legend(loc="upper left", fontsize=8, frameon=False)
     axes[-1].set_xlabel(LABEL["time"])
@@ -290,7 +290,7 @@ def comparison_figure(drained: RunReader, branches: list, path: Path) -> Path:
     for ax, label in zip(axes, ("tau", "velocity", "pressure")):
         ax.set_ylabel(LABEL[label])
     axes[2].set_ylabel("P / σ  (mean; band: min – max)")
-    axes[1].axhline(info.slip_params["start_factor"], color="0.55", lw=0.7, ls=":")
+    axes[1].axhline(info.slip_rule.start_factor, color="0.55", lw=0.7, ls=":")
     axes[0].legend(loc="lower left", fontsize=8, frameon=True, framealpha=0.85, edgecolor="none")
     axes[-1].set_xlabel(LABEL["time"])
     scale = units.t0_s * 1e3
