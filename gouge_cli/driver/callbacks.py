@@ -30,6 +30,9 @@ class Callback:
     def act(self, sim) -> None:
         pass
 
+    def sync(self, sim) -> None:
+        """Bring the state up to date before it is saved (default: nothing to do)."""
+
     def state_dict(self) -> dict | None:
         return None
 

@@ -18,7 +18,7 @@ from ..kernels import layout as L
 from ..kernels import measure as M
 from ..kernels import step as K
 from ..model.packing import build_packing
-from .guards import NonFiniteGuard, OverlapGuard, Scan
+from .guards import check
 from .schedules import Every
 from .settling import SettleCheck, settle_check
 from ..model.state import State
@@ -298,13 +298,6 @@ class Simulation:
             self._measured = {"step": self.state.step, "row": self.observe()}
         return dict(self._measured["row"])
 
-    def check(self):
-        """Stop with a PhysicsError on NaN/inf or a runaway overlap (the non-finite and overlap
-        guards of gouge_cli.driver.guards, run once; used while compacting and by the benchmark)."""
-        scan = Scan.of(self)
-        NonFiniteGuard()(self, scan)
-        OverlapGuard()(self, scan)
-
     # ---- compaction --------------------------------------------------------------------
     def compact(self, on_chunk: Callable = None, start: tuple[float, int] | None = None) -> dict:
         """Settle under the normal stress alone until the top wall and grains are still, then
@@ -312,7 +305,7 @@ class Simulation:
         every 100 t0 of steps counted from `start` = (time, step) where compaction began
         (default: now), so a compaction resumed from any step ends where it would have:
 
-            "settling": check() (non-finite and overlap guards), observe, settle_check -> self.settling;
+            "settling": guards.check (non-finite and overlap guards), observe, settle_check -> self.settling;
                         stop when settled (min_time passed, wall and grains still) or at max_time
             "on_chunk": on_chunk(sim, elapsed), if given
 
@@ -325,7 +318,7 @@ class Simulation:
         last = {"row": None, "elapsed": 0.0}
 
         def settling(sim: Simulation):
-            sim.check()
+            check(sim)
             row = last["row"] = sim.measure()
             elapsed = last["elapsed"] = sim.state.time - t0
             sim.settling = settle_check(sim.state, row["kinetic_energy"], row["wall_vz"], elapsed, v_tol, cfg.min_time)

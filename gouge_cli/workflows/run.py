@@ -23,6 +23,7 @@ from ..driver.phases import compaction_phase, load_phase
 from ..errors import RunDirError
 from ..io.rundir import check_run_dir, open_run_file, prepare_run_dir, RunLock
 from ..driver.simulation import Simulation
+from ..driver.slips import recorded_count
 from ..errors import PhysicsError
 
 
@@ -51,11 +52,7 @@ def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=
     recorder = None
     try:
         if sim.phase == L.COMPACTION:
-            start = None
-            if resume_from is not None and "compaction_start" in resume_from.extra:
-                t0, step0 = resume_from.extra["compaction_start"]
-                start = (float(t0), int(step0))
-            compaction_phase(sim, out_dir, live, quiet, start)        # (ends with the fluid started)
+            compaction_phase(sim, out_dir, live, quiet, resume_from)        # (ends with the fluid started)
             writer.set_attr("compaction_settled", bool(sim.compaction_settled))
             if not sim.compaction_settled:
                 print(f"warning: compaction did not settle within compaction.max_time = "
@@ -157,10 +154,10 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
             with open_run_file(layout.run_file) as h5:
                 if str(h5.attrs["status"]) == "finished":
                     raise RunDirError(f"{run_dir} already finished; nothing to resume")
-            rec_state = ck.extra.get("slip_recorder", {})
-            _refuse_damaged(layout.run_file, ck.time, ck.step, int(rec_state.get("count", 0)))
+            count = recorded_count(ck.extra)
+            _refuse_damaged(layout.run_file, ck.time, ck.step, count)
             writer = RunFile(layout.run_file, ck.config, sim.dt, mode="a", threads=sim.threads)
-            writer.truncate_after(ck.time, ck.step, int(rec_state.get("count", 0)))
+            writer.truncate_after(ck.time, ck.step, count)
             writer.set_attr("status", "running")
         return _drive(sim, writer, run_dir, live=live, quiet=quiet, label=f"resume {ck.config.name}",
                       resume_from=ck)
