@@ -526,16 +526,12 @@ def restart(run: Run | Path | str, slip: int, perm=(), overrides=None, duration:
             force: bool = False, main: str = "first", quiet: bool = True) -> Fork:
     """`gouge restart`: drained and undrained (one per ``perm`` [d^2]) branches of slip ``slip``; writes
     pair.json when ``perm`` is given; returns the opened :class:`Fork`."""
-    from .workflows.fork import run_fork
-    from .workflows.pairs import write_pair_json
+    from .workflows.fork import restart as run_restart
 
     run_dir = _run_dir(run)
     perms = [perm] if isinstance(perm, (int, float)) else list(perm)
-    run_fork(run_dir, slip, perms, _sets(overrides), duration, force=force, quiet=quiet)
-    fork_dir = RunLayout(run_dir).fork(slip).root
-    if perms:
-        write_pair_json(fork_dir, main)
-    return Fork(fork_dir)
+    run_restart(run_dir, slip, perms, _sets(overrides), duration, force=force, main=main, quiet=quiet)
+    return Fork(RunLayout(run_dir).fork(slip).root)
 
 
 def study(target: Path | str, perm, slips=None, main: str = "first", jobs: int | None = None,

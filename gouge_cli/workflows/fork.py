@@ -81,7 +81,7 @@ def check_perms(perms) -> None:
 
 def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | None = None,
                overrides: list[str] | None = None, live=None, quiet: bool = False,
-               stop_after_slip: bool | None = None) -> BranchResult:
+               stop_after_slip: bool | None = None, checkpoint=None) -> BranchResult:
     """Run one branch (drained: ``perm=None``) of slip ``slip`` into ``RUN/forks/slip_NNN/<branch>``.
 
     ``duration`` [t0] from the checkpoint; None: 5 x (end - checkpoint time) + 2 leads.
@@ -89,11 +89,13 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     Overwrites an existing branch directory. The branch directory is locked while it runs (so
     branches of one run may run in parallel), and the run itself must not be in progress. Dense
     snapshots while the branch slips: output.slip_frames, FORK_SLIP_FRAMES unless overridden.
+    ``checkpoint``: the slip's checkpoint read already with these overrides (its arrays are copied
+    into the branch's scene, never changed), so that a fork reads it once.
     """
     run_dir = Path(run_dir)
     refuse_if_in_progress(run_dir, f"restart --slip {slip}")
     entry = fork_entry(run_dir, slip)
-    ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
+    ck = checkpoint if checkpoint is not None else read_checkpoint(run_dir / entry["checkpoint"], overrides)
     frames = {} if any(o.split("=")[0].strip() == "output.slip_frames" for o in overrides or []) \
         else {"output": {"slip_frames": ck.config.output.slip_frames or FORK_SLIP_FRAMES}}
     config = branch_config(ck.config, perm, frames)
@@ -178,7 +180,7 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     results = []
     for perm in branches:
         try:
-            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet)
+            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet, checkpoint=ck)
         except OSError as exc:
             if exc.errno != errno.ENOSPC:
                 raise
@@ -194,6 +196,19 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     summary = pair_summary(run_dir, slip, ck.time - origin, [by_name[branch_name(p)] for p in names], origin,
                            ck.config.loading.velocity)
     summary["library_differences_from_parent"] = provenance.bit_risks(ck.provenance)
+    return summary
+
+
+def restart(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
+            duration: float | None = None, force: bool = False, main: str = "first", live=None,
+            quiet: bool = False) -> dict:
+    """`gouge restart` and :func:`gouge_cli.api.restart`: :func:`run_fork`, then, with
+    permeabilities, the fork's pair.json (its record also under "pair" in the returned summary)."""
+    from .pairs import write_pair_json
+
+    summary = run_fork(run_dir, slip, perms, overrides, duration, force=force, live=live, quiet=quiet)
+    if perms:
+        summary["pair"] = write_pair_json(RunLayout(run_dir).fork(slip).root, main)
     return summary
 
 
