@@ -51,7 +51,10 @@ class Simulation:
         self.compaction_start: tuple[float, int] | None = None     # (time, step) where compaction began
         self.settling: SettleCheck | None = None                    # the last check of compaction's criterion
         self.fluid = None
-        self._layers = None         # the GPU engine (numerics.device: gpu), made on the first dry advance
+        # numerics.device, resolved once: the GPU engine runs dry steps only (a wet scene's loading, with
+        # its pressure grid, runs on the cpu: gpu_fallback says so); made on the first dry advance
+        self.gpu = config.numerics.device == "gpu"
+        self._layers = None
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(L.N_OBSERVABLES)
         self._measured: dict | None = None      # measure()'s row while run fires a step's callbacks
@@ -95,6 +98,13 @@ class Simulation:
                                    "check the packing and fluid.cell_size", s.time)
         self.drag = (self.fluid.drag_x, self.fluid.drag_z)
 
+    @property
+    def gpu_fallback(self) -> str:
+        """Why numerics.device = gpu does not run this scene's steps now ('' if it does or was not asked)."""
+        if self.gpu and self.fluid is not None:
+            return "numerics.device = gpu runs dry steps only: this wet scene loads on the cpu"
+        return ""
+
     # ---- phase -------------------------------------------------------------------------
     @property
     def phase(self) -> int:
@@ -136,7 +146,7 @@ class Simulation:
 
     def _advance(self, left: int):
         s = self.state
-        if self.fluid is None and self.config.numerics.device == "gpu":
+        if self.gpu and self.fluid is None:
             self._gpu_layers().advance(left, params=self.params)
             return
         while left > 0:

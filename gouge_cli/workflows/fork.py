@@ -167,6 +167,9 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     note = provenance.risk_line(ck.provenance, f"the checkpoint of slip {slip}")
     if note:
         print(note, file=sys.stderr, flush=True)
+    if ck.config.numerics.device == "gpu" and not quiet:
+        print("note: numerics.device = gpu: the fork's branches run on the cpu (branch_config)",
+              file=sys.stderr, flush=True)
     fork = RunLayout(run_dir).fork(slip)
     fork_dir = fork.root
     names = [None] + list(perms)

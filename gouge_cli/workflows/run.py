@@ -59,6 +59,8 @@ def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=
                       f"{config.compaction.max_time:g} t0 (top wall or grains still moving); loading starts "
                       "anyway. Raise compaction.max_time, or compaction.damping, for a settled start.",
                       file=sys.stderr, flush=True)
+            if sim.gpu_fallback:
+                print(f"note: {sim.gpu_fallback}", file=sys.stderr, flush=True)
             writer.set_attr("load_start_time", sim.state.time)
             writer.set_attr("end_time", sim.state.time + config.run.duration)
             writer.append(sim.observe())
