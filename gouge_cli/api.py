@@ -49,6 +49,7 @@ from .analysis.study import transient_slips
 from .config import Config, build_config, load_config
 from .errors import AnalysisError, ConfigError, SlipNotFoundError
 from .io.filedoc import ANALYSIS_UNITS, SLIP_ATTRS, TIME_ORIGIN
+from .io.layout import RunLayout
 from .io.runfile import RunInfo, RunReader, read_series_items
 
 __all__ = ["Run", "Fork", "Pair", "open_run", "open_study", "open_campaign", "analyze", "figures", "run", "restart",
@@ -854,16 +855,12 @@ def restart(run: Run | Path | str, slip: int, perm=(), overrides=None, duration:
         >>> fork.pair(1e-5).type  # doctest: +SKIP
         'II'
     """
-    from .workflows.fork import run_fork
-    from .workflows.pairs import write_pair_json
+    from .workflows.fork import restart as run_restart
 
     run_dir = _run_dir(run)
     perms = [perm] if isinstance(perm, (int, float)) else list(perm)
-    run_fork(run_dir, slip, perms, _sets(overrides), duration, force=force, quiet=quiet)
-    fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
-    if perms:
-        write_pair_json(fork_dir, main)
-    return Fork(fork_dir)
+    run_restart(run_dir, slip, perms, _sets(overrides), duration, force=force, main=main, quiet=quiet)
+    return Fork(RunLayout(run_dir).fork(slip).root)
 
 
 def study(target: Path | str, perm, slips=None, main: str = "first", jobs: int | None = None,

@@ -152,7 +152,7 @@ class NumericsConfig(_Section):
         description="re-number the grains by position every this many neighbour-list rebuilds, so that "
                     "neighbours stay close in memory as the layer shears; 0 = never; default 20 from "
                     "2000 grains, else 0")
-    # stick scaling (gouge_cli.stick_scaling)
+    # stick scaling (gouge_cli.driver.stick_scaling)
     stick_scaling: float = Field(
         1.0, ge=1.0, le=1.0e4,
         description="inertia (density) scaling lambda of grains and walls while a loading run sticks: the "
@@ -182,17 +182,12 @@ class OutputConfig(_Section):
                     "(v_w >= slips.end_factor V_s), for movies; 0 = none; forks use 30 unless set [-]")
 
 
-# the slip detector's thresholds (multiples of V_s), defaults everywhere (config, detector, pair definition,
-# run-file reader): one place
-SLIP_START_FACTOR = 10.0
-SLIP_END_FACTOR = 2.0
-
-
 class SlipsConfig(_Section):
-    """Slip detection and the checkpoint kept before each slip (velocity thresholds relative to V_s)."""
+    """Slip detection and the checkpoint kept before each slip (velocity thresholds relative to V_s).
+    These defaults are the slip rule's everywhere (model.slip_rule.SlipRule takes them from here)."""
 
-    start_factor: float = Field(SLIP_START_FACTOR, gt=1, description="an event triggers when v_wall >= start_factor V_s [-]")
-    end_factor: float = Field(SLIP_END_FACTOR, gt=0, description="an event spans v_wall >= end_factor V_s [-]")
+    start_factor: float = Field(10.0, gt=1, description="an event triggers when v_wall >= start_factor V_s [-]")
+    end_factor: float = Field(2.0, gt=0, description="an event spans v_wall >= end_factor V_s [-]")
     min_duration: Time = Field(0.0, ge=0, description="drop events shorter than this [t0]")
     min_slip: Length = Field(0.0, ge=0, description="drop events slipping less than this [d]")
     merge_gap: Time = Field(0.0, ge=0, description="events closer than this merge into one slip [t0]")

@@ -24,7 +24,7 @@ from .friction import (
     wall_acceleration,
 )
 from .pairs import PairDefinition, PairResult, campaign_summary, classify_pair, complexity_criteria
-from ..driver.detector import Slip, SlipDetector, SubEvent, WallSeries, detect_slips, recurrence_intervals
+from ..model.slip_rule import Slip, SlipDetector, SlipRule, SubEvent, WallSeries, detect_slips, recurrence_intervals
 
 __all__ = [
     "BlockSliderFit",
@@ -32,6 +32,7 @@ __all__ = [
     "PairResult",
     "Slip",
     "SlipDetector",
+    "SlipRule",
     "SubEvent",
     "WallSeries",
     "block_slider_duration",

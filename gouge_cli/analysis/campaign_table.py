@@ -16,6 +16,7 @@ from .catalog import catalog_table, read_catalog, summary_statistics
 from .forkpairs import classify_fork, ForkPair, PAIR_COLUMNS
 from .report import _write_csv
 from .study import transient_slips
+from ..io.layout import RunLayout
 from ..io.runfile import RunReader
 
 PHASE_COLUMNS = ("x", "y", "n_pairs", "n_unclassified", "n_complex", "n_type_I", "n_type_II", "frac_complex",
@@ -58,7 +59,7 @@ def campaign_table(points: list[CampaignPoint]) -> tuple[list[dict], dict[float,
             row[f"{key}_mean"], row[f"{key}_std"] = stats[key]["mean"], stats[key]["std"]
         rows.append(row)
         for slip in p.fork_slips:
-            for pair in classify_fork(Path(p.run_dir) / "forks" / f"slip_{slip:03d}"):
+            for pair in classify_fork(RunLayout(p.run_dir).fork(slip).root):
                 perm = float(pair.row["permeability"])
                 if not _listed(perm, p.permeabilities):
                     continue

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..driver.detector import WallSeries, detect_slips
+from ..model.slip_rule import WallSeries
 from ..errors import NotARunError, SlipNotFoundError
 from ..io.runfile import RunReader, read_slips
 from .blockslider import BlockSliderFit, fit_block_slider
@@ -50,9 +50,8 @@ def _detected_catalog(reader: RunReader) -> list[dict]:
     s = reader.series(["time", "wall_x", "wall_vx", "tau_over_sigma", "porosity"])
     if s["wall_vx"] is None:
         raise NotARunError(f"{reader.info.h5_path} has no /series/wall_vx")
-    slips = detect_slips(s["time"], s["wall_vx"], reader.info.V_s, x_wall=s["wall_x"],
-                         tau_over_sigma=s["tau_over_sigma"], porosity=s["porosity"],
-                         **reader.info.slip_params)
+    slips = reader.info.slip_rule.detect(s["time"], s["wall_vx"], x_wall=s["wall_x"],
+                                         tau_over_sigma=s["tau_over_sigma"], porosity=s["porosity"])
     out = []
     for number, slip in enumerate(slips, start=1):
         entry = slip.to_dict()
@@ -69,7 +68,7 @@ def read_catalog(reader: RunReader, detect: bool = False) -> list[dict]:
     """The run's slips as dicts (the /slips catalog written while it ran).
 
     Runs without a /slips group (or ``detect=True``) are scanned with
-    :func:`~gouge_cli.driver.detector.detect_slips` using the run's own thresholds.
+    :meth:`~gouge_cli.model.slip_rule.SlipRule.detect` with the run's own rule.
     """
     catalog = None if detect else read_slips(reader.h5)
     return _detected_catalog(reader) if catalog is None else catalog

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import AnalysisError, DamagedFileError, NotARunError
+from ..io.layout import ForkLayout, RunLayout
 from ..io.runfile import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
 from .pairs import DRAINED_DE, UNDRAINED_DE, PairDefinition, PairResult, campaign_summary, classify_pair, regime  # noqa: F401
@@ -29,39 +30,14 @@ PAIR_COLUMNS = (
 
 
 
-def perm_text(perm: float) -> str:
-    """kappa_c in the one format of branch folders and labels: shortest exact scientific, e.g.
-    1e-05, 2.5e-05, 1e-03."""
-    return np.format_float_scientific(float(perm), trim="-", exp_digits=2)
-
-
-def branch_name(perm: float | None) -> str:
-    """Branch folder of a fork: ``drained`` or ``perm_<perm_text>`` (e.g. perm_1e-05, perm_1e-03)."""
-    return "drained" if perm is None else f"perm_{perm_text(perm)}"
-
-
-def branch_perm(path: Path) -> float:
-    """kappa_c of a ``perm_*`` branch folder (also the older ``perm_0.001`` spelling); inf if unreadable."""
-    try:
-        return float(Path(path).name[len("perm_"):])
-    except ValueError:
-        return math.inf
-
-
 def fork_dirs(run_dir: Path) -> list[Path]:
     """``RUN/forks/slip_NNN`` directories, in slip order."""
-    root = Path(run_dir) / "forks"
-    return sorted(p for p in root.glob("slip_*") if p.is_dir()) if root.is_dir() else []
-
+    return RunLayout(run_dir).fork_dirs()
 
 
 def fork_branches(fork_dir: Path) -> tuple[Path | None, list[Path]]:
     """(drained run dir or None, undrained ``perm_*`` run dirs sorted by permeability)."""
-    fork_dir = Path(fork_dir)
-    drained = fork_dir / "drained"
-    perms = [p for p in fork_dir.glob("perm_*") if (p / "run.h5").is_file()]
-    return (drained if (drained / "run.h5").is_file() else None), sorted(perms, key=branch_perm)
-
+    return ForkLayout(fork_dir).branches()
 
 
 @dataclass
@@ -106,7 +82,7 @@ def deborah_during(time, deborah, slip) -> tuple[float, float]:
 
 def pair_definition(info: RunInfo, main: str = "first") -> PairDefinition:
     """The pair definition with this run's detector thresholds."""
-    return PairDefinition.for_run(info.slip_params, main=main)
+    return PairDefinition.for_run(info.slip_rule, main=main)
 
 
 

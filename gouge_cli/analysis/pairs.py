@@ -9,7 +9,7 @@ decides which events are compared or what type a pair is.
 
 Rule (all thresholds are fields of :class:`PairDefinition`, velocities in units of V_s):
 
-* Events: slips found by :func:`~gouge_cli.driver.detector.detect_slips` with the run's own
+* Events: slips found by the run's own :class:`~gouge_cli.model.slip_rule.SlipRule` (its
   thresholds (trigger ``start_factor``, extent ``end_factor``). The *compared* event of each
   branch is its first slip (``main="first"``: the forked slip) or the one with the largest
   slip distance (``main="largest"``).
@@ -33,8 +33,7 @@ from dataclasses import asdict, dataclass, field, fields, replace
 import numpy as np
 
 from .blockslider import BlockSliderFit, fit_block_slider
-from ..config import SLIP_END_FACTOR, SLIP_START_FACTOR
-from ..driver.detector import Slip, WallSeries, detect_slips
+from ..model.slip_rule import Slip, SlipRule, WallSeries
 
 __all__ = ["PairDefinition", "PairResult", "classify_pair", "complexity_criteria", "campaign_summary",
            "compared_event", "static_strength", "regime", "DRAINED_DE", "UNDRAINED_DE", "SLOW", "CRITERIA"]
@@ -60,11 +59,11 @@ class PairDefinition:
 
     main: str = "first"
     strength_tol: float = 1e-3
-    start_factor: float = SLIP_START_FACTOR
-    end_factor: float = SLIP_END_FACTOR
-    min_duration: float = 0.0
-    min_slip: float = 0.0
-    merge_gap: float = 0.0
+    start_factor: float = SlipRule.start_factor
+    end_factor: float = SlipRule.end_factor
+    min_duration: float = SlipRule.min_duration
+    min_slip: float = SlipRule.min_slip
+    merge_gap: float = SlipRule.merge_gap
     slow_factor: float | None = None
     max_subevents: int = 1
     restart_factor: float | None = None
@@ -78,10 +77,17 @@ class PairDefinition:
             raise ValueError(f"main must be 'first' or 'largest', got {self.main!r}")
 
     @classmethod
-    def for_run(cls, slip_params: dict, **overrides) -> "PairDefinition":
-        """The definition with a run's detector thresholds (``RunInfo.slip_params``) and overrides."""
+    def for_run(cls, rule: SlipRule | dict, **overrides) -> "PairDefinition":
+        """The definition with a run's slip rule (``RunInfo.slip_rule``, or its config values as a
+        dict) and overrides."""
         names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in {**slip_params, **overrides}.items() if k in names and v is not None})
+        values = rule.config_values() if isinstance(rule, SlipRule) else rule
+        return cls(**{k: v for k, v in {**values, **overrides}.items() if k in names and v is not None})
+
+    def rule(self, V_s: float, start_factor: float | None = None) -> SlipRule:
+        """The slip rule of this definition at V_s (``start_factor``: another trigger, e.g. the slow one)."""
+        return SlipRule(V_s, start_factor or self.start_factor, self.end_factor, self.min_duration,
+                        self.min_slip, self.merge_gap)
 
     @property
     def slow_trigger(self) -> float:
@@ -91,10 +97,8 @@ class PairDefinition:
         return min(2.0 * self.end_factor, 0.5 * (self.start_factor + self.end_factor))
 
     def detect(self, s: WallSeries, V_s: float, start_factor: float | None = None) -> list[Slip]:
-        return detect_slips(s.t, s.v_wall, V_s, x_wall=s.x_wall, tau_over_sigma=s.tau_over_sigma,
-                            porosity=s.porosity, start_factor=start_factor or self.start_factor,
-                            end_factor=self.end_factor, min_duration=self.min_duration,
-                            min_slip=self.min_slip, merge_gap=self.merge_gap)
+        return self.rule(V_s, start_factor).detect(s.t, s.v_wall, x_wall=s.x_wall,
+                                                   tau_over_sigma=s.tau_over_sigma, porosity=s.porosity)
 
     def to_dict(self) -> dict:
         return dict(asdict(self), slow_trigger=self.slow_trigger)
@@ -186,7 +190,7 @@ def complexity_criteria(
     fit: BlockSliderFit | None,
     V_s: float,
     *,
-    start_factor: float = SLIP_START_FACTOR,
+    start_factor: float = SlipRule.start_factor,
     max_subevents: int = 1,
     restart_factor: float | None = None,
     creep_low_factor: float = 0.5,

@@ -148,7 +148,7 @@ def _print_run(out, analysis, written: dict, wide: bool = False):
 
 def _print_campaign(out, summary: dict, n_runs: int):
     """One line per permeability (pairs at different permeabilities are never pooled)."""
-    from ..analysis.forkpairs import perm_text
+    from ..io.layout import perm_text
 
     for g in summary["per_permeability"]:
         counts = ", ".join(f"{k}: {v}" for k, v in g["counts"].items() if v)

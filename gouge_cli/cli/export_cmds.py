@@ -15,16 +15,18 @@ import typer
 def _branches(run_dir: Path, fork: Optional[str]) -> list[Path]:
     """The run directory, or with --fork the branch directories it names under RUN/forks."""
     from ..errors import NotARunError
+    from ..io.layout import ForkLayout, RunLayout
 
     if fork is None:
         return [run_dir]
-    target = run_dir / "forks" / fork
-    if (target / "run.h5").is_file():
+    layout = RunLayout(run_dir)
+    target = layout.forks / fork
+    if RunLayout(target).run_file.is_file():
         return [target]
-    branches = sorted(p.parent for p in target.glob("*/run.h5")) if target.is_dir() else []
+    branches = [p.parent for p in ForkLayout(target).branch_run_files()] if target.is_dir() else []
     if not branches:
-        listed = sorted(str(p.parent.relative_to(run_dir / "forks")) for p in (run_dir / "forks").glob("*/*/run.h5"))
-        raise NotARunError(f"no fork {fork!r} under {run_dir / 'forks'}; forks there: {', '.join(listed) or 'none'}")
+        listed = sorted(str(p.parent.relative_to(layout.forks)) for p in layout.branch_run_files())
+        raise NotARunError(f"no fork {fork!r} under {layout.forks}; forks there: {', '.join(listed) or 'none'}")
     return branches
 
 

@@ -84,8 +84,7 @@ def restart(
     import json
 
     from ..io.filedoc import json_safe
-    from ..workflows.fork import run_fork
-    from ..workflows.pairs import write_pair_json
+    from ..workflows.fork import restart as run_restart
 
     target = _run_dir(run_dir)
     if duration is None and not until_slip_ends:
@@ -94,9 +93,7 @@ def restart(
         fail(f"--duration = {duration:g}: give a positive, finite time [t0]")
     if main not in ("first", "largest"):
         fail(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
-    summary = run_fork(target, slip, perm, set_, duration, force=force, quiet=quiet)
-    if perm:
-        summary["pair"] = write_pair_json(target / "forks" / f"slip_{slip:03d}", main)
+    summary = run_restart(target, slip, perm, set_, duration, force=force, main=main, quiet=quiet)
     out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
 
 

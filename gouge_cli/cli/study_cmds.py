@@ -40,7 +40,7 @@ def register(app: typer.Typer) -> None:
                               "if need be (default: split to fit)"),
     ):
         """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
-        from ..analysis.forkpairs import perm_text
+        from ..io.layout import perm_text
         from ..analysis.study import summary_lines
         from ..errors import StudyInterrupted
         from ..workflows.study import parse_slips, run_study

@@ -15,11 +15,13 @@ from pathlib import Path
 
 from ..io import provenance
 from ..io.checkpoint import snapshot_of, write_checkpoint
+from ..io.layout import RunLayout
 from ..io.rundir import ensure_space
 from ..io.runfile import RunFile
 from ..kernels import layout as L
 from ..model.timestep import slip_duration
-from .guards import guard_callbacks
+from .callbacks import Callback, restore, schedules, states
+from .guards import Guards
 from .progress import ProgressReport, SettleReport
 from ..errors import ConfigError, PhysicsError
 from .schedules import Every
@@ -30,82 +32,53 @@ from .slips import SlipRecorder
 def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float, *, live=None,
                quiet=False, label="loading", resume_from=None,
                checkpoints: bool = True, stop_after_slip: bool = False) -> tuple[str, SlipRecorder]:
-    """Shear until sim time reaches end_time, firing the output, guard, slip and checkpoint
-    callbacks. `resume_from`: the Checkpoint (latest.h5) whose callback states (slip
-    recorder with its ring, energy guard) carry on. Returns (status, recorder); raises
-    PhysicsError after recording it."""
+    """Shear until sim time reaches end_time, firing the loading phase's callbacks (driver.callbacks),
+    in this order on a step where several are due: guards, slip_frames, series (+ slip recorder,
+    stick scaling, progress), snapshots, ring (pre-slip states), checkpoint (latest.h5 with every
+    callback's state under its name). `resume_from`: the Checkpoint (latest.h5) whose callback
+    states (slip recorder with its ring, energy guard, stick scaling) carry on. Returns (status,
+    recorder); raises PhysicsError after recording it."""
     config = sim.config
-    ck_dir = out_dir / "checkpoints" if checkpoints else None
-    saved = resume_from.extra if resume_from is not None else {}
-    recorder = SlipRecorder(config, sim, writer, ck_dir, saved.get("slip_recorder"),
-                            resume_from.attached if resume_from is not None else None)
-    guards = guard_callbacks(sim)
-    guards[0].action.load_state_dict(saved.get("guards", {}))
+    layout = RunLayout(out_dir) if checkpoints else None
+    recorder = SlipRecorder(config, sim, writer, layout)
+    guards = Guards()
     scaling = None
     if config.numerics.stick_scaling > 1.0:     # stick scaling: the controller (sets the inertia)
         from .stick_scaling import StickScaling
         try:
-            scaling = StickScaling(config, sim, saved.get("stick_scaling"), quiet=quiet)
+            scaling = StickScaling(config, sim, quiet=quiet)
+            if resume_from is not None:
+                restore([scaling], resume_from.extra)
         except ConfigError as err:
             writer.close(f"refused: {err}", provenance.sim_hash(sim))
             raise
+    if resume_from is not None:
+        restore([recorder, guards], resume_from.extra, resume_from.attached)
+    companions = [guards] if scaling is not None else []     # stick scaling: kept with the ring states
     progress = None if quiet else ProgressReport(label, end_time - sim.state.time, sim.state.n, live=live)
-    t_begin = sim.state.time
-    stop = {"now": False}
-
     need = 2.0 * (config.slips.ring + 2) * state_bytes(sim)
+    series = SeriesWriter(writer, recorder, scaling, companions, progress, out_dir, need, sim.state.time,
+                          stop_after_slip)
+    callbacks = [guards, SlipFrames(writer, recorder), series, Snapshots(writer), Ring(recorder, companions)]
+    callbacks += [recorder] + ([scaling] if scaling is not None else [])
+    keeper = CheckpointKeeper(writer, layout, callbacks)
+    callbacks.insert(callbacks.index(recorder), keeper)
 
-    def record(s: Simulation):
-        ensure_space(out_dir, need)
-        row = s.measure()               # (the guards' row when they ran on this step)
-        if scaling is not None:                 # stick scaling: lambda, I (and De) columns
-            row.update(scaling.columns(s, row))
-        writer.append(row)
-        slip = recorder.observe(row)
-        if scaling is not None and scaling.after_row(s, row, recorder, writer, guards[0].action, slip):
-            return                              # stick scaling: went back to a pre-slip state
-        if slip is not None and stop_after_slip:
-            stop["now"] = True
-        if progress:
-            progress.update(s.state.time - t_begin, s.state.step,
-                            info=f"tau/sigma {row['tau_over_sigma']:.3f}, slips {recorder.count}")
-
-    def latest(s: Simulation):
-        if ck_dir is not None:
-            writer.flush()
-            rec_state, ring = recorder.full_state()
-            extra = {"phase": "loading", "slip_recorder": rec_state, "guards": guards[0].action.state_dict()}
-            if scaling is not None:             # stick scaling: its state
-                scaling.tally(s)
-                extra["stick_scaling"] = scaling.state_dict()
-            write_checkpoint(ck_dir / "latest.h5", snapshot_of(s, extra, ring))
-
-    def keep(s: Simulation):                    # stick scaling: ring states carry the energy guard's history
-        recorder.keep(s, {"guards": guards[0].action.state_dict()})
-
-    # callback order on a step where several are due: guards, slip_frames, series (+ slip detector,
-    # progress), snapshots, ring (pre-slip states), checkpoint (latest.h5 with the guards' and the
-    # slip recorder's states)
     def build() -> list[Every]:
-        """The callbacks; their periods are step counts, so stick scaling rebuilds them when dt changes."""
-        recorder.ring_every = recorder.ring_steps(sim)
-        return guards + slip_frame_callbacks(sim, writer, recorder) + [
-                 Every.t0(sim, config.output.series_interval, record, "series"),
-                 Every.t0(sim, config.output.snapshot_interval, writer.snapshot, "snapshots"),
-                 Every(recorder.ring_every, recorder.keep if scaling is None else keep, "ring"),
-                 Every.t0(sim, config.output.checkpoint_interval, latest, "checkpoint")]
+        """The schedules; their periods are step counts, so stick scaling rebuilds them when dt changes."""
+        return schedules(sim, callbacks)
     status = "finished"
     try:
         with deferred_interrupt() as interrupted:
             if sim.state.time < end_time:       # stick scaling changes the step: callbacks rebuilt
                 sim.run(end_time - sim.state.time, build if scaling is not None else build(),
-                        should_stop=lambda: stop["now"] or interrupted())
+                        should_stop=lambda: series.stopped or interrupted())
             if interrupted():
                 status = "interrupted"
-            latest(sim)
+            keeper.act(sim)
     except KeyboardInterrupt:       # a second Ctrl-C, or one outside the step loop
         status = "interrupted"
-        latest(sim)
+        keeper.act(sim)
     except PhysicsError as err:
         writer.close(f"failed: {err}", provenance.sim_hash(sim))
         raise
@@ -120,22 +93,117 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     return status, recorder
 
 
+class SeriesWriter(Callback):
+    """The series row every output.series_interval: measured, widened by stick scaling's columns,
+    appended to the run file, fed to the slip recorder and stick scaling, shown as progress.
+    ``stopped``: a slip ended and the phase was asked to stop after one (stop_after_slip)."""
 
-def slip_frame_callbacks(sim: Simulation, writer: RunFile, recorder: SlipRecorder) -> list[Every]:
+    name = "series"
+
+    def __init__(self, writer: RunFile, recorder: SlipRecorder, scaling, companions: list, progress,
+                 out_dir: Path, need: float, t_begin: float, stop_after_slip: bool):
+        self.writer, self.recorder, self.scaling, self.companions = writer, recorder, scaling, companions
+        self.progress, self.out_dir, self.need, self.t_begin = progress, out_dir, need, t_begin
+        self.stop_after_slip = stop_after_slip
+        self.stopped = False
+
+    def every(self, sim):
+        return Every.t0(sim, sim.config.output.series_interval, self.act, self.name)
+
+    def act(self, sim: Simulation):
+        ensure_space(self.out_dir, self.need)
+        row = sim.measure()             # (the guards' row when they ran on this step)
+        if self.scaling is not None:            # stick scaling: lambda, I (and De) columns
+            row.update(self.scaling.columns(sim, row))
+        self.writer.append(row)
+        slip = self.recorder.observe(row)
+        if self.scaling is not None and self.scaling.after_row(sim, row, self.recorder, self.writer,
+                                                               self.companions, slip):
+            return                              # stick scaling: went back to a pre-slip state
+        if slip is not None and self.stop_after_slip:
+            self.stopped = True
+        if self.progress:
+            self.progress.update(sim.state.time - self.t_begin, sim.state.step,
+                                 info=f"tau/sigma {row['tau_over_sigma']:.3f}, slips {self.recorder.count}")
+
+
+class Snapshots(Callback):
+    """A snapshot into the run file every output.snapshot_interval."""
+
+    name = "snapshots"
+
+    def __init__(self, writer: RunFile):
+        self.writer = writer
+
+    def every(self, sim):
+        return Every.t0(sim, sim.config.output.snapshot_interval, self.act, self.name)
+
+    def act(self, sim):
+        self.writer.snapshot(sim)
+
+
+class SlipFrames(Callback):
     """Dense snapshots while the top wall slips: output.slip_frames per predicted slip duration
     pi sqrt(m_b/k) (thesis Eq. 3), written whenever v_w >= slips.end_factor V_s; none if 0."""
-    frames = sim.config.output.slip_frames
-    if not frames or sim.wall_mass_per_length <= 0:
-        return []
-    period = slip_duration(sim.config, sim.wall_mass_per_length)
-    writer.set_attr("snapshot_dense_interval", period / frames)
 
-    def dense(s: Simulation):
-        if s.state.wall[L.W_VX] >= recorder.lo:
-            writer.snapshot(s)
+    name = "slip_frames"
 
-    return [Every.t0(sim, period / frames, dense, "slip_frames")]
+    def __init__(self, writer: RunFile, recorder: SlipRecorder):
+        self.writer, self.recorder = writer, recorder
 
+    def every(self, sim):
+        frames = sim.config.output.slip_frames
+        if not frames or sim.wall_mass_per_length <= 0:
+            return None
+        period = slip_duration(sim.config, sim.wall_mass_per_length)
+        self.writer.set_attr("snapshot_dense_interval", period / frames)
+        return Every.t0(sim, period / frames, self.act, self.name)
+
+    def act(self, sim):
+        if sim.state.wall[L.W_VX] >= self.recorder.lo:
+            self.writer.snapshot(sim)
+
+
+class Ring(Callback):
+    """The slip recorder's ring of pre-slip states, every lead / RING_PER_LEAD, with the states of
+    ``companions`` (stick scaling: the guards', so that a rollback restores them too)."""
+
+    name = "ring"
+
+    def __init__(self, recorder: SlipRecorder, companions: list):
+        self.recorder, self.companions = recorder, companions
+
+    def every(self, sim):
+        self.recorder.ring_every = self.recorder.ring_steps(sim)
+        return Every(self.recorder.ring_every, self.act, self.name)
+
+    def act(self, sim):
+        if self.companions:
+            self.recorder.keep(sim, states(self.companions)[0])
+        else:
+            self.recorder.keep(sim)
+
+
+class CheckpointKeeper(Callback):
+    """checkpoints/latest.h5 every output.checkpoint_interval and when the phase ends: the state
+    with every callback's own state under its name (callbacks.states) and the phase."""
+
+    name = "checkpoint"
+
+    def __init__(self, writer: RunFile, layout: RunLayout | None, callbacks: list, phase: str = "loading"):
+        self.writer, self.layout, self.callbacks, self.phase = writer, layout, callbacks, phase
+
+    def every(self, sim):
+        return Every.t0(sim, sim.config.output.checkpoint_interval, self.act, self.name)
+
+    def act(self, sim):
+        if self.layout is None:
+            return
+        self.writer.flush()
+        for cb in self.callbacks:
+            cb.sync(sim)
+        saved, attached = states(self.callbacks)
+        write_checkpoint(self.layout.latest, snapshot_of(sim, {"phase": self.phase, **saved}, attached))
 
 
 @contextmanager
@@ -170,13 +238,17 @@ def state_bytes(sim: Simulation) -> int:
 
 
 
-def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False,
-                     start: tuple[float, int] | None = None):
+def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False, resume_from=None):
     """Simulation.compact with checkpoints/latest.h5 written every output.checkpoint_interval of
     compaction (on its 100 t0 checks) and on Ctrl-C, so that `gouge resume` continues a
-    compaction too. Progress is shown toward the settling criterion (progress.SettleReport)."""
+    compaction too (`resume_from`: that checkpoint, whose compaction start it goes on from).
+    Progress is shown toward the settling criterion (progress.SettleReport)."""
     config = sim.config
-    latest = out_dir / "checkpoints" / "latest.h5"
+    start = None
+    if resume_from is not None and "compaction_start" in resume_from.extra:
+        t0, step0 = resume_from.extra["compaction_start"]
+        start = (float(t0), int(step0))
+    latest = RunLayout(out_dir).latest
     chunk = sim.steps_for(100.0)
     every = max(1, int(round(config.output.checkpoint_interval / 100.0)))
 

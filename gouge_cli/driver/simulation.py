@@ -18,7 +18,7 @@ from ..kernels import layout as L
 from ..kernels import measure as M
 from ..kernels import step as K
 from ..model.packing import build_packing
-from .guards import NonFiniteGuard, OverlapGuard, Scan
+from .guards import check
 from .schedules import Every
 from .settling import SettleCheck, settle_check
 from ..model.state import State
@@ -51,7 +51,10 @@ class Simulation:
         self.compaction_start: tuple[float, int] | None = None     # (time, step) where compaction began
         self.settling: SettleCheck | None = None                    # the last check of compaction's criterion
         self.fluid = None
-        self._layers = None         # the GPU engine (numerics.device: gpu), made on the first dry advance
+        # numerics.device, resolved once: the GPU engine runs dry steps only (a wet scene's loading, with
+        # its pressure grid, runs on the cpu: gpu_fallback says so); made on the first dry advance
+        self.gpu = config.numerics.device == "gpu"
+        self._layers = None
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(L.N_OBSERVABLES)
         self._measured: dict | None = None      # measure()'s row while run fires a step's callbacks
@@ -95,6 +98,13 @@ class Simulation:
                                    "check the packing", s.time)
         self.drag = (self.fluid.drag_x, self.fluid.drag_z)
 
+    @property
+    def gpu_fallback(self) -> str:
+        """Why numerics.device = gpu does not run this scene's steps now ('' if it does or was not asked)."""
+        if self.gpu and self.fluid is not None:
+            return "numerics.device = gpu runs dry steps only: this wet scene loads on the cpu"
+        return ""
+
     # ---- phase -------------------------------------------------------------------------
     @property
     def phase(self) -> int:
@@ -136,7 +146,7 @@ class Simulation:
 
     def _advance(self, left: int):
         s = self.state
-        if self.fluid is None and self.config.numerics.device == "gpu":
+        if self.gpu and self.fluid is None:
             self._gpu_layers().advance(left, params=self.params)
             return
         while left > 0:
@@ -272,6 +282,21 @@ class Simulation:
             row.update(self.fluid.observe(s.wall[L.W_VX], s.vx, s.vz))
         return row
 
+    def contacts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(i, j, fx, fz): the touching pairs by original grain id and the contact force on i
+        (kernels.measure.contact_list), shape (m,) each, for snapshots."""
+        s, p = self.state, self.params
+        npairs = int(s.start[-1])
+        ci = np.empty(npairs, np.int32)
+        cj = np.empty(npairs, np.int32)
+        cfx = np.empty(npairs)
+        cfz = np.empty(npairs)
+        m = M.contact_list(s.x, s.z, s.radius, s.start, s.index, s.shear, s.width, p[L.C_NORMAL],
+                           p[L.C_TANGENTIAL], p[L.FRICTION], ci, cj, cfx, cfz)
+        ci[:m] = s.id[ci[:m]]
+        cj[:m] = s.id[cj[:m]]
+        return ci[:m], cj[:m], cfx[:m], cfz[:m]
+
     def measure(self) -> dict:
         """observe(), shared by the callbacks of one step: while run fires a step's callbacks
         (which leave the state alone), the first that measures (guards, the series writer,
@@ -283,13 +308,6 @@ class Simulation:
             self._measured = {"step": self.state.step, "row": self.observe()}
         return dict(self._measured["row"])
 
-    def check(self):
-        """Stop with a PhysicsError on NaN/inf or a runaway overlap (the non-finite and overlap
-        guards of gouge_cli.driver.guards, run once; used while compacting and by the benchmark)."""
-        scan = Scan.of(self)
-        NonFiniteGuard()(self, scan)
-        OverlapGuard()(self, scan)
-
     # ---- compaction --------------------------------------------------------------------
     def compact(self, on_chunk: Callable = None, start: tuple[float, int] | None = None) -> dict:
         """Settle under the normal stress alone until the top wall and grains are still, then
@@ -297,7 +315,7 @@ class Simulation:
         every 100 t0 of steps counted from `start` = (time, step) where compaction began
         (default: now), so a compaction resumed from any step ends where it would have:
 
-            "settling": check() (non-finite and overlap guards), observe, settle_check -> self.settling;
+            "settling": guards.check (non-finite and overlap guards), observe, settle_check -> self.settling;
                         stop when settled (min_time passed, wall and grains still) or at max_time
             "on_chunk": on_chunk(sim, elapsed), if given
 
@@ -310,7 +328,7 @@ class Simulation:
         last = {"row": None, "elapsed": 0.0}
 
         def settling(sim: Simulation):
-            sim.check()
+            check(sim)
             row = last["row"] = sim.measure()
             elapsed = last["elapsed"] = sim.state.time - t0
             sim.settling = settle_check(sim.state, row["kinetic_energy"], row["wall_vz"], elapsed, v_tol, cfg.min_time)

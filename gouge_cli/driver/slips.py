@@ -15,13 +15,13 @@ drops (too small) discards its pending state.
 from __future__ import annotations
 
 from collections import deque
-from pathlib import Path
-
 import numpy as np
 
 from ..io.checkpoint import Checkpoint, snapshot_of, write_checkpoint
+from ..io.layout import RunLayout
 from ..config import Config
-from .detector import Slip, SlipDetector
+from ..model.slip_rule import Slip, SlipDetector, SlipRule
+from .callbacks import Callback
 from ..kernels.layout import W_VX
 
 RING_PER_LEAD = 4      # pre-slip ring states kept per slips.lead (spaced lead / RING_PER_LEAD)
@@ -36,61 +36,69 @@ def lead_time(config: Config) -> float:
     return s.lead_stress * config.loading.normal_stress / rate
 
 
-def make_detector(config: Config) -> SlipDetector:
-    s = config.slips
-    return SlipDetector(config.loading.velocity, s.start_factor, s.end_factor, s.min_duration,
-                        s.min_slip, s.merge_gap)
+class SlipRecorder(Callback):
+    """Time-series callback: detect slips, persist the pre-slip checkpoint, write the catalog.
+    Fed by the series writer (not scheduled itself); its checkpoint state (``state_dict`` and
+    ``attachments``: the ring and the pending pre-slip state) is saved under ``name``."""
 
+    name = "slip_recorder"
 
-class SlipRecorder:
-    """Time-series callback: detect slips, persist the pre-slip checkpoint, write the catalog."""
-
-    def __init__(self, config: Config, sim, run_file, checkpoint_dir: Path | None, state: dict | None = None,
+    def __init__(self, config: Config, sim, run_file, layout: RunLayout | None, state: dict | None = None,
                  attached: dict | None = None):
+        """`layout`: the run directory whose slip checkpoints it writes (None: none written)."""
         self.config = config
         self.run_file = run_file
-        self.checkpoint_dir = checkpoint_dir
+        self.layout = layout
         self.lead = lead_time(config)
         self.ring_every = self.ring_steps(sim)
         self.ring: deque[Checkpoint] = deque(maxlen=config.slips.ring)
-        self.hi = config.slips.start_factor * config.loading.velocity
-        self.lo = config.slips.end_factor * config.loading.velocity
-        state = state or {}
+        self.rule = SlipRule.from_config(config)
+        self.hi, self.lo = self.rule.hi, self.rule.lo
+        self.peak_band = 0.25 * config.slips.lead_stress
+        self.slips: list[dict] = []
+        self._start_time = sim.state.time
+        self.load_state_dict(state or {}, attached)
+
+    def load_state_dict(self, state: dict, attached: dict | None = None):
+        """Go on from a saved state (state_dict) and its attached checkpoints (attachments)."""
         self.detector = (SlipDetector.from_state_dict(state["detector"]) if "detector" in state
-                         else make_detector(config))
+                         else self.rule.detector())
         self.count = int(state.get("count", 0))
-        self.last_quiet = float(state.get("last_quiet", sim.state.time))
+        self.last_quiet = float(state.get("last_quiet", self._start_time))
         self.above = bool(state.get("above", False))
         self.peak_tau = float(state.get("peak_tau", -np.inf))
-        self.peak_time = float(state.get("peak_time", sim.state.time))
-        self.peak_band = 0.25 * config.slips.lead_stress
+        self.peak_time = float(state.get("peak_time", self._start_time))
         self.pending: Checkpoint | None = None
-        self.slips: list[dict] = []
         self._deborah: list[float] = [float(v) for v in state.get("deborah", [])]
         ring = [ck for key, ck in sorted((attached or {}).items()) if key.startswith("ring_")]
+        self.ring.clear()
         self.ring.extend(ring)
         if "pending" in (attached or {}):
             self.pending = attached["pending"]
         elif state.get("pending_in_ring") is not None:
             self.pending = ring[int(state["pending_in_ring"])]
 
-    def state_dict(self) -> dict:
+    def ring_state(self) -> dict:
+        """The state kept with each ring state (rewind_to goes back to it)."""
         return {"detector": self.detector.state_dict(), "count": self.count,
                 "last_quiet": self.last_quiet, "above": self.above,
                 "peak_tau": self.peak_tau, "peak_time": self.peak_time}
 
-    def full_state(self) -> tuple[dict, dict]:
-        """(state dict, attached checkpoints) for latest.h5: everything a resume needs to go on
-        exactly as this recorder would (the kept ring, the pending pre-slip state, the Deborah
-        samples of a slip in progress); the inverse of the constructor's `state`, `attached`."""
-        state = self.state_dict()
+    def state_dict(self) -> dict:
+        """For latest.h5: everything a resume needs to go on exactly as this recorder would (with
+        attachments(): the kept ring, the pending pre-slip state; the Deborah samples of a slip
+        in progress); the inverse of load_state_dict."""
+        state = self.ring_state()
         state["deborah"] = list(self._deborah)
-        attached = {f"ring_{i:03d}": ck for i, ck in enumerate(self.ring)}
         in_ring = [i for i, ck in enumerate(self.ring) if ck is self.pending]
         state["pending_in_ring"] = in_ring[0] if in_ring else None
-        if self.pending is not None and not in_ring:
+        return state
+
+    def attachments(self) -> dict:
+        attached = {f"ring_{i:03d}": ck for i, ck in enumerate(self.ring)}
+        if self.pending is not None and not any(ck is self.pending for ck in self.ring):
             attached["pending"] = self.pending
-        return state, attached
+        return attached
 
     def keep(self, sim, extra: dict | None = None, always: bool = False):
         """Ring callback (every lead/4): keep the state if the wall is quiet (v < end threshold),
@@ -99,7 +107,7 @@ class SlipRecorder:
         `always`: keep it whatever the wall does (stick scaling: the moment scaling resumes)."""
         tau = sim.tau_over_sigma()
         if always or (sim.state.wall[W_VX] < self.lo and tau >= self.peak_tau - self.peak_band):
-            self.ring.append(snapshot_of(sim, {"slip_recorder": self.state_dict(), **(extra or {})}))
+            self.ring.append(snapshot_of(sim, {self.name: self.ring_state(), **(extra or {})}))
 
     def ring_steps(self, sim) -> int:
         """Steps between ring states at sim's current dt: lead / RING_PER_LEAD."""
@@ -110,7 +118,7 @@ class SlipRecorder:
         then; the pending state and every other ring state dropped: the run goes on from `ck` at
         true inertia, so no older state leads to what it computes next, and a pre-slip
         checkpoint from before `ck` would not retrace it)."""
-        state = ck.extra["slip_recorder"]
+        state = ck.extra[self.name]
         self.detector = SlipDetector.from_state_dict(state["detector"])
         self.count = int(state["count"])
         self.last_quiet, self.above = float(state["last_quiet"]), bool(state["above"])
@@ -178,15 +186,20 @@ class SlipRecorder:
         self._deborah.clear()
         entry["checkpoint"] = ""
         entry["checkpoint_time"] = float("nan")
-        if self.pending is not None and self.checkpoint_dir is not None:
-            name = f"slip_{self.count:03d}.h5"
+        if self.pending is not None and self.layout is not None:
+            path = self.layout.slip_checkpoint(self.count)
             extra = dict(self.pending.extra)
             extra.update(slip=self.count, onset_time=slip.onset_time)
-            write_checkpoint(self.checkpoint_dir / name,
+            write_checkpoint(path,
                              Checkpoint(self.pending.config, self.pending.state, self.pending.fluid, extra,
                                         provenance=self.pending.provenance))
-            entry["checkpoint"] = f"checkpoints/{name}"
+            entry["checkpoint"] = self.layout.relative(path)
             entry["checkpoint_time"] = self.pending.time
         self.slips.append(entry)
         if self.run_file is not None:
             self.run_file.add_slip(self.count, entry, subevents)
+
+
+def recorded_count(extra: dict) -> int:
+    """Slips a recorder had recorded when it saved the checkpoint whose extra this is (0 if none)."""
+    return int(extra.get(SlipRecorder.name, {}).get("count", 0))

@@ -71,6 +71,7 @@ from ..errors import ConfigError
 from ..kernels import layout as L
 from ..model.portable import sphere_mass
 from ..model.timestep import choose_dt
+from .callbacks import Callback, restore, states
 from .slips import RING_PER_LEAD, lead_time
 
 # The largest lambda the ladder found within the seed spread with every smaller rung
@@ -113,8 +114,11 @@ def stick_deborah_bound(config: Config, lam: float, diffusivity: float, half_thi
     return math.sqrt(lam) * half_thickness * config.loading.velocity / max(diffusivity, 1e-300)
 
 
-class StickScaling:
-    """The controller: lambda schedule, rollback to true inertia, guard; checkpointable."""
+class StickScaling(Callback):
+    """The controller: lambda schedule, rollback to true inertia, guard; checkpointable (its state
+    under ``name``). Not scheduled: the series writer calls after_row on every row."""
+
+    name = "stick_scaling"
 
     def __init__(self, config: Config, sim, state: dict | None = None, quiet: bool = False):
         n = config.numerics
@@ -128,7 +132,16 @@ class StickScaling:
         self.lo = config.slips.end_factor * config.loading.velocity
         self.lead = lead_time(config)
         self.quiet_floor = quiet_floor(config)
-        st = dict(state or {})
+        self.drop = 0.25 * config.slips.lead_stress
+        self.sim = sim
+        if sim.fluid is not None and self.target > 1.0:
+            self._check_wet(sim)
+        self.load_state_dict(state or {})
+
+    def load_state_dict(self, state: dict, attached: dict | None = None):
+        """The controller's saved state; sets the inertia of its lambda."""
+        sim = self.sim
+        st = dict(state)
         self.lam = float(st.get("lam", self.target))
         self.onset_scaled = st.get("onset_scaled")      # time of the scaled onset being recomputed
         self.triggered = bool(st.get("triggered", False))
@@ -138,14 +151,15 @@ class StickScaling:
         self.slip_span = float(st.get("slip_span", 0.0))    # D: duration of the slip closed in this stretch
         self.peak_tau = float(st.get("peak_tau", -math.inf))        # tau/sigma peak of this stretch
         self.resumed_at = float(st.get("resumed_at", -math.inf))    # when scaling last resumed [t0]
-        self.drop = 0.25 * config.slips.lead_stress
         self.counts = {k: int(st.get(k, 0)) for k in
                        ("rollbacks", "misses", "in_place", "lowered", "steps_scaled", "steps_true",
                         "steps_discarded")}
         self.counted_to = sim.state.step     # steps up to here are in counts (tally)
-        if sim.fluid is not None and self.target > 1.0:
-            self._check_wet(sim)
         set_inertia(sim, self.lam, self.dt_true)
+
+    def sync(self, sim):
+        """Before its state is saved: the steps since the last tally counted."""
+        self.tally(sim)
 
     # ---- state ---------------------------------------------------------------------------
     def state_dict(self) -> dict:
@@ -183,15 +197,17 @@ class StickScaling:
         return out
 
     # ---- control --------------------------------------------------------------------------
-    def after_row(self, sim, row: dict, recorder, writer, guard, slip=None) -> bool:
+    def after_row(self, sim, row: dict, recorder, writer, companions=None, slip=None) -> bool:
         """Called after the recorder saw `row` (`slip`: the slip it closed on this row, if any);
-        True if the run went back in time."""
+        True if the run went back in time. `companions`: the callbacks whose states travel with
+        the ring states and come back on a rollback (the guards)."""
+        companions = companions or []
         self.tally(sim)
         t, v = row["time"], row["wall_vx"]
         if self.scaled:
             self.peak_tau = max(self.peak_tau, row["tau_over_sigma"])
             if v >= max(self.lo, self.hi / math.sqrt(self.lam)) or row["tau_over_sigma"] < self.peak_tau - self.drop:
-                self._rollback(sim, recorder, writer, guard, t)
+                self._rollback(sim, recorder, writer, companions, t)
                 return True
             if v < self.lo:     # the guard watches the quiet stick phase; onsets are rolled back
                 self._guard(sim, row)
@@ -223,7 +239,7 @@ class StickScaling:
                     self._set(sim, self.target)
                     self.resumed_at = t         # kept in the ring: no later rollback goes back past it
                     recorder.forget_peak()      # else a stale peak (a slow slip) keeps the ring empty
-                    recorder.keep(sim, {"guards": guard.state_dict() if guard else {}}, always=True)
+                    recorder.keep(sim, states(companions)[0], always=True)
                     self.onset_scaled, self.triggered, self.quiet_since, self.missed_now = None, False, None, False
                     self.slip_span = 0.0
                 else:
@@ -246,7 +262,7 @@ class StickScaling:
                       f"t0: lambda lowered from {self.lam:g} to {lam:.3g} until the next slip")
             self._set(sim, lam)
 
-    def _rollback(self, sim, recorder, writer, guard, t_onset: float):
+    def _rollback(self, sim, recorder, writer, companions, t_onset: float):
         ck = recorder.pending if recorder.pending is not None else \
             recorder.choose_pre_slip(min(recorder.last_quiet, recorder.peak_time, t_onset))
         if ck is not None and ck.time < self.resumed_at:      # never redo a true-inertia stretch
@@ -266,8 +282,7 @@ class StickScaling:
         if sim.fluid is not None:
             sim.fluid.restore(ck.fluid)
         recorder.rewind_to(ck)
-        if guard is not None and "guards" in ck.extra:
-            guard.load_state_dict(ck.extra["guards"])
+        restore(companions, ck.extra)
         writer.truncate_after(ck.time, ck.step, recorder.count)
         self._set(sim, 1.0, rescale=False)      # the stored state as it is: a fork from it computes the same
 

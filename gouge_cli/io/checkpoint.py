@@ -1,7 +1,7 @@
 """Checkpoints: every evolving array plus the config and callback state, written atomically.
 
 A checkpoint is an HDF5 file: datasets ``state/<name>`` (see State.EVOLVING) and, with fluid,
-``fluid/<name>``; states attached to it (the slip recorder's pre-slip ring, see events.py) under
+``fluid/<name>``; states attached to it (the slip recorder's pre-slip ring, see driver/slips.py) under
 ``attached/<key>/{state,fluid}/<name>`` with their own ``extra`` attribute; attributes
 ``config`` (YAML of the validated config), ``extra`` (JSON: detector state, slip number, parent
 run, ...), ``provenance`` (JSON, see :mod:`gouge_cli.io.provenance`) and ``checksum``:

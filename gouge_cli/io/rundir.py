@@ -24,9 +24,9 @@ from pathlib import Path
 import h5py
 
 from ..errors import RunDirError
+from .layout import OWNED, RUN_FILE, RunLayout, runs_under
 
 LOCK_NAME = ".gouge.lock"
-OWNED = ("run.h5", "config.yaml", "checkpoints", "forks", "figures", "analysis")
 # a campaign point directory (gouge campaign) holds its state point and ledger beside the run:
 # they make no directory foreign, count as no run, and are never removed by --force
 CAMPAIGN_ENTRIES = ("point.yaml", "ledger")
@@ -120,7 +120,7 @@ def is_gouge_run(run_dir: Path) -> bool:
     if (run_dir / LOCK_NAME).is_file():
         return True
     try:
-        with h5py.File(run_dir / "run.h5", "r") as h5:
+        with h5py.File(RunLayout(run_dir).run_file, "r") as h5:
             return "config" in h5.attrs and "version" in h5.attrs
     except (OSError, KeyError):
         return False
@@ -130,13 +130,14 @@ def killed_start(run_dir: Path) -> bool:
     """True for a run killed before its first checkpoint: its lock is free, it has no
     checkpoints, forks or analysis, and its run.h5 is missing, unreadable or still 'running'."""
     run_dir = Path(run_dir)
-    if holder(run_dir) is not None or (run_dir / "checkpoints" / "latest.h5").exists() or \
-            any(run_dir.glob("checkpoints/slip_*.h5")) or any((run_dir / d).exists() for d in ("forks", "analysis")):
+    layout = RunLayout(run_dir)
+    if holder(run_dir) is not None or layout.latest.exists() or \
+            layout.slip_checkpoints() or layout.forks.exists() or layout.analysis.exists():
         return False
-    if not (run_dir / "run.h5").exists():
+    if not layout.run_file.exists():
         return True
     try:
-        with h5py.File(run_dir / "run.h5", "r") as h5:
+        with h5py.File(layout.run_file, "r") as h5:
             return str(h5.attrs.get("status", "running")) == "running"
     except OSError:         # cut short while it was created
         return True
@@ -159,7 +160,7 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
         raise RunDirError(f"{out_dir} already holds a run; choose another --out, another name (--set name=...), "
                           "or pass --force to replace it")
     lock = RunLock(out_dir, "gouge run")
-    busy = [who for branch in out_dir.glob("forks/*/*") if (who := holder(branch)) is not None]
+    busy = [who for branch in RunLayout(out_dir).branch_dirs() if (who := holder(branch)) is not None]
     if busy:
         lock.release()
         raise RunDirError(f"{out_dir} has a fork in progress ({busy[0]}); nothing was changed: wait for it or "
@@ -194,14 +195,14 @@ def check_run_dir(run_dir: Path) -> Path:
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise RunDirError(f"{run_dir} is not a gouge run directory (no such directory)")
-    if not (run_dir / "run.h5").is_file() and not (run_dir / LOCK_NAME).is_file():
-        raise RunDirError(f"{run_dir} is not a gouge run directory (no run.h5 in it)")
+    if not RunLayout(run_dir).run_file.is_file() and not (run_dir / LOCK_NAME).is_file():
+        raise RunDirError(f"{run_dir} is not a gouge run directory (no {RUN_FILE} in it)")
     return run_dir
 
 
 def latest_run(runs_root: Path = Path("runs")) -> Path:
     """The most recently modified run directory under runs_root."""
-    candidates = [p.parent for p in runs_root.glob("*/run.h5")]
+    candidates = runs_under(runs_root)
     if not candidates:
         raise RunDirError(f"no runs under {runs_root}/; run `gouge run CONFIG` first or name the run directory")
-    return max(candidates, key=lambda p: (p / "run.h5").stat().st_mtime)
+    return max(candidates, key=lambda p: RunLayout(p).run_file.stat().st_mtime)

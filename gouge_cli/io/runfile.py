@@ -17,7 +17,7 @@ Layout of ``run.h5``::
                  scene has fluid (attrs origin, spacing, axis_order); grains in their original
                  (packing) order, contact_i/j in those numbers
     /slips/NNN   one group per slip recorded while running (driver.slips.SlipRecorder), NNN from 001:
-                 attrs = driver.detector.Slip fields (onset_time, end_time, duration, slip,
+                 attrs = model.slip_rule.Slip fields (onset_time, end_time, duration, slip,
                  peak_velocity, stress drop, ...) plus number, deborah, checkpoint (path of
                  checkpoints/slip_NNN.h5 or ""), checkpoint_time; datasets subevent_time [t0],
                  subevent_velocity [v0] (S,)
@@ -53,14 +53,15 @@ import yaml
 
 from .. import __version__
 from . import provenance
-from ..config import SLIP_END_FACTOR, SLIP_START_FACTOR, Config, dump_config
+from ..config import Config, dump_config
 from ..errors import DamagedFileError, NotARunError, RunStillRunningError
+from ..model.slip_rule import SlipRule
 from ..model.timestep import half_period
 from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, document_analysis, document_run_file,
                       document_slip, grid_geometry)
 from ..kernels import layout as L
-from ..kernels import measure as M
 from .integrity import SEAL, STRUCTURE_ERRORS, check_seal, read, seal, seal_tree, stored_seal, structure_error
+from .layout import RUN_FILE, RunLayout
 from .rundir import open_run_file
 
 # name -> (unit, description); units are the dimensionless scales of docs/physics/units.md
@@ -186,18 +187,8 @@ class RunFile:
         grp.attrs["step"] = s.step
         for name in ("x", "z", "radius", "vx", "vz", "spin", "body"):     # in original grain order
             _checked(grp, name, s.by_id(getattr(s, name)), compression="gzip", compression_opts=1)
-        npairs = int(s.start[-1])
-        ci = np.empty(npairs, np.int32)
-        cj = np.empty(npairs, np.int32)
-        cfx = np.empty(npairs)
-        cfz = np.empty(npairs)
-        p = sim.params
-        m = M.contact_list(s.x, s.z, s.radius, s.start, s.index, s.shear, s.width, p[L.C_NORMAL],
-                           p[L.C_TANGENTIAL], p[L.FRICTION], ci, cj, cfx, cfz)
-        ci[:m] = s.id[ci[:m]]
-        cj[:m] = s.id[cj[:m]]
-        for name, arr in (("contact_i", ci), ("contact_j", cj), ("contact_fx", cfx), ("contact_fz", cfz)):
-            _checked(grp, name, arr[:m], compression="gzip", compression_opts=1)
+        for name, arr in zip(("contact_i", "contact_j", "contact_fx", "contact_fz"), sim.contacts()):
+            _checked(grp, name, arr, compression="gzip", compression_opts=1)
         if sim.fluid is not None:
             f = sim.fluid
             geometry = grid_geometry(f.state[L.S_Z_BOT], f.dx, f.dz)
@@ -284,7 +275,7 @@ def run_status(h5_path: Path) -> str | None:
 
 def slip_catalog(run_dir: Path) -> list[dict]:
     """The run's slip catalog (one dict of attributes per slip, in order; [] if none)."""
-    with open_run_file(Path(run_dir) / "run.h5") as h5:
+    with open_run_file(RunLayout(run_dir).run_file) as h5:
         return read_slips(h5) or []
 
 
@@ -296,7 +287,7 @@ class RunInfo:
     """What one run file says about itself (dimensionless units).
 
     k: spring constant per length; V_s: loading velocity; sigma: normal stress;
-    m_b: top-wall mass per length; slip_params: the detector thresholds of the run.
+    m_b: top-wall mass per length; slip_rule: the run's slip rule (its stored slips section at V_s).
     Forks also carry branch ('drained' or 'perm_K'), parent_run and fork_slip.
     """
 
@@ -314,7 +305,6 @@ class RunInfo:
     load_start_time: float
     has_fluid: bool
     permeability: float | None
-    slip_params: dict
     n_samples: int
     series_names: tuple
     branch: str | None = None
@@ -337,6 +327,11 @@ class RunInfo:
             return None
         h = fluid.get("cell_size")
         return float(h) if h is not None else 0.5 * float(fluid.get("filter_width", 0.0))
+
+    @property
+    def slip_rule(self) -> SlipRule:
+        """The run's slip rule, from its stored config (keys an older file lacks: the defaults)."""
+        return SlipRule.from_stored(self.config.get("slips") or {}, self.V_s)
 
     @property
     def predicted_half_period(self) -> float:
@@ -380,9 +375,9 @@ def _locate(path: Path) -> tuple[Path, Path]:
         return path.parent, path
     if not path.exists():
         raise NotARunError(f"{path} does not exist")
-    h5_path = path / "run.h5"
+    h5_path = RunLayout(path).run_file
     if not h5_path.is_file():
-        raise NotARunError(f"{path} is not a gouge run directory (no run.h5 in it); "
+        raise NotARunError(f"{path} is not a gouge run directory (no {RUN_FILE} in it); "
                            "give the directory that `gouge run --out` or `gouge restart` wrote")
     return path, h5_path
 
@@ -432,20 +427,12 @@ class RunReader:
         cfg = yaml.safe_load(attr_value(h5.attrs, "config")) or {}
         loading = cfg.get("loading") or {}
         fluid = cfg.get("fluid")
-        slips = cfg.get("slips") or {}
         m_b = attr_value(h5.attrs, "wall_mass_per_length")
         if m_b is None:
             m_b = loading.get("wall_mass")
         if m_b is None:
             raise NotARunError(f"{h5_path} has no wall_mass_per_length attribute")
         series = h5["series"]
-        slip_params = {
-            "start_factor": float(slips.get("start_factor", SLIP_START_FACTOR)),
-            "end_factor": float(slips.get("end_factor", SLIP_END_FACTOR)),
-            "min_duration": float(slips.get("min_duration", 0.0)),
-            "min_slip": float(slips.get("min_slip", 0.0)),
-            "merge_gap": float(slips.get("merge_gap", 0.0)),
-        }
         fork_slip = attr_value(h5.attrs, "fork_slip")
         return RunInfo(
             run_dir=run_dir, h5_path=h5_path, config=cfg,
@@ -460,7 +447,6 @@ class RunReader:
             load_start_time=float(attr_value(h5.attrs, "load_start_time", _NAN)),
             has_fluid=bool(fluid),
             permeability=float(fluid["permeability"]) if fluid and "permeability" in fluid else None,
-            slip_params=slip_params,
             n_samples=int(series["time"].shape[0]),
             series_names=tuple(sorted(series.keys())),
             branch=attr_value(h5.attrs, "branch"),

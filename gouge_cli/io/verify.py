@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import DamagedFileError, InputError
 from .checkpoint import read_checkpoint
+from .layout import RUN_FILE, ForkLayout, RunLayout, branch_flag
 from .integrity import STRUCTURE_ERRORS, all_objects, check_seal, damaged_rows, read, stored_seal, structure_error
 from .runfile import attr_value, checked_time
 
@@ -182,12 +183,13 @@ def _source(checkpoints: list[FileReport], time: float | None, before: str | Non
 def verify_run(run_dir: Path) -> dict:
     """Scrub a run directory (module doc). Returns {"run", "sound", "files": [FileReport as dict]}."""
     root = Path(run_dir)
-    if not (root / "run.h5").is_file():
-        raise InputError(f"{root} is not a gouge run directory (no run.h5 in it)")
-    checkpoints = [_checkpoint_report(p, root) for p in sorted((root / "checkpoints").glob("*.h5"))]
+    layout = RunLayout(root)
+    if not layout.run_file.is_file():
+        raise InputError(f"{root} is not a gouge run directory (no {RUN_FILE} in it)")
+    checkpoints = [_checkpoint_report(p, root) for p in layout.checkpoint_files()]
     reports = []
-    problems, sealed = run_file_problems(root / "run.h5")
-    main = FileReport("run.h5", "run", "damaged" if problems else ("sound" if sealed else "unchecked"), problems)
+    problems, sealed = run_file_problems(layout.run_file)
+    main = FileReport(layout.relative(layout.run_file), "run", "damaged" if problems else ("sound" if sealed else "unchecked"), problems)
     for p in problems:
         if p.part == "analysis":
             p.recompute = f"`gouge analyze {root}` (rewrites /analysis)"
@@ -198,18 +200,17 @@ def verify_run(run_dir: Path) -> dict:
         if c.status == "damaged":
             c.recompute = _source(checkpoints, _checkpoint_time_hint(root, c.path), before=c.path)
     reports.extend(checkpoints)
-    for branch in sorted(root.glob("forks/slip_*/*/run.h5")):
+    for branch in layout.branch_run_files():
         rel = str(branch.relative_to(root))
         problems, sealed = run_file_problems(branch)
         report = FileReport(rel, "fork", "damaged" if problems else ("sound" if sealed else "unchecked"), problems)
         if problems:
-            slip = int(branch.parent.parent.name.removeprefix("slip_"))
-            name = branch.parent.name
-            perm = "" if name == "drained" else f" --perm {name.removeprefix('perm_')}"
-            source = next((c for c in checkpoints if c.path == f"checkpoints/slip_{slip:03d}.h5"), None)
+            slip = ForkLayout(branch.parent.parent).slip
+            perm = branch_flag(branch.parent.name)
+            wanted = layout.relative(layout.slip_checkpoint(slip))
+            source = next((c for c in checkpoints if c.path == wanted), None)
             state = "sound" if source and source.status != "damaged" else "damaged or missing"
-            report.recompute = (f"checkpoints/slip_{slip:03d}.h5 ({state}): `gouge restart {root} --slip {slip}"
-                                f"{perm} --force`")
+            report.recompute = f"{wanted} ({state}): `gouge restart {root} --slip {slip}{perm} --force`"
         reports.append(report)
     return {"run": str(root), "sound": not any(r.status == "damaged" for r in reports),
             "files": [_plain(asdict(r)) for r in reports]}
@@ -221,7 +222,7 @@ def _checkpoint_time_hint(root: Path, rel: str) -> float | None:
     if not m:
         return None
     try:
-        with h5py.File(root / "run.h5", "r") as h5:
+        with h5py.File(RunLayout(root).run_file, "r") as h5:
             return float(attr_value(h5["slips"][f"{int(m.group(1)):03d}"].attrs, "checkpoint_time"))
     except (OSError, KeyError, ValueError, TypeError, RuntimeError):
         return None

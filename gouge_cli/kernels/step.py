@@ -179,10 +179,9 @@ def contact_forces(grains, lists, pairs, drag_x, drag_z, params):
     several (smaller parts balance the threads better; no part reads what another
     part of the same pass writes): the law of every listed pair (law_pass) into pairs.pair_*,
     then the sum per grain (sum_pass) in the one fixed order of _sum_range. Every pair's result
-    and every sum are the same for any nb: same bits on any thread count. [Summing by pulling
-    replaced a scatter of each pair to its second grain, whose read-modify-writes were a large
-    share of the pass. The passes are separate parallel functions: numba fuses adjacent prange loops
-    of equal range, which would let a part sum pairs another part has not yet computed.]"""
+    and every sum are the same for any nb: same bits on any thread count. The passes are separate
+    parallel functions: numba fuses adjacent prange loops of equal range, which would let a part sum
+    pairs another part has not yet computed."""
     n = grains.x.shape[0]
     if lists.layout[L_BUILT] < 0:
         derive_list(grains, lists, pairs)
@@ -348,8 +347,7 @@ def kick_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inert
     """Half kick (two if double) and drift of every grain; returns how many grains lie farther
     than skin/2 from their build positions (the list must be rebuilt before forces).
     Grains in params[THREADS] equal parts (move_range); late: (N,) int64 scratch, one count per
-    part. [This replaced a prange over grains with per-grain flags summed serially, which was
-    slower on two threads than on one.]"""
+    part."""
     n = x.shape[0]
     nb = min(max(int(params[THREADS]), 1), max(n, 1))
     for b in prange(nb):

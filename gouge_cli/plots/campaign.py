@@ -20,7 +20,7 @@ def campaign_figure(pairs: list[ForkPair], path: Path, title: str = "") -> Path:
     Left: pairs per type. Right: histogram of the undrained/drained peak-velocity ratio (the thesis
     finds undrained slips always slower, ratio < 1), with each permeability's median."""
     from .series import branch_colors
-    from ..analysis.forkpairs import perm_text
+    from ..io.layout import perm_text
 
     summary = campaign(pairs)
     groups = summary["per_permeability"]

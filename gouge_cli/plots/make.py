@@ -10,6 +10,7 @@ import numpy as np
 from ..analysis.catalog import find_slip, read_catalog, slip_friction
 from ..analysis.forkpairs import fork_branches, run_pairs
 from ..errors import NoSlipsError
+from ..io.layout import RunLayout, branch_perm_text
 from ..io.runfile import RunReader
 from .campaign import campaign_figure
 from .series import comparison_figure, friction_figure, overview_figure, pair_figure, slip_figure
@@ -30,7 +31,7 @@ def undrained_friction_figure(u: RunReader, pair, path: Path, notch: bool, drain
     slip = int(pair.row["slip"])
     fr = slip_friction(u, {"number": slip, "onset_time": main.onset_time, "end_time": main.end_time,
                            "static_strength": pair.result.undrained_strength}, notch=notch)
-    title = (f"Slip {slip}, κ_c = {pair.row['branch'].removeprefix('perm_')} d² ({pair.row['regime']}): "
+    title = (f"Slip {slip}, κ_c = {branch_perm_text(pair.row['branch'])} d² ({pair.row['regime']}): "
              "combined resistance R/σ (Eq. 6)")
     return friction_figure(fr, u.info.V_s, path, title=title,
                            drained_mean=drained_mean)
@@ -81,7 +82,7 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
                                                  f"{'dynamic friction μ_d(t) (Eq. 7)' if fr.drained else 'combined resistance R/σ (Eq. 6)'}"))
     pairs, _ = run_pairs(run_dir, main=main)
     if entry is not None:
-        fork = run_dir / "forks" / f"slip_{slip:03d}"
+        fork = RunLayout(run_dir).fork(slip).root
         drained_dir, undrained_dirs = fork_branches(fork)
         mine = [p for p in pairs if p.drained_dir.parent == fork]
         if drained_dir is not None and mine:
@@ -108,7 +109,7 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
                             snap = u.snapshot(name)
                             written.append(snapshot_figure(
                                 snap, u.info.width, out / f"{tag}_snapshot_{branch}.png",
-                                title=f"Slip {slip}, κ_c = {branch.removeprefix('perm_')} d²: grains and pore pressure "
+                                title=f"Slip {slip}, κ_c = {branch_perm_text(branch)} d²: grains and pore pressure "
                                       f"{snap['time'] - t_peak:+.4g} t₀ from the peak velocity",
                                 sigma=u.info.sigma,
                                 time_offset=u.time_offset()))

@@ -23,7 +23,8 @@ import numpy as np
 from matplotlib.collections import LineCollection
 
 from ..analysis.catalog import find_slip, read_catalog
-from ..analysis.forkpairs import branch_name, branch_perm, fork_branches, perm_text
+from ..analysis.forkpairs import fork_branches
+from ..io.layout import RunLayout, branch_name, branch_perm, perm_text
 from ..driver.progress import ItemProgress
 from ..errors import MovieError
 from ..io.runfile import RunReader
@@ -72,23 +73,23 @@ def open_fork(run_dir: Path | str, slip: int, perm: float | None = None) -> tupl
     """(drained, undrained) branches of ``RUN/forks/slip_NNN``; ``perm`` picks the undrained
     branch (default: the only one)."""
     run_dir = Path(run_dir)
-    fork = run_dir / "forks" / f"slip_{slip:03d}"
+    fork = RunLayout(run_dir).fork(slip).root
     if not fork.is_dir():
         with RunReader(run_dir, allow_running=True) as r:
             find_slip(read_catalog(r), slip)          # names the slips there are, if slip is not one
         raise MovieError(f"{run_dir} has no fork of slip {slip}; run `gouge restart {run_dir} --slip {slip} "
                          f"--perm K` first")
-    _, wet = fork_branches(fork)
+    dry, wet = fork_branches(fork)
     if perm is not None:
         wet = [p for p in wet if branch_perm(p) == perm]
-    if not (fork / "drained" / "run.h5").is_file() or not wet:
+    if dry is None or not wet:
         have = ", ".join(p.name for p in sorted(fork.iterdir()) if p.is_dir()) or "none"
         raise MovieError(f"{fork} needs a drained and an undrained branch{'' if perm is None else ' ' + branch_name(perm)}; "
                          f"it has: {have}")
     if len(wet) > 1:
         raise MovieError(f"{fork} has several undrained branches ({', '.join(p.name for p in wet)}); pick one "
                          "with --perm")
-    drained = _branch("drained", fork / "drained")
+    drained = _branch("drained", dry)
     undrained = _branch(f"undrained, κ_c = {perm_text(branch_perm(wet[0]))} d²", wet[0])
     return drained, undrained
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..analysis.forkpairs import branch_name, perm_text
+from ..io.layout import branch_name, perm_text
 from .campaign import campaign_figure
 from .style import DPI, save
 

@@ -1,4 +1,4 @@
-"""Figure of the stick-scaling ladder (gouge_cli.scaling_ladder): slip statistics and cost vs lambda."""
+"""Figure of the stick-scaling ladder (gouge_cli.studies.scaling_ladder): slip statistics and cost vs lambda."""
 
 from __future__ import annotations
 

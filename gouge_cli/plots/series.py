@@ -14,6 +14,7 @@ import numpy as np
 
 from ..analysis.catalog import fit_slip, series_envelope, slip_window, SlipFriction
 from ..analysis.forkpairs import ForkPair
+from ..io.layout import branch_perm_text
 from ..io.runfile import RunReader
 from ..units import ResultUnits
 from .style import (
@@ -61,7 +62,7 @@ def overview_figure(reader: RunReader, catalog: list[dict], path: Path, max_poin
             ax.text(0.5, 0.5, f"no {name} series", transform=ax.transAxes, ha="center", color="0.5")
         shade_slips(ax, spans)
         ax.set_ylabel(LABEL[label])
-    hi = reader.info.slip_params["start_factor"]
+    hi = reader.info.slip_rule.start_factor
     axes[1].axhline(hi, color="0.55", lw=0.7, ls=":", label=f"slip trigger {hi:g} V_s")
     axes[1].legend(loc="upper left", fontsize=8, frameon=False)
     axes[-1].set_xlabel(LABEL["time"])
@@ -135,7 +136,7 @@ def pair_figure(drained: RunReader, undrained: RunReader, pair: ForkPair, path: 
             ax.plot(td, _scaled(name, d[name], drained), color=DRAINED, lw=1.0, label="drained")
         if u[name] is not None:
             ax.plot(tu, _scaled(name, u[name], undrained), color=UNDRAINED, lw=1.0,
-                    label=f"κ_c = {undrained.info.run_dir.name.removeprefix('perm_')} d²")
+                    label=f"κ_c = {branch_perm_text(undrained.info.run_dir.name)} d²")
         ax.set_ylabel(LABEL[label])
     axes[0].legend(loc="lower left", fontsize=8, frameon=False)
     ax = axes[4]
@@ -246,7 +247,7 @@ def branch_colors(perms) -> dict:
 
 def branch_label(row: dict) -> str:
     """Legend text of an undrained branch: kappa_c, its Deborah number and drainage regime."""
-    from ..analysis.forkpairs import perm_text
+    from ..io.layout import perm_text
 
     de = row.get("deborah_slip")
     de = de if de is not None and np.isfinite(de) else row.get("deborah_mean", float("nan"))
@@ -289,7 +290,7 @@ def comparison_figure(drained: RunReader, branches: list, path: Path) -> Path:
     for ax, label in zip(axes, ("tau", "velocity", "pressure")):
         ax.set_ylabel(LABEL[label])
     axes[2].set_ylabel("P / σ  (mean; band: min – max)")
-    axes[1].axhline(info.slip_params["start_factor"], color="0.55", lw=0.7, ls=":")
+    axes[1].axhline(info.slip_rule.start_factor, color="0.55", lw=0.7, ls=":")
     axes[0].legend(loc="lower left", fontsize=8, frameon=True, framealpha=0.85, edgecolor="none")
     axes[-1].set_xlabel(LABEL["time"])
     scale = units.t0_s * 1e3
@@ -298,7 +299,7 @@ def comparison_figure(drained: RunReader, branches: list, path: Path) -> Path:
     top.tick_params(labelsize=8)
     tidy(axes)
     slip = int(info.fork_slip) if info.fork_slip is not None else 0
-    from ..analysis.forkpairs import perm_text
+    from ..io.layout import perm_text
 
     perms = ", ".join(perm_text(p.row["permeability"]) for _, p in branches)
     title = f"Slip {slip}: drained branch and every permeability (κ_c = {perms} d²) from the same packing"

@@ -22,7 +22,7 @@ def study_figure(rows: list[dict], path: Path, title: str = "") -> Path:
     Right: m_eff / m_b of each drained slip (Eq. 3 fit); 1 is the rigid block of the thesis."""
     from matplotlib.ticker import MaxNLocator
 
-    from ..analysis.forkpairs import perm_text
+    from ..io.layout import perm_text
 
     fig, (ax1, ax2) = new_figure("campaign", 1, 2)
     perms = sorted({float(r["kappa_c"]) for r in rows})

@@ -117,12 +117,13 @@ class LevelResult:
 def slip_end(path: Path, extra: dict) -> float | None:
     """End time of the slip a checkpoint was kept for, from the run's catalog (RUN/run.h5 next
     to RUN/checkpoints/), or None."""
+    from ..io.layout import RunLayout
     from ..io.runfile import slip_catalog
 
-    run_dir = Path(path).resolve().parent.parent
-    if "slip" not in extra or not (run_dir / "run.h5").is_file():
+    run = RunLayout.of_checkpoint(path)
+    if "slip" not in extra or not run.run_file.is_file():
         return None
-    for entry in slip_catalog(run_dir):
+    for entry in slip_catalog(run.root):
         if int(entry["number"]) == int(extra["slip"]):
             return float(entry["end_time"])
     return None
@@ -168,13 +169,14 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
     """Compact and load `config` (at most run.duration) until its first slip ends; start from the
     slip checkpoint written before it (work_dir/checkpoints/slip_001.h5), or from the end state
     (checkpoints/latest.h5) if no slip came."""
+    from ..io.layout import RunLayout
     from ..io.runfile import RunFile
     from ..driver.phases import load_phase
 
     work_dir = Path(work_dir)
     work_dir.mkdir(parents=True, exist_ok=True)
     sim = Simulation(config)
-    writer = RunFile(work_dir / "run.h5", config, sim.dt)
+    writer = RunFile(RunLayout(work_dir).run_file, config, sim.dt)
     try:
         sim.compact()
         writer.append(sim.observe())
@@ -184,7 +186,7 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
         writer.close()
     if recorder.slips and recorder.slips[0]["checkpoint"]:
         return start_from_checkpoint(work_dir / recorder.slips[0]["checkpoint"], config, interval)
-    return start_from_checkpoint(work_dir / "checkpoints" / "latest.h5", config, interval)
+    return start_from_checkpoint(RunLayout(work_dir).latest, config, interval)
 
 
 def fluid_dt(config: Config, finest_step: float) -> float:

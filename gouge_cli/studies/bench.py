@@ -40,6 +40,7 @@ from ..config import build_config, find_config, load_config
 from ..kernels import layout as L
 from ..kernels import step as K
 from ..kernels.probe import stream_probe
+from ..driver.guards import check
 from ..driver.simulation import Simulation
 from ..model.timestep import choose_dt, slip_duration
 
@@ -102,7 +103,7 @@ def prepare(n_grains: int, dt: float, skin: float, cache: Path | None = None) ->
     sim = Simulation(bench_config(n_grains, dt, skin))
     sim.compact()
     sim.advance(int(80 * sim.state.width))
-    sim.check()
+    check(sim)
     start = sim.state.arrays()
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -140,7 +141,7 @@ def time_gouge(sim: Simulation, start: dict, threads: int | list[int], steps: in
             final[t] = sim.state.arrays()
             if probe:
                 probe_rates[t].append(probe.rate(t))
-    sim.check()
+    check(sim)
     return rates, final, probe_rates
 
 

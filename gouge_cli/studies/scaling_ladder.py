@@ -63,6 +63,7 @@ def kept_runs(path: Path, key: str) -> list[dict]:
 
 def _run_rung(config: Config, packing, lam: float, out_dir: Path) -> dict:
     """One loading run from the compacted `packing` (a Checkpoint) at lambda; its slips and costs."""
+    from ..io.layout import RunLayout
     from ..io.runfile import RunFile, RunReader, attr_value
     from ..driver.phases import load_phase
     from ..driver.simulation import Simulation
@@ -72,7 +73,7 @@ def _run_rung(config: Config, packing, lam: float, out_dir: Path) -> dict:
     sim = Simulation(cfg, arrays=packing.state)
     out_dir.mkdir(parents=True, exist_ok=True)
     t_load, end = sim.state.time, sim.state.time + cfg.run.duration
-    writer = RunFile(out_dir / "run.h5", cfg, sim.dt, extra_attrs={
+    writer = RunFile(RunLayout(out_dir).run_file, cfg, sim.dt, extra_attrs={
         "n_grains": sim.state.n, "width": sim.state.width, "wall_mass_per_length": sim.wall_mass_per_length,
         "load_start_time": t_load, "end_time": end}, threads=1)
     writer.append(sim.observe())

@@ -36,6 +36,7 @@ import yaml
 
 from ..errors import CampaignConflict
 from ..config import Config, build_config
+from ..io.layout import CONFIG_FILE, OWNED, RunLayout
 from ..io.rundir import pid_alive
 from .campaign_spec import CampaignSpec, Point, expand, load_spec
 
@@ -130,10 +131,11 @@ def advance_run(run_dir: str, config: dict, settings: dict) -> dict:
     from .run import resume_run, run_scene
 
     run_dir = Path(run_dir)
+    layout = RunLayout(run_dir)
 
     def body():
-        status = run_status(run_dir / "run.h5")
-        resumed = status in ("running", "interrupted") and (run_dir / "checkpoints" / "latest.h5").is_file()
+        status = run_status(layout.run_file)
+        resumed = status in ("running", "interrupted") and layout.latest.is_file()
         if status != "finished":
             result = resume_run(run_dir, quiet=True) if resumed else \
                 run_scene(build_config(config), run_dir, force=True, quiet=True)
@@ -158,7 +160,7 @@ def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration:
 
     def body():
         summary = run_fork(run_dir, slip, list(permeabilities), None, duration, force=True, quiet=True)
-        write_pair_json(run_dir / "forks" / f"slip_{slip:03d}")
+        write_pair_json(RunLayout(run_dir).fork(slip).root)
         return {"branches": {k: b["status"] for k, b in summary["branches"].items()}}
 
     return _task(run_dir / "ledger" / f"fork_{slip:03d}.json", settings, body)
@@ -292,13 +294,13 @@ def survey(spec: CampaignSpec, spec_path: Path) -> Survey:
     for point in points:
         pdir = root / point.name
         run = run_settings(point.config)
-        rs = _piece_state(Piece(point.name, "run"), pdir / "ledger" / "run.json", run, pdir / "run.h5")
+        rs = _piece_state(Piece(point.name, "run"), pdir / "ledger" / "run.json", run, RunLayout(pdir).run_file)
         out.pieces.append(rs)
         if rs.state == "done":
             for piece in action.after(point.name, rs.piece, rs.record.get("result", {}) | {"state": "done"}):
                 ledger = pdir / "ledger" / f"{piece.label}.json"
-                fork_dir = pdir / "forks" / f"slip_{piece.slip:03d}"
-                out.pieces.append(_piece_state(piece, ledger, action.settings(piece, run), fork_dir / "pair.json"))
+                pair_file = RunLayout(pdir).fork(piece.slip).pair_file
+                out.pieces.append(_piece_state(piece, ledger, action.settings(piece, run), pair_file))
         elif spec.action == "study":
             out.unknown_forks.append(point.name)
     return out
@@ -341,7 +343,7 @@ def _wipe(s: Survey, ps: PieceState):
     """Remove a conflicting piece's results (``--force``): a run takes its forks with it."""
     pdir = s.point_dir(ps.piece.point)
     if ps.piece.kind == "run":
-        for name in ("run.h5", "checkpoints", "forks", "ledger", "figures", "analysis"):
+        for name in [n for n in OWNED if n != CONFIG_FILE] + ["ledger"]:
             target = pdir / name
             if target.is_dir():
                 shutil.rmtree(target)

@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..analysis.forkpairs import branch_name
+from ..io.layout import RunLayout, branch_name
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint
 from ..config import build_config, Config
@@ -81,7 +81,7 @@ def check_perms(perms) -> None:
 
 def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | None = None,
                overrides: list[str] | None = None, live=None, quiet: bool = False,
-               stop_after_slip: bool | None = None) -> BranchResult:
+               stop_after_slip: bool | None = None, checkpoint=None) -> BranchResult:
     """Run one branch (drained: ``perm=None``) of slip ``slip`` into ``RUN/forks/slip_NNN/<branch>``.
 
     ``duration`` [t0] from the checkpoint; None: 5 x (end - checkpoint time) + 2 leads.
@@ -89,11 +89,13 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     Overwrites an existing branch directory. The branch directory is locked while it runs (so
     branches of one run may run in parallel), and the run itself must not be in progress. Dense
     snapshots while the branch slips: output.slip_frames, FORK_SLIP_FRAMES unless overridden.
+    ``checkpoint``: the slip's checkpoint read already with these overrides (its arrays are copied
+    into the branch's scene, never changed), so that a fork reads it once.
     """
     run_dir = Path(run_dir)
     refuse_if_in_progress(run_dir, f"restart --slip {slip}")
     entry = fork_entry(run_dir, slip)
-    ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
+    ck = checkpoint if checkpoint is not None else read_checkpoint(run_dir / entry["checkpoint"], overrides)
     frames = {} if any(o.split("=")[0].strip() == "output.slip_frames" for o in overrides or []) \
         else {"output": {"slip_frames": ck.config.output.slip_frames or FORK_SLIP_FRAMES}}
     config = branch_config(ck.config, perm, frames)
@@ -104,7 +106,7 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     if duration is None:
         span = float(entry["end_time"]) - ck.time
         duration = 5.0 * span + 2.0 * lead_time(ck.config)
-    out_dir = run_dir / "forks" / f"slip_{slip:03d}" / name
+    out_dir = RunLayout(run_dir).fork(slip).branch(perm).root
     out_dir.mkdir(parents=True, exist_ok=True)
     with RunLock(out_dir, f"gouge restart --slip {slip} ({name})"):
         return _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet)
@@ -113,7 +115,7 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
 def _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet):
     t0 = time.perf_counter()
     sim = Simulation(config, arrays=ck.state)
-    writer = RunFile(out_dir / "run.h5", config, sim.dt, extra_attrs={
+    writer = RunFile(RunLayout(out_dir).run_file, config, sim.dt, extra_attrs={
         "parent_run": os.path.relpath(run_dir, out_dir), "parent_checkpoint": str(entry["checkpoint"]),
         "fork_slip": slip, "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
         "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
@@ -165,11 +167,15 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     note = provenance.risk_line(ck.provenance, f"the checkpoint of slip {slip}")
     if note:
         print(note, file=sys.stderr, flush=True)
-    fork_dir = run_dir / "forks" / f"slip_{slip:03d}"
+    if ck.config.numerics.device == "gpu" and not quiet:
+        print("note: numerics.device = gpu: the fork's branches run on the cpu (branch_config)",
+              file=sys.stderr, flush=True)
+    fork = RunLayout(run_dir).fork(slip)
+    fork_dir = fork.root
     names = [None] + list(perms)
-    finished = {p: branch_status(fork_dir / branch_name(p)) == "finished" for p in names}
+    finished = {p: branch_status(fork.branch(p).root) == "finished" for p in names}
     if all(finished.values()) and not force:
-        last = fork_dir / branch_name(names[-1]) / "run.h5"
+        last = fork.branch(names[-1]).run_file
         raise RunDirError(f"{last} exists (finished); pass --force to run this branch again")
     kept = [] if force else [_finished_branch(fork_dir, p) for p in names if finished[p]]
     branches = names if force else [p for p in names if not finished[p]]
@@ -177,7 +183,7 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     results = []
     for perm in branches:
         try:
-            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet)
+            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet, checkpoint=ck)
         except OSError as exc:
             if exc.errno != errno.ENOSPC:
                 raise
@@ -193,6 +199,19 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     summary = pair_summary(run_dir, slip, ck.time - origin, [by_name[branch_name(p)] for p in names], origin,
                            ck.config.loading.velocity)
     summary["library_differences_from_parent"] = provenance.bit_risks(ck.provenance)
+    return summary
+
+
+def restart(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
+            duration: float | None = None, force: bool = False, main: str = "first", live=None,
+            quiet: bool = False) -> dict:
+    """`gouge restart` and :func:`gouge_cli.api.restart`: :func:`run_fork`, then, with
+    permeabilities, the fork's pair.json (its record also under "pair" in the returned summary)."""
+    from .pairs import write_pair_json
+
+    summary = run_fork(run_dir, slip, perms, overrides, duration, force=force, live=live, quiet=quiet)
+    if perms:
+        summary["pair"] = write_pair_json(RunLayout(run_dir).fork(slip).root, main)
     return summary
 
 

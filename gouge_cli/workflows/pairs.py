@@ -18,6 +18,7 @@ from ..io.checkpoint import read_checkpoint
 from ..io.filedoc import json_safe
 from ..io.integrity import check_seal, stored_seal
 from ..io.provenance import bit_risks, loads
+from ..io.layout import ForkLayout, RunLayout
 from ..io.runfile import RunReader
 
 __all__ = ["write_pair_json", "branch_status"]
@@ -25,7 +26,7 @@ __all__ = ["write_pair_json", "branch_status"]
 
 def branch_status(branch_dir: Path) -> str:
     """Status attribute of ``branch_dir/run.h5`` ('missing' or 'unreadable' when it has none)."""
-    h5 = Path(branch_dir) / "run.h5"
+    h5 = RunLayout(branch_dir).run_file
     if not h5.is_file():
         return "missing"
     try:
@@ -46,13 +47,14 @@ def write_pair_json(fork_dir: Path, main: str = "first") -> dict:
     retrace the parent bit for bit). Raises :class:`~gouge_cli.errors.AnalysisError` when a
     branch is missing or still running.
     """
-    fork_dir = Path(fork_dir)
+    fork = ForkLayout(fork_dir)
+    fork_dir = fork.root
     pairs = classify_fork(fork_dir, main)
     drained, undrained = fork_branches(fork_dir)
     branches = {p.name: branch_status(p) for p in [drained, *undrained] if p is not None}
     risks = sorted({r for p in [drained, *undrained] if p is not None for r in branch_bit_risks(p)})
     record = json_safe({
-        "slip": pairs[0].row["slip"] if pairs else int(fork_dir.name.split("_")[-1]),
+        "slip": pairs[0].row["slip"] if pairs else fork.slip,
         "fork_dir": fork_dir.name,
         "branches": branches,
         "definition": pairs[0].result.definition if pairs else None,
@@ -61,7 +63,7 @@ def write_pair_json(fork_dir: Path, main: str = "first") -> dict:
         "pairs": [dict(p.row, run="../..") for p in pairs],
         "library_differences_from_parent": risks,
     })
-    (fork_dir / "pair.json").write_text(json.dumps(record, indent=2, allow_nan=False))
+    fork.pair_file.write_text(json.dumps(record, indent=2, allow_nan=False))
     return record
 
 
@@ -71,7 +73,7 @@ def branch_bit_risks(branch_dir: Path) -> list[str]:
     ([] if either file or its provenance is missing; one line saying so if either is damaged,
     nothing compared)."""
     try:
-        with h5py.File(Path(branch_dir) / "run.h5", "r") as h5:
+        with h5py.File(RunLayout(branch_dir).run_file, "r") as h5:
             check_seal(h5, stored_seal(h5) is not None)
             mine = loads(h5.attrs.get("provenance"))
             parent = Path(branch_dir) / str(h5.attrs.get("parent_run", "")) / str(h5.attrs.get("parent_checkpoint", ""))

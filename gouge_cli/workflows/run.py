@@ -14,6 +14,7 @@ from ..io.checkpoint import read_checkpoint, remove_stale_temps
 from ..config import Config, dump_config, load_config
 from ..errors import ConfigError, DamagedFileError, hdf5_os_error
 from ..kernels import layout as L
+from ..io.layout import RunLayout
 from ..io.runfile import RunFile
 from ..io.verify import continued_problems
 from ..model.params import choose_threads
@@ -22,6 +23,7 @@ from ..driver.phases import compaction_phase, load_phase
 from ..errors import RunDirError
 from ..io.rundir import check_run_dir, open_run_file, prepare_run_dir, RunLock
 from ..driver.simulation import Simulation
+from ..driver.slips import recorded_count
 from ..errors import PhysicsError
 
 
@@ -50,17 +52,15 @@ def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=
     recorder = None
     try:
         if sim.phase == L.COMPACTION:
-            start = None
-            if resume_from is not None and "compaction_start" in resume_from.extra:
-                t0, step0 = resume_from.extra["compaction_start"]
-                start = (float(t0), int(step0))
-            compaction_phase(sim, out_dir, live, quiet, start)        # (ends with the fluid started)
+            compaction_phase(sim, out_dir, live, quiet, resume_from)        # (ends with the fluid started)
             writer.set_attr("compaction_settled", bool(sim.compaction_settled))
             if not sim.compaction_settled:
                 print(f"warning: compaction did not settle within compaction.max_time = "
                       f"{config.compaction.max_time:g} t0 (top wall or grains still moving); loading starts "
                       "anyway. Raise compaction.max_time, or compaction.damping, for a settled start.",
                       file=sys.stderr, flush=True)
+            if sim.gpu_fallback:
+                print(f"note: {sim.gpu_fallback}", file=sys.stderr, flush=True)
             writer.set_attr("load_start_time", sim.state.time)
             writer.set_attr("end_time", sim.state.time + config.run.duration)
             writer.append(sim.observe())
@@ -99,14 +99,14 @@ def stopped_by_os_error(writer: RunFile, err: BaseException) -> BaseException:
 
 def _new_run(config: Config, out_dir: Path, live, quiet, label) -> RunResult:
     """Write config.yaml and a fresh run.h5 into out_dir (locked by the caller) and drive it."""
-    (out_dir / "config.yaml").write_text(dump_config(config))
+    RunLayout(out_dir).config_file.write_text(dump_config(config))
     sim = Simulation(config)
     return _drive(sim, _fresh_run_file(sim, out_dir), out_dir, live=live, quiet=quiet, label=label)
 
 
 def _fresh_run_file(sim: Simulation, out_dir: Path) -> RunFile:
     """A new run.h5 (attributes only), flushed to disk at once."""
-    writer = RunFile(out_dir / "run.h5", sim.config, sim.dt,
+    writer = RunFile(RunLayout(out_dir).run_file, sim.config, sim.dt,
                      extra_attrs={"n_grains": sim.state.n, "width": sim.state.width,
                                   "wall_mass_per_length": sim.wall_mass_per_length}, threads=sim.threads)
     writer.flush()
@@ -135,14 +135,15 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
     snapshots and catalog entries written after that checkpoint are dropped and produced
     again. A run killed before its first checkpoint starts again from its config.yaml."""
     run_dir = check_run_dir(run_dir)
+    layout = RunLayout(run_dir)
     with RunLock(run_dir, "gouge resume"):
-        latest = run_dir / "checkpoints" / "latest.h5"
+        latest = layout.latest
         remove_stale_temps(latest)
         if not latest.is_file():
-            if not (run_dir / "config.yaml").is_file():
+            if not layout.config_file.is_file():
                 raise RunDirError(f"{run_dir} has neither checkpoints/latest.h5 nor config.yaml; start it again "
                                   "with `gouge run ... --force`")
-            config = load_config(run_dir / "config.yaml")
+            config = load_config(layout.config_file)
             return _new_run(config, run_dir, live, quiet, f"resume {config.name}")
         ck = read_checkpoint(latest)
         note = provenance.risk_line(ck.provenance, f"{latest}")
@@ -152,13 +153,13 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
         if sim.phase == L.COMPACTION:       # run.h5 holds nothing but its attributes yet: written anew
             writer = _fresh_run_file(sim, run_dir)
         else:
-            with open_run_file(run_dir / "run.h5") as h5:
+            with open_run_file(layout.run_file) as h5:
                 if str(h5.attrs["status"]) == "finished":
                     raise RunDirError(f"{run_dir} already finished; nothing to resume")
-            rec_state = ck.extra.get("slip_recorder", {})
-            _refuse_damaged(run_dir / "run.h5", ck.time, ck.step, int(rec_state.get("count", 0)))
-            writer = RunFile(run_dir / "run.h5", ck.config, sim.dt, mode="a", threads=sim.threads)
-            writer.truncate_after(ck.time, ck.step, int(rec_state.get("count", 0)))
+            count = recorded_count(ck.extra)
+            _refuse_damaged(layout.run_file, ck.time, ck.step, count)
+            writer = RunFile(layout.run_file, ck.config, sim.dt, mode="a", threads=sim.threads)
+            writer.truncate_after(ck.time, ck.step, count)
             writer.set_attr("status", "running")
         return _drive(sim, writer, run_dir, live=live, quiet=quiet, label=f"resume {ck.config.name}",
                       resume_from=ck)

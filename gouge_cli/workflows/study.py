@@ -31,14 +31,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..analysis.report import analyze_run, write_analysis
-from ..analysis.forkpairs import perm_text
 from ..analysis.study import STUDY_COLUMNS, study_rows, study_summaries, summary_lines, transient_slips
 from ..io.checkpoint import read_checkpoint
 from ..config import load_config
 from ..errors import ConfigError, StudyInterrupted
 from ..io.runfile import slip_catalog
-from .fork import branch_name, check_perms, run_branch
+from .fork import check_perms, run_branch
 from ..errors import RunDirError
+from ..io.layout import RunLayout, branch_name, perm_text
 from ..io.rundir import check_run_dir
 from .run import default_run_dir, resume_run, run_scene
 from ..io.filedoc import json_safe
@@ -129,12 +129,12 @@ def _loading_run(target: Path, out: Path | None, overrides: list[str] | None, qu
         return check_run_dir(target), "given"
     cfg = load_config(target, overrides)
     run_dir = Path(out) if out is not None else default_run_dir(cfg)
-    h5 = run_dir / "run.h5"
+    h5 = RunLayout(run_dir).run_file
     if h5.is_file():
         status = branch_status(run_dir)
         if status == "finished":
             return run_dir, "done before"
-        if (run_dir / "checkpoints" / "latest.h5").is_file():
+        if RunLayout(run_dir).latest.is_file():
             _finished(resume_run(run_dir, quiet=quiet), run_dir)
             return run_dir, f"resumed ({status})"
     _finished(run_scene(cfg, run_dir, force=h5.is_file(), quiet=quiet, confirm=confirm), run_dir)
@@ -158,7 +158,7 @@ def plan_branches(run_dir: Path, slips: list[int], perms: list[float]) -> tuple[
         window = study_window(entry, ck.time, cfg.loading.normal_stress, cfg.loading.spring_constant,
                               cfg.loading.velocity)
         for perm in [None, *perms]:
-            branch = run_dir / "forks" / f"slip_{slip:03d}" / branch_name(perm)
+            branch = RunLayout(run_dir).fork(slip).branch(perm).root
             if branch_status(branch) == "finished":
                 done.append(f"slip {slip} {branch.name}")
             else:
@@ -210,7 +210,7 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
                 say(f"slip {rec['slip']} {rec['branch']}: {rec['status']} ({rec['wall_seconds']:.0f} s)")
     for slip in chosen:
         try:
-            write_pair_json(run_dir / "forks" / f"slip_{slip:03d}", main)
+            write_pair_json(RunLayout(run_dir).fork(slip).root, main)
         except Exception as exc:       # a failed branch: the pair is reported as skipped below
             say(f"slip {slip}: no pair ({exc})")
     analysis = analyze_run(run_dir, main=main)

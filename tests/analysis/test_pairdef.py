@@ -11,7 +11,7 @@ import pytest
 from gouge_cli.analysis.blockslider import FIT_MIN_R2, FIT_PERIOD_FACTOR, fit_block_slider, judge_fit
 from gouge_cli.analysis.pairs import SLOW, PairDefinition, classify_pair
 from gouge_cli.analysis.study import study_summary, transient_slips
-from gouge_cli.driver.detector import WallSeries
+from gouge_cli.model.slip_rule import WallSeries
 from gouge_cli.workflows.study import parse_slips, study_window
 
 V, K, M, SIG = 1e-3, 0.5, 2.0, 1.0

@@ -1,0 +1,76 @@
+"""The run-directory layout has one owner (gouge_cli.io.layout): its paths, and no path literal of a run
+directory spelled anywhere else in gouge_cli, checked from the source. A path literal is a string
+constant (an f-string's literal parts included) without white space; prose that names a file for
+the reader (docstrings, help texts, error messages) is not one."""
+
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+from gouge_cli.io.layout import ForkLayout, RunLayout, branch_name, branch_perm
+
+PACKAGE = Path(__file__).resolve().parents[2] / "gouge_cli"
+OWNER = PACKAGE / "io" / "layout.py"
+# a string constant (an f-string's literal parts included) that spells a run directory's file
+FORBIDDEN = re.compile(r"run\.h5|latest\.h5|pair\.json|(^|/)checkpoints(/|$)|(^|/)forks(/|$)|forks/slip_|^perm_|"
+                       r"^slip_\*|checkpoints/slip_")
+
+
+def _docstrings(tree: ast.AST) -> set[int]:
+    ids = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)) and node.body:
+            first = node.body[0]
+            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
+                ids.add(id(first.value))
+    return ids
+
+
+def path_literals(path: Path) -> list[tuple[int, str]]:
+    """(line, text) of the path literals of a run directory in one source file."""
+    tree = ast.parse(path.read_text())
+    skip = _docstrings(tree)
+    return [(node.lineno, node.value) for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in skip
+            and not re.search(r"\s", node.value) and FORBIDDEN.search(node.value)]
+
+
+def test_no_run_directory_path_is_spelled_outside_the_layout():
+    found = [f"{p.relative_to(PACKAGE.parent)}:{line}: {text!r}" for p in sorted(PACKAGE.rglob("*.py")) if p != OWNER
+             for line, text in path_literals(p)]
+    assert not found, "spell these through gouge_cli.io.layout:\n" + "\n".join(found)
+
+
+def test_the_checker_sees_a_hand_built_path(tmp_path):
+    src = tmp_path / "m.py"
+    src.write_text('"""run.h5 in a docstring is fine."""\nx = run_dir / "forks" / f"slip_{n:03d}" / "run.h5"\n'
+                   'raise OSError(f"{x}: no run.h5 in it")\n')
+    assert sorted(text for _, text in path_literals(src)) == ["forks", "run.h5"]
+
+
+def test_paths(tmp_path):
+    run = RunLayout(tmp_path)
+    assert run.run_file == tmp_path / "run.h5"
+    assert run.latest == tmp_path / "checkpoints" / "latest.h5"
+    assert run.slip_checkpoint(7) == tmp_path / "checkpoints" / "slip_007.h5"
+    assert run.relative(run.slip_checkpoint(7)) == "checkpoints/slip_007.h5"
+    fork = run.fork(3)
+    assert fork.root == tmp_path / "forks" / "slip_003" and fork.slip == 3
+    assert fork.pair_file == tmp_path / "forks" / "slip_003" / "pair.json"
+    assert fork.branch(None).run_file == tmp_path / "forks" / "slip_003" / "drained" / "run.h5"
+    assert fork.branch(1e-5).root.name == "perm_1e-05" == branch_name(1e-5)
+    assert branch_perm(fork.branch(2.5e-5).root) == 2.5e-5
+
+
+def test_branches_found(tmp_path):
+    fork = ForkLayout(tmp_path / "forks" / "slip_001")
+    for perm in (None, 1e-3, 1e-5):
+        fork.branch(perm).root.mkdir(parents=True)
+        fork.branch(perm).run_file.write_bytes(b"")
+    drained, wet = fork.branches()
+    assert drained == fork.branch(None).root
+    assert [branch_perm(p) for p in wet] == [1e-5, 1e-3]
+    assert RunLayout(tmp_path).fork_dirs() == [fork.root]
+    assert len(RunLayout(tmp_path).branch_run_files()) == 3
