@@ -192,8 +192,9 @@ def show_config(
     out.print(dump_config(cfg), highlight=False, end="")
     out.print(f"# time step {pre.dt:.6g} t0 (stability bound {bound.bound:.6g} t0, {bound.mode} mode)",
               highlight=False)
-    if pre.note:
-        out.print(f"# {pre.note}", highlight=False)
+    for line in (pre.note, pre.warning):
+        if line:
+            out.print(f"# {line}", highlight=False)
 
 
 @app.command()

@@ -124,8 +124,9 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
     pre = check_config(config, choose_threads(config.numerics.threads, config.packing.n_grains))
     if pre.note and confirm is not None and not confirm(pre.note):
         raise ConfigError(f"not started (nothing was written): {pre.note.removeprefix('note: ')}")
-    if pre.note:
-        print(pre.note, file=sys.stderr, flush=True)
+    for line in (pre.note, pre.warning):
+        if line:
+            print(line, file=sys.stderr, flush=True)
     with prepare_run_dir(out_dir, force):
         return _new_run(config, out_dir, live, quiet, f"loading {config.name}")
 
