@@ -177,7 +177,7 @@ def register(app: typer.Typer) -> None:
         from ..api import analyze as analyze_run
         from ..errors import AnalysisError, DamagedFileError
         from ..errors import describe_os_error
-        from ..errors import EXIT_BAD_INPUT
+        from ..errors import EXIT_BAD_INPUT, EXIT_SKIPPED
         from .common import err, fail, out
 
         done, failed = [], []
@@ -206,10 +206,17 @@ def register(app: typer.Typer) -> None:
             })))
         elif summary is not None:
             _print_campaign(out, summary, len({a.info.run_dir for a, _ in done}))
+        skipped = sum(len(a.skipped) for a, _ in done)
         if failed:
             if as_json:
                 raise typer.Exit(EXIT_BAD_INPUT)
-            fail(f"{len(failed)} of {len(run_dirs)} run(s) could not be analysed")
+            fail(f"{len(failed)} of {len(run_dirs)} run(s) could not be analysed"
+                 + (f"; {skipped} fork(s) skipped (listed above)" if skipped else ""))
+        if skipped:         # exit 4: done, but incomplete (a script can tell)
+            if not as_json:
+                err.print(f"summary: {len(done)} run(s) analysed; {skipped} fork(s) skipped as damaged or unfinished "
+                          "(listed above: their pairs are not in the tables)", highlight=False)
+            raise typer.Exit(EXIT_SKIPPED)
 
     @app.command()
     def plot(

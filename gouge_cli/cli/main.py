@@ -1,4 +1,5 @@
-"""`gouge` command line. Exit codes: 0 done, 2 bad input, 3 physics failure, 130 interrupted."""
+"""`gouge` command line. Exit codes: 0 done, 2 bad input, 3 physics failure or full disk, 4 done with
+damaged forks skipped (analyze, study), 130 interrupted."""
 
 from __future__ import annotations
 

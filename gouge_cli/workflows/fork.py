@@ -28,7 +28,8 @@ from ..driver.slips import lead_time
 from ..io.runfile import RunFile, RunReader, slip_catalog
 from ..model.preflight import check_config
 from ..errors import RunDirError
-from ..io.rundir import check_run_dir, refuse_if_in_progress, RunLock
+from ..io.outputs import require_space
+from ..io.rundir import SPACE_MARGIN, check_run_dir, refuse_if_in_progress, RunLock
 from ..driver.phases import load_phase
 from ..driver.simulation import Simulation
 from .pairs import branch_status
@@ -73,6 +74,18 @@ def fork_entry(run_dir: Path, slip: int) -> dict:
     return next(e for e in catalog if int(e["number"]) == slip)
 
 
+SNAPSHOT_BYTES_PER_GRAIN = 130     # a snapshot's grains (7 float64) and about 3 contacts (2 int32, 2 float64)
+
+
+def branch_bytes(config: Config) -> float:
+    """Bytes a branch needs on disk, about: its dense snapshots (output.slip_frames per predicted
+    slip duration over up to 6 of them, plus 4 regular ones) and the room the run keeps free for
+    its in-memory slip states (driver.phases: the ring and SPACE_MARGIN)."""
+    n = config.packing.n_grains
+    frames = 6 * config.output.slip_frames + 4
+    return frames * SNAPSHOT_BYTES_PER_GRAIN * n + 2.0 * (config.slips.ring + 2) * 200 * n + SPACE_MARGIN
+
+
 def check_perms(perms) -> None:
     for perm in perms:
         if not (perm is None or (perm > 0 and math.isfinite(perm))):
@@ -105,6 +118,8 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
         span = float(entry["end_time"]) - ck.time
         duration = 5.0 * span + 2.0 * lead_time(ck.config)
     out_dir = run_dir / "forks" / f"slip_{slip:03d}" / name
+    require_space(run_dir, branch_bytes(config), f"branch {name} of slip {slip}",
+                  f"run `gouge restart {run_dir} --slip {slip}` again")     # (run_fork names its command)
     out_dir.mkdir(parents=True, exist_ok=True)
     with RunLock(out_dir, f"gouge restart --slip {slip} ({name})"):
         return _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet)
@@ -182,7 +197,8 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
             if exc.errno != errno.ENOSPC:
                 raise
             raise NoSpaceError(exc.filename or str(run_dir), f"run `{command}` again: the fork's branches are "
-                               "run again (no --force needed)") from None
+                               "run again (no --force needed)", need=getattr(exc, "need", None),
+                               detail=getattr(exc, "detail", "")) from None
         if r.status == "interrupted":
             raise KeyboardInterrupt(f"interrupted: branch {r.name} of slip {slip} stopped; no pair was classified. "
                                     f"Run `{command}` again to finish the fork (no --force needed)")

@@ -115,6 +115,7 @@ class StudyResult:
     transient: list[int]
     ran: list[dict] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
+    damaged: list[str] = field(default_factory=list)      # forks left out of the tables (analysis.skipped)
     rows: list[dict] = field(default_factory=list)
     summary: list = field(default_factory=list)      # one study_summary per permeability
     written: dict = field(default_factory=dict)
@@ -214,6 +215,7 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
         except Exception as exc:       # a failed branch: the pair is reported as skipped below
             say(f"slip {slip}: no pair ({exc})")
     analysis = analyze_run(run_dir, main=main)
+    result.damaged = [r for r in analysis.skipped if any(f"slip_{s:03d}" in r for s in chosen)]
     result.written.update(write_analysis(analysis))
     pairs = [p for p in analysis.pairs if int(p.row["slip"]) in set(chosen)
              and p.row["branch"] in {branch_name(k) for k in perms}]
