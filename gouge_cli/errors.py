@@ -116,6 +116,9 @@ class NoSpaceError(OSError):
         self.need = need            # bytes to free, when the write could be sized
         self.detail = detail        # e.g. "the export needs about 3.1 MB, 0.2 MB are free"
 
+    def __reduce__(self):           # raised in a worker process (gouge study), re-raised in its parent
+        return NoSpaceError, (self.filename, self.next_step, self.need, self.detail)
+
 
 class PhysicsError(PhysicsFailure):
     """The physics went wrong (NaN, runaway overlap, unstable fluid step); names cause and fix."""

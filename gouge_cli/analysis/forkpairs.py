@@ -4,7 +4,7 @@ classified with the pair definition of analysis.pairs, and the campaign summary 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,8 +23,9 @@ PAIR_COLUMNS = (
     "strength_difference", "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
     "undrained_peak_over_Vs", "n_undrained_slips", "n_subevents", "drained_onset", "drained_end",
     "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_ok", "drained_fit_verdict",
-    "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "note",
+    "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "note", "status",
 )
+FAILED = "failed"       # type and base_type of a pair whose branch failed (status 'failed: <physics message>')
 
 
 
@@ -143,6 +144,11 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 ds = u.series(["time", "deborah"])
                 uinfo = u.info
             result = classify_pair(drained, undrained, info.V_s, info.k, info.m_b, info.sigma, definition)
+            failure = next((f"{name} branch {st}" for name, st in (("drained", info.status), ("undrained", uinfo.status))
+                            if st.startswith("failed")), "")
+            if failure:     # a failed branch is no pair type: reported as failed, with its message
+                result = replace(result, type=FAILED, base_type=FAILED, complex=False, undrained_event=FAILED,
+                                 criteria={k: False for k in result.criteria}, note=failure)
             d_main, u_main = result.drained_slip, result.undrained_slip
             fired = [name for name, on in result.criteria.items() if on]
             de_onset, de_max = deborah_during(ds["time"], ds["deborah"], u_main)
@@ -192,6 +198,7 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 "deborah_onset": de_onset,
                 "deborah_max": de_max,
                 "note": result.note,
+                "status": FAILED if failure else "finished",
             }
             pairs.append(ForkPair(row, result, drained_dir, udir))
     return pairs

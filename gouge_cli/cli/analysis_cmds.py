@@ -7,8 +7,10 @@ Bad input (not a run, still running, no slips, no such slip) exits with code 2.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
+import shlex
 from pathlib import Path
 from typing import List, Optional
 
@@ -177,15 +179,21 @@ def register(app: typer.Typer) -> None:
         from ..api import analyze as analyze_run
         from ..errors import AnalysisError, DamagedFileError
         from ..errors import describe_os_error
-        from ..errors import EXIT_BAD_INPUT, EXIT_SKIPPED
+        from ..errors import EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_SKIPPED, NoSpaceError
         from .common import err, fail, out
 
-        done, failed = [], []
+        done, failed, full = [], [], False
         for run_dir in run_dirs:
             try:
                 analysis = analyze_run(run_dir, notch=notch, main=_main(main), write=False)
                 written = write_analysis(analysis)
             except (AnalysisError, DamagedFileError, OSError) as exc:
+                if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+                    full = True
+                    if not getattr(exc, "next_step", None):
+                        exc = NoSpaceError(exc.filename or str(run_dir), "run `" + shlex.join(
+                            ["gouge", "analyze", *map(str, run_dirs)]) + "` again (with the same options)",
+                                           getattr(exc, "need", None), getattr(exc, "detail", ""))
                 exc = exc if not isinstance(exc, OSError) else describe_os_error(exc, str(run_dir))[0]
                 failed.append(str(exc))
                 if not as_json:
@@ -210,8 +218,11 @@ def register(app: typer.Typer) -> None:
         if failed:
             if as_json:
                 raise typer.Exit(EXIT_BAD_INPUT)
+            if len(failed) == 1 and len(run_dirs) == 1 and not skipped:    # one message, already printed
+                raise typer.Exit(EXIT_PHYSICS if full else EXIT_BAD_INPUT)
             fail(f"{len(failed)} of {len(run_dirs)} run(s) could not be analysed"
-                 + (f"; {skipped} fork(s) skipped (listed above)" if skipped else ""))
+                 + (f"; {skipped} fork(s) skipped (listed above)" if skipped else ""),
+                 EXIT_PHYSICS if full else EXIT_BAD_INPUT)
         if skipped:         # exit 4: done, but incomplete (a script can tell)
             if not as_json:
                 err.print(f"summary: {len(done)} run(s) analysed; {skipped} fork(s) skipped as damaged or unfinished "

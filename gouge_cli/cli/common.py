@@ -60,6 +60,7 @@ def _with_next_step(exc, name: str, kwargs: dict):
 
     if getattr(exc, "next_step", None) or not is_no_space(exc):
         return exc
+    name = {"figures": "plot"}.get(name, name)          # `gouge plot` runs api.figures guarded
     cause = exc if isinstance(exc, OSError) else hdf5_os_error(exc) or exc
     path = getattr(cause, "filename", None) or str(kwargs.get("run_dir") or kwargs.get("out_dir") or ".")
     run = kwargs.get("out_dir") if name == "run" else kwargs.get("run_dir")

@@ -84,6 +84,7 @@ def restart(
     the branch K (the finished drained branch is kept). Times printed in t0 since loading began."""
     import json
 
+    from ..errors import InputError, PhysicsFailure
     from ..io.filedoc import json_safe
     from ..workflows.fork import run_fork
     from ..workflows.pairs import write_pair_json
@@ -95,7 +96,15 @@ def restart(
         fail(f"--duration = {duration:g}: give a positive, finite time [t0]")
     if main not in ("first", "largest"):
         fail(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
-    summary = run_fork(target, slip, perm, set_, duration, force=force, quiet=quiet)
+    try:
+        summary = run_fork(target, slip, perm, set_, duration, force=force, quiet=quiet)
+    except PhysicsFailure:
+        if perm:        # the failed branch is reported as failed in pair.json, with its message
+            try:
+                write_pair_json(target / "forks" / f"slip_{slip:03d}", main)
+            except (InputError, OSError):
+                pass
+        raise
     if perm:
         summary["pair"] = write_pair_json(target / "forks" / f"slip_{slip:03d}", main)
     out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)

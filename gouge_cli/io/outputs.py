@@ -95,7 +95,7 @@ def free_bytes(folder: Path) -> int:
     return shutil.disk_usage(existing or Path.cwd()).free
 
 
-def require_space(folder: Path, need: float, what: str, next_step: str) -> None:
+def require_space(folder: Path, need: float, what: str, next_step: str | None = None) -> None:
     """NoSpaceError unless `need` + SPACE_MARGIN bytes are free where `folder` is (module doc)."""
     free = free_bytes(folder)
     if free < need + SPACE_MARGIN:
@@ -111,9 +111,10 @@ def temp_for(path: Path) -> Path:
 
 
 @contextmanager
-def temporary(path: Path, next_step: str):
+def temporary(path: Path, next_step: str | None = None):
     """Yield the temporary path of output `path` (module doc); on success it is renamed onto
-    `path`. A full disk (ENOSPC, also inside an encoder) raises NoSpaceError naming `next_step`."""
+    `path`. A full disk (ENOSPC, also inside an encoder) raises NoSpaceError naming `next_step`
+    (None: the command's own advice, cli.common.guarded)."""
     path = Path(path)
     tmp = temp_for(path)
     try:
@@ -127,7 +128,7 @@ def temporary(path: Path, next_step: str):
         raise
 
 
-def write_bytes(path: Path, data: bytes, next_step: str) -> None:
+def write_bytes(path: Path, data: bytes, next_step: str | None = None) -> None:
     """Write `data` to `path` through its temporary file (checked for space first, fsync'd)."""
     path = Path(path)
     require_space(path.parent, len(data), f"{path.name} ({len(data) / 1e6:.1f} MB)", next_step)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import errno
 import fcntl
 import os
+import shlex
 import shutil
 from pathlib import Path
 
@@ -26,6 +27,7 @@ import h5py
 from ..errors import RunDirError
 
 LOCK_NAME = ".gouge.lock"
+CONTINUE = "; continued by: "       # in a lock file: the command that continues the holder's work
 OWNED = ("run.h5", "config.yaml", "checkpoints", "forks", "figures", "analysis")
 # a campaign point directory (gouge campaign) holds its state point and ledger beside the run:
 # they make no directory foreign, count as no run, and are never removed by --force
@@ -35,19 +37,23 @@ CAMPAIGN_ENTRIES = ("point.yaml", "ledger")
 class RunLock:
     """Exclusive lock of a run directory (module doc). Use as a context manager or release()."""
 
-    def __init__(self, run_dir: Path, what: str = "gouge"):
+    def __init__(self, run_dir: Path, what: str = "gouge", then: str | None = None):
+        """``then``: the command that continues the holder's work once it is stopped (written
+        into the lock file and named to a second process; default `gouge resume RUN`)."""
         self.run_dir = Path(run_dir)
         path = self.run_dir / LOCK_NAME
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "unknown process"
+            holder = os.pread(fd, 1000, 0).decode(errors="replace").strip() or "unknown process"
             os.close(fd)
+            holder, _, then = holder.partition(CONTINUE)
+            then = then.strip() or shlex.join(["gouge", "resume", str(self.run_dir)])
             raise RunDirError(f"{self.run_dir} is in use by a gouge process in progress ({holder}); wait for it "
-                              "to finish, or stop it (Ctrl-C) and `gouge resume` it") from None
+                              f"to finish, or stop it (Ctrl-C) and run `{then}` to continue its work") from None
         os.ftruncate(fd, 0)
-        os.pwrite(fd, f"PID {os.getpid()}, {what}\n".encode(), 0)
+        os.pwrite(fd, f"PID {os.getpid()}, {what}{CONTINUE + then if then else ''}\n".encode(), 0)
         self.fd = fd
 
     def release(self):

@@ -94,11 +94,13 @@ def check_perms(perms) -> None:
 
 def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | None = None,
                overrides: list[str] | None = None, live=None, quiet: bool = False,
-               stop_after_slip: bool | None = None) -> BranchResult:
+               stop_after_slip: bool | None = None, command: str | None = None) -> BranchResult:
     """Run one branch (drained: ``perm=None``) of slip ``slip`` into ``RUN/forks/slip_NNN/<branch>``.
 
     ``duration`` [t0] from the checkpoint; None: 5 x (end - checkpoint time) + 2 leads.
     ``stop_after_slip``: stop when the branch's first slip ends (default: when ``duration`` is None).
+    ``command``: the `gouge restart` line that continues this work once stopped (named to a
+    second process that finds the branch locked; default: this branch's own).
     Overwrites an existing branch directory. The branch directory is locked while it runs (so
     branches of one run may run in parallel), and the run itself must not be in progress. Dense
     snapshots while the branch slips: output.slip_frames, FORK_SLIP_FRAMES unless overridden.
@@ -112,6 +114,7 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     config = branch_config(ck.config, perm, frames)
     check_config(config)
     name = branch_name(perm)
+    duration_given = duration
     if stop_after_slip is None:
         stop_after_slip = duration is None
     if duration is None:
@@ -121,7 +124,8 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     require_space(run_dir, branch_bytes(config), f"branch {name} of slip {slip}",
                   f"run `gouge restart {run_dir} --slip {slip}` again")     # (run_fork names its command)
     out_dir.mkdir(parents=True, exist_ok=True)
-    with RunLock(out_dir, f"gouge restart --slip {slip} ({name})"):
+    then = command or restart_command(run_dir, slip, [perm] if perm is not None else [], overrides, duration_given)
+    with RunLock(out_dir, f"gouge restart --slip {slip} ({name})", then=then):
         return _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet)
 
 
@@ -192,7 +196,7 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     results = []
     for perm in branches:
         try:
-            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet)
+            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet, command=command)
         except OSError as exc:
             if exc.errno != errno.ENOSPC:
                 raise

@@ -20,7 +20,8 @@ from ..model.params import choose_threads
 from ..model.preflight import check_config
 from ..driver.phases import compaction_phase, load_phase
 from ..errors import RunDirError
-from ..io.rundir import check_run_dir, open_run_file, prepare_run_dir, RunLock
+from ..io.outputs import require_space
+from ..io.rundir import SPACE_MARGIN, check_run_dir, open_run_file, prepare_run_dir, RunLock
 from ..driver.simulation import Simulation
 from ..errors import PhysicsError
 
@@ -127,8 +128,16 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
     for line in (pre.note, pre.warning):
         if line:
             print(line, file=sys.stderr, flush=True)
+    require_space(out_dir, start_bytes(config), f"the start of run {config.name}",
+                  "run the same `gouge run` again (nothing was written)")
     with prepare_run_dir(out_dir, force):
         return _new_run(config, out_dir, live, quiet, f"loading {config.name}")
+
+
+def start_bytes(config: Config) -> float:
+    """Bytes a run needs free to start (its first files and the room driver.phases keeps for its
+    checkpoints): HDF5 then never meets a full disk while the run can still stop cleanly."""
+    return 2.0 * (config.slips.ring + 2) * 2000 * config.packing.n_grains + SPACE_MARGIN
 
 
 def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> RunResult:
@@ -146,6 +155,7 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
             config = load_config(run_dir / "config.yaml")
             return _new_run(config, run_dir, live, quiet, f"resume {config.name}")
         ck = read_checkpoint(latest)
+        require_space(run_dir, start_bytes(ck.config), f"resuming {run_dir}", f"`gouge resume {run_dir}`")
         note = provenance.risk_line(ck.provenance, f"{latest}")
         if note:
             print(note, file=sys.stderr, flush=True)

@@ -21,10 +21,12 @@ Steps (each skipped when its output is already there, so the study is idempotent
 from __future__ import annotations
 
 import csv
+import errno
 import json
 import math
 import multiprocessing
 import os
+import shlex
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -35,7 +37,7 @@ from ..analysis.forkpairs import perm_text
 from ..analysis.study import STUDY_COLUMNS, study_rows, study_summaries, summary_lines, transient_slips
 from ..io.checkpoint import read_checkpoint
 from ..config import load_config
-from ..errors import ConfigError, StudyInterrupted
+from ..errors import ConfigError, NoSpaceError, StudyInterrupted
 from ..io.runfile import slip_catalog
 from .fork import branch_name, check_perms, run_branch
 from ..errors import RunDirError
@@ -206,7 +208,18 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
                                  initargs=(os.getpid(),)) as pool:
             futures = [pool.submit(branch_task, str(run_dir), s, p, w, main == "first") for s, p, w in todo]
             for fut in as_completed(futures):
-                rec = fut.result()
+                try:
+                    rec = fut.result()
+                except OSError as exc:
+                    if exc.errno != errno.ENOSPC:
+                        raise
+                    for other in futures:
+                        other.cancel()
+                    command = shlex.join(["gouge", "study", str(run_dir), *[a for k in perms for a in ("--perm", f"{k:g}")],
+                                          "--slips", ",".join(map(str, chosen)), "--main", main])
+                    raise NoSpaceError(exc.filename or str(run_dir), f"run `{command}` again (the branches that "
+                                       "finished are kept)", getattr(exc, "need", None),
+                                       getattr(exc, "detail", "")) from None
                 result.ran.append(rec)
                 say(f"slip {rec['slip']} {rec['branch']}: {rec['status']} ({rec['wall_seconds']:.0f} s)")
     for slip in chosen:
