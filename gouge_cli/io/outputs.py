@@ -24,7 +24,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..errors import InputError, NoSpaceError
-from .rundir import LOCK_NAME
+from .rundir import LOCK_NAME, RESERVE_BYTES
 
 SPACE_MARGIN = 256_000          # bytes left free beyond a sized write
 RUN_FILES = {"run.h5", "config.yaml", LOCK_NAME, "pair.json", "latest.h5", "point.yaml"}
@@ -161,3 +161,22 @@ def _remove(path: Path) -> None:
     except FileNotFoundError:
         pass
 
+
+
+class Reserve:
+    """A file of RESERVE_BYTES beside an HDF5 file being written (``.<name>.reserve``). HDF5
+    cannot close a file whose metadata it cannot flush (on a full disk it crashed the process):
+    :meth:`release` frees this room first, so the close that follows can complete and the file
+    stays readable. Released (removed) on every close; a stale one is simply rewritten."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path).with_name(f".{Path(path).name}.reserve")
+        try:
+            with open(self.path, "wb") as fh:
+                fh.truncate(0)
+                os.posix_fallocate(fh.fileno(), 0, RESERVE_BYTES)
+        except OSError:         # no room even for the reserve: what the writes after it will meet
+            _remove(self.path)
+
+    def release(self) -> None:
+        _remove(self.path)

@@ -184,6 +184,7 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
 
 
 SPACE_MARGIN = 4_000_000     # bytes kept free beyond the next checkpoints
+RESERVE_BYTES = 500_000      # of them, held by a run file's reserve (io.outputs.Reserve) while it is written
 
 
 def ensure_space(run_dir: Path, need: float):
@@ -191,7 +192,7 @@ def ensure_space(run_dir: Path, need: float):
     its file system: raised before a write, so the run stops cleanly (files closed, the last
     checkpoint intact) instead of HDF5 failing half-way through one."""
     free = shutil.disk_usage(run_dir).free
-    if free < need + SPACE_MARGIN:
+    if free + RESERVE_BYTES < need + SPACE_MARGIN:        # (the run file's reserve is part of the margin)
         raise OSError(errno.ENOSPC, f"No space left on device ({free / 1e6:.1f} MB free, the next checkpoints need "
                       f"about {(need + SPACE_MARGIN) / 1e6:.1f} MB)", str(run_dir))
 

@@ -3,6 +3,7 @@ outputs, slip checkpoints, periodic checkpoints and clean stops."""
 
 from __future__ import annotations
 
+import errno
 import sys
 import time
 from dataclasses import dataclass
@@ -92,7 +93,7 @@ def stopped_by_os_error(writer: RunFile, err: BaseException) -> BaseException:
     if cause is None:
         return err
     try:
-        writer.close(f"failed: {cause.strerror or cause}")
+        writer.close(f"failed: {cause.strerror or cause}", full_disk=cause.errno == errno.ENOSPC)
     except (OSError, RuntimeError):
         pass
     return cause
@@ -137,7 +138,10 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
 def start_bytes(config: Config) -> float:
     """Bytes a run needs free to start (its first files and the room driver.phases keeps for its
     checkpoints): HDF5 then never meets a full disk while the run can still stop cleanly."""
-    return 2.0 * (config.slips.ring + 2) * 2000 * config.packing.n_grains + SPACE_MARGIN
+    return 2.0 * (config.slips.ring + 2) * STATE_BYTES_PER_GRAIN * config.packing.n_grains + SPACE_MARGIN
+
+
+STATE_BYTES_PER_GRAIN = 110     # driver.phases.state_bytes of a dry state, about (104 measured), plus a fluid grid's share
 
 
 def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> RunResult:
