@@ -6,8 +6,8 @@
         other than a full disk)
     3   the run could not go on: physics failure (PhysicsFailure, names the parameter to
         change) or a full disk (ENOSPC, names the path); the last good checkpoint is kept
-    4   done, but something was skipped because it is damaged or unfinished (`gouge analyze`,
-        `gouge study`: a fork branch; listed, with a summary line printed last)
+    4   done, but something was skipped because it is damaged (`gouge analyze`, `gouge study`: a
+        fork whose branch cannot be read; listed, with a summary line printed last)
     130 interrupted (outputs flushed)
 
 Messages are one line, at most MAX_MESSAGE characters per line and MAX_LINES lines.
@@ -142,6 +142,10 @@ class NotARunError(AnalysisError):
 class RunStillRunningError(AnalysisError):
     """The run or fork file still has status 'running'."""
 
+
+
+class BranchInterruptedError(AnalysisError):
+    """A fork branch was interrupted before its end: its pair is not classified until it is run again."""
 
 
 class NoSlipsError(AnalysisError):

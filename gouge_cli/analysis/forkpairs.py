@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import AnalysisError, DamagedFileError, NotARunError
+from ..errors import AnalysisError, BranchInterruptedError, DamagedFileError, NotARunError, RunStillRunningError
 from ..io.runfile import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
 from .pairs import DRAINED_DE, UNDRAINED_DE, PairDefinition, PairResult, campaign_summary, classify_pair, regime  # noqa: F401
@@ -113,7 +113,7 @@ def pair_definition(info: RunInfo, main: str = "first") -> PairDefinition:
 def _refuse_interrupted(info, fork_dir: Path):
     """An interrupted branch ends before its window: its pair is not classified."""
     if info.status == "interrupted":
-        raise AnalysisError(f"{info.run_dir} was interrupted before its end; its pair is not classified. Run "
+        raise BranchInterruptedError(f"{info.run_dir} was interrupted before its end; its pair is not classified. Run "
                             f"`gouge restart {fork_dir.parent.parent} --slip {_slip_number(fork_dir)} --perm K` "
                             "(or `gouge study`) again to finish it")
 
@@ -224,8 +224,18 @@ def run_pairs(run_dir: Path, strict: bool = False, main: str = "first") -> tuple
         except (AnalysisError, DamagedFileError) as exc:      # a damaged branch is skipped, named
             if strict:
                 raise
-            skipped.append(str(exc))
+            skipped.append(Skipped(exc))
     return pairs, skipped
+
+
+class Skipped(str):
+    """Why a fork was skipped (its message); ``damaged``: False for a fork that is only unfinished
+    (a branch still running or interrupted), which `gouge analyze` does not count as damaged."""
+
+    def __new__(cls, exc: BaseException):
+        text = super().__new__(cls, str(exc))
+        text.damaged = not isinstance(exc, (RunStillRunningError, BranchInterruptedError))
+        return text
 
 
 

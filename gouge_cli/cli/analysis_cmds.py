@@ -214,19 +214,19 @@ def register(app: typer.Typer) -> None:
             })))
         elif summary is not None:
             _print_campaign(out, summary, len({a.info.run_dir for a, _ in done}))
-        skipped = sum(len(a.skipped) for a, _ in done)
+        skipped = sum(1 for a, _ in done for r in a.skipped if getattr(r, "damaged", True))
         if failed:
             if as_json:
                 raise typer.Exit(EXIT_BAD_INPUT)
             if len(failed) == 1 and len(run_dirs) == 1 and not skipped:    # one message, already printed
                 raise typer.Exit(EXIT_PHYSICS if full else EXIT_BAD_INPUT)
             fail(f"{len(failed)} of {len(run_dirs)} run(s) could not be analysed"
-                 + (f"; {skipped} fork(s) skipped (listed above)" if skipped else ""),
+                 + (f"; {skipped} damaged fork(s) skipped (listed above)" if skipped else ""),
                  EXIT_PHYSICS if full else EXIT_BAD_INPUT)
         if skipped:         # exit 4: done, but incomplete (a script can tell)
             if not as_json:
-                err.print(f"summary: {len(done)} run(s) analysed; {skipped} fork(s) skipped as damaged or unfinished "
-                          "(listed above: their pairs are not in the tables)", highlight=False)
+                err.print(f"summary: {len(done)} run(s) analysed; {skipped} damaged fork(s) skipped (listed above: "
+                          "their pairs are not in the tables)", highlight=False)
             raise typer.Exit(EXIT_SKIPPED)
 
     @app.command()

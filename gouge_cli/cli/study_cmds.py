@@ -74,6 +74,6 @@ def register(app: typer.Typer) -> None:
         out.print(f"ran {len(result.ran)} branches, {len(result.skipped)} done before; wrote "
                   f"{result.run_dir / 'study'}", highlight=False)
         if result.damaged:      # exit 4: done, but forks were left out (listed above)
-            err.print(f"summary: {len(result.rows)} pairs in the study; {len(result.damaged)} fork(s) skipped as "
-                      "damaged or unfinished (listed above)", highlight=False, markup=False)
+            err.print(f"summary: {len(result.rows)} pairs in the study; {len(result.damaged)} damaged fork(s) "
+                      "skipped (listed above)", highlight=False, markup=False)
             raise typer.Exit(EXIT_SKIPPED)

@@ -228,7 +228,8 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
         except Exception as exc:       # a failed branch: the pair is reported as skipped below
             say(f"slip {slip}: no pair ({exc})")
     analysis = analyze_run(run_dir, main=main)
-    result.damaged = [r for r in analysis.skipped if any(f"slip_{s:03d}" in r for s in chosen)]
+    result.damaged = [r for r in analysis.skipped if getattr(r, "damaged", True)
+                      and any(f"slip_{s:03d}" in r for s in chosen)]
     result.written.update(write_analysis(analysis))
     pairs = [p for p in analysis.pairs if int(p.row["slip"]) in set(chosen)
              and p.row["branch"] in {branch_name(k) for k in perms}]
