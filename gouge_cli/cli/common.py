@@ -64,11 +64,12 @@ def _with_next_step(exc, name: str, kwargs: dict):
     cause = exc if isinstance(exc, OSError) else hdf5_os_error(exc) or exc
     path = getattr(cause, "filename", None) or str(kwargs.get("run_dir") or kwargs.get("out_dir") or ".")
     run = kwargs.get("out_dir") if name == "run" else kwargs.get("run_dir")
-    if name in ("run", "resume") and run is not None:
-        step = f"`gouge resume {run}` (the last good checkpoint is kept)"
+    if name in ("run", "resume"):
+        step = f"`gouge resume{f' {run}' if run is not None else ''}` (the last good checkpoint is kept)"
     else:
         target = f" {kwargs['run_dir']}" if kwargs.get("run_dir") and not isinstance(kwargs["run_dir"], list) else ""
-        step = f"run `gouge {name.replace('_', '-')}{target}` again with the same options (what it wrote is kept or "                "written anew)"
+        step = (f"run `gouge {name.replace('_', '-')}{target}` again with the same options (what it wrote is "
+                "kept or written anew)")
     return NoSpaceError(path, step)
 
 
