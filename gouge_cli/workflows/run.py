@@ -153,6 +153,7 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
         latest = run_dir / "checkpoints" / "latest.h5"
         remove_stale_temps(latest)
         if not latest.is_file():
+            _refuse_branch(run_dir)
             if not (run_dir / "config.yaml").is_file():
                 raise RunDirError(f"{run_dir} has neither checkpoints/latest.h5 nor config.yaml; start it again "
                                   "with `gouge run ... --force`")
@@ -177,6 +178,24 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
             writer.set_attr("status", "running")
         return _drive(sim, writer, run_dir, live=live, quiet=quiet, label=f"resume {ck.config.name}",
                       resume_from=ck)
+
+
+def _refuse_branch(run_dir: Path) -> None:
+    """RunDirError naming the `gouge restart` that finishes a fork branch (branches are run again,
+    not resumed: they keep no checkpoints)."""
+    try:
+        with open_run_file(run_dir / "run.h5") as h5:
+            slip, branch, parent = (h5.attrs.get(k) for k in ("fork_slip", "branch", "parent_run"))
+    except (OSError, RuntimeError):
+        return
+    if slip is None or parent is None:
+        return
+    from .fork import restart_command
+
+    perm = str(branch).removeprefix("perm_") if str(branch).startswith("perm_") else None
+    command = restart_command((run_dir / str(parent)).resolve(), int(slip), [float(perm)] if perm else [])
+    raise RunDirError(f"{run_dir} is a fork branch, which is run again rather than resumed: run `{command}` "
+                      "(it runs the fork's unfinished branches; no --force needed)")
 
 
 def _refuse_damaged(path: Path, time: float, step: int, slips: int) -> None:

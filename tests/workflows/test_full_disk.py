@@ -405,6 +405,8 @@ def test_advice_of_a_held_lock_and_ctrl_c_continues_the_restart(forked, tmp_path
     assert "Traceback" not in stdout + stderr
     named = advised(stderr)                           # what the interrupted restart itself names
     assert named[:2] == ["restart", str(target)]
+    resumed = refused(gouge("resume", branch))       # a branch is not resumed: told the restart to run
+    assert advised(resumed)[:4] == ["restart", str(target.resolve()), "--slip", str(slip)]
     done = gouge(*command, "--quiet")
     assert done.returncode == 0, done.stderr[-2000:]
     assert json.loads((target / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())["pairs"]

@@ -91,7 +91,7 @@ def loaded(tmp_path_factory):
     """A loaded run with a slip kept with a checkpoint (the packing found through tests/slipping.py,
     so that it slips at every GOUGE_TEST_SEED_OFFSET)."""
     folder = tmp_path_factory.mktemp("orphans")
-    _, run_dir, slips = slipping_run(SCENE, folder, slips=1)      # folder/orphans.yaml: the seed it used
+    _, run_dir, slips = slipping_run(SCENE, folder, slips=1, grow=2.0)   # folder/orphans.yaml: the seed it used
     return folder, run_dir, slips[0]
 
 
