@@ -365,7 +365,7 @@ def test_failed_branch_reported_as_failed(forked, tmp_path):
     assert gouge("analyze", target).returncode == 0
     with open(target / "analysis" / "pairs.csv") as fh:
         rows = [r for r in csv.DictReader(fh) if r["branch"] == "perm_1e-07"]
-    assert rows[0]["type"] == "failed" and "blow-up" in rows[0]["note"] or "failed" in rows[0]["note"]
+    assert rows[0]["type"] == "failed" and rows[0]["note"] == row["note"]
     from gouge_cli import api
 
     frame = api.open_study(target)
@@ -412,3 +412,25 @@ def test_advice_of_a_held_lock_and_ctrl_c_continues_the_restart(forked, tmp_path
     assert json.loads((target / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())["pairs"]
     again = gouge(*named, "--quiet")                # all finished: refused, naming --force (exit 2)
     assert again.returncode == 2 and "--force" in again.stderr
+
+
+def test_study_exits_4_with_a_damaged_branch(forked, tmp_path):
+    """A finished branch whose series fail their checksum is kept by the study (it is finished)
+    but cannot be classified: the study and analyze list it, print a summary last and exit 4."""
+    run, slip, _ = forked
+    target = tmp_path / "run"
+    shutil.copytree(run, target)
+    branch = target / "forks" / f"slip_{slip:03d}" / "perm_1e-03" / "run.h5"
+    with h5py.File(branch, "r") as h5:              # one byte of its wall velocity flipped on disk
+        chunk = h5["series/wall_vx"].id.get_chunk_info(0)
+    with open(branch, "r+b") as fh:
+        fh.seek(chunk.byte_offset + 100)
+        byte = fh.read(1)[0]
+        fh.seek(chunk.byte_offset + 100)
+        fh.write(bytes([byte ^ 0xFF]))
+    for args in (("study", target, "--perm", 1e-3, "--slips", slip, "--no-figures", "--quiet"), ("analyze", target)):
+        done = gouge(*args)
+        text = done.stdout + done.stderr
+        assert done.returncode == 4, text[-3000:]
+        assert "Traceback" not in text and "skipped fork" in text
+        assert done.stderr.strip().splitlines()[-1].startswith("summary:")
