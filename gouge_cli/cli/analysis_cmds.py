@@ -217,7 +217,7 @@ def register(app: typer.Typer) -> None:
         skipped = sum(1 for a, _ in done for r in a.skipped if getattr(r, "damaged", True))
         if failed:
             if as_json:
-                raise typer.Exit(EXIT_BAD_INPUT)
+                raise typer.Exit(EXIT_PHYSICS if full else EXIT_BAD_INPUT)
             if len(failed) == 1 and len(run_dirs) == 1 and not skipped:    # one message, already printed
                 raise typer.Exit(EXIT_PHYSICS if full else EXIT_BAD_INPUT)
             fail(f"{len(failed)} of {len(run_dirs)} run(s) could not be analysed"
