@@ -2,7 +2,10 @@
 where this process cannot mount one): every command that writes ends with exit 3 and one
 `error:` line naming what to free and the command that continues, with no traceback, no crash,
 no temporary file, nothing of the run destroyed; and the command it names, run once space is
-freed, does continue the work."""
+freed, does continue the work. Then the other error paths of issue 50, each with real files: an
+`--out` that names what the command does not own, values `gouge config` accepts, config and
+campaign paths of the wrong kind, a failed branch, damaged forks (exit 4), and the advice of a held
+lock and of Ctrl-C, each run."""
 
 from __future__ import annotations
 
