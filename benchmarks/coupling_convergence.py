@@ -69,7 +69,9 @@ def fork(run: Path, grid_dir: Path, slip: int, perm: float, width: float, h: flo
             return {"status": f"failed: {(result.stdout + result.stderr).strip().splitlines()[-1:]}"}
     data = json.loads(pair.read_text())
     row = data["pairs"][0] if data.get("pairs") else {}
-    return {"status": "ok", "type": row.get("type"), **{m: row.get(m, float("nan")) for m in METRICS}}
+    value = {m: row.get(m) for m in METRICS}
+    return {"status": "ok", "type": row.get("type"),
+            **{m: float(v) if v is not None else float("nan") for m, v in value.items()}}
 
 
 def main(argv=None):

@@ -258,7 +258,7 @@ class Config(_Section):
 
     name: str = Field("run", pattern=r"^[A-Za-z0-9_.-]+$", max_length=100,
                       description="run name, a plain file name (no '/', not '.' or '..'); output under runs/<name>/")
-    seed: int = Field(1, ge=0, description="random seed of the packing")
+    seed: int = Field(1, ge=0, le=2**63 - 1, description="random seed of the packing (a 64-bit signed integer)")
     scales: ScalesConfig = ScalesConfig()
     material: MaterialConfig = MaterialConfig()
     packing: PackingConfig = PackingConfig()
@@ -419,11 +419,31 @@ def build_config(data: dict | None, overrides: list[str] | dict | None = None) -
         raise ConfigError(_format_errors(err, data)) from None
 
 
+def not_a_file(path: Path) -> str | None:
+    """What `path` is when it exists but is no regular file (a directory, a device, a FIFO, a
+    socket), or None."""
+    import stat
+
+    try:
+        mode = path.stat().st_mode
+    except OSError:
+        return None
+    for test, what in ((stat.S_ISDIR, "a directory"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return what
+    return None
+
+
 def find_config(name: str | Path) -> Path:
     """A config path, or a scene name looked up as configs/<name>.yaml and configs/thesis/<name>.yaml."""
     path = Path(name)
     if path.is_file():
         return path
+    kind = not_a_file(path)
+    if kind is not None:
+        raise ConfigError(f"config file {str(path)!r} is {kind}, not a file; give a YAML config file")
     roots = [Path.cwd() / "configs", Path(__file__).resolve().parents[1] / "configs"]
     for root in roots:
         for candidate in (root / f"{name}.yaml", root / "thesis" / f"{name}.yaml", root / f"{name}"):

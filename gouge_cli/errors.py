@@ -6,6 +6,8 @@
         other than a full disk)
     3   the run could not go on: physics failure (PhysicsFailure, names the parameter to
         change) or a full disk (ENOSPC, names the path); the last good checkpoint is kept
+    4   done, but something was skipped because it is damaged (`gouge analyze`, `gouge study`: a
+        fork whose branch cannot be read; listed, with a summary line printed last)
     130 interrupted (outputs flushed)
 
 Messages are one line, at most MAX_MESSAGE characters per line and MAX_LINES lines.
@@ -17,7 +19,7 @@ import errno
 import os
 import re
 
-EXIT_OK, EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_INTERRUPTED = 0, 2, 3, 130
+EXIT_OK, EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_SKIPPED, EXIT_INTERRUPTED = 0, 2, 3, 4, 130
 MAX_MESSAGE = 400       # characters per line of a message
 MAX_LINES = 25
 
@@ -62,7 +64,10 @@ def describe_os_error(exc: OSError, where: str | None = None) -> tuple[str, int]
     code = exc.errno
     if code == errno.ENOSPC or "No space left on device" in str(exc):
         then = getattr(exc, "next_step", None) or "`gouge resume` (the last good checkpoint is kept)"
-        return f"no space left on device while writing {path}; free some space and {then}", EXIT_PHYSICS
+        need = getattr(exc, "need", None)
+        free = f"free at least {max(need / 1e6, 0.1):.1f} MB there" if need else "free some space there"
+        detail = f" ({exc.detail})" if getattr(exc, "detail", "") else ""
+        return f"no space left on device while writing {path}{detail}; {free} and {then}", EXIT_PHYSICS
     if code in (errno.EACCES, errno.EPERM, errno.EROFS):
         return f"permission denied: {path} cannot be written or read (read-only directory or file?)", EXIT_BAD_INPUT
     if code == errno.EISDIR:
@@ -105,9 +110,14 @@ class NoSpaceError(OSError):
     """A full disk (ENOSPC) stopped a command; ``next_step`` says what continues the work once
     space is freed (named in the message instead of `gouge resume`)."""
 
-    def __init__(self, path: str, next_step: str):
+    def __init__(self, path: str, next_step: str, need: float | None = None, detail: str = ""):
         super().__init__(errno.ENOSPC, os.strerror(errno.ENOSPC), path)
         self.next_step = next_step
+        self.need = need            # bytes to free, when the write could be sized
+        self.detail = detail        # e.g. "the export needs about 3.1 MB, 0.2 MB are free"
+
+    def __reduce__(self):           # raised in a worker process (gouge study), re-raised in its parent
+        return NoSpaceError, (self.filename, self.next_step, self.need, self.detail)
 
 
 class PhysicsError(PhysicsFailure):
@@ -132,6 +142,10 @@ class NotARunError(AnalysisError):
 class RunStillRunningError(AnalysisError):
     """The run or fork file still has status 'running'."""
 
+
+
+class BranchInterruptedError(AnalysisError):
+    """A fork branch was interrupted before its end: its pair is not classified until it is run again."""
 
 
 class NoSlipsError(AnalysisError):

@@ -85,7 +85,7 @@ def phase_cells(pair_rows: list[dict], x: str, y: str | None) -> list[dict]:
     for yv in ys:
         for xv in xs:
             inside = [r for r in pair_rows if _axis_value(r, x) == xv and _axis_value(r, y) == yv]
-            classified = [r for r in inside if r["base_type"] != "none"]
+            classified = [r for r in inside if r["base_type"] not in ("none", "failed")]
             n = len(classified)
             n_c = sum(1 for r in classified if r["complex"])
             n_1 = sum(1 for r in classified if r["base_type"] == "I")

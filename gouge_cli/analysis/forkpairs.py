@@ -4,12 +4,12 @@ classified with the pair definition of analysis.pairs, and the campaign summary 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import AnalysisError, DamagedFileError, NotARunError
+from ..errors import AnalysisError, BranchInterruptedError, DamagedFileError, NotARunError, RunStillRunningError
 from ..io.layout import ForkLayout, RunLayout
 from ..io.runfile import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
@@ -25,8 +25,9 @@ PAIR_COLUMNS = (
     "strength_difference", "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
     "undrained_peak_over_Vs", "n_undrained_slips", "n_subevents", "drained_onset", "drained_end",
     "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_verdict",
-    "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "note",
+    "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "note", "status",
 )
+FAILED = "failed"       # type and base_type of a pair whose branch failed (status 'failed: <physics message>')
 
 
 
@@ -89,7 +90,7 @@ def pair_definition(info: RunInfo, main: str = "first") -> PairDefinition:
 def _refuse_interrupted(info, fork_dir: Path):
     """An interrupted branch ends before its window: its pair is not classified."""
     if info.status == "interrupted":
-        raise AnalysisError(f"{info.run_dir} was interrupted before its end; its pair is not classified. Run "
+        raise BranchInterruptedError(f"{info.run_dir} was interrupted before its end; its pair is not classified. Run "
                             f"`gouge restart {fork_dir.parent.parent} --slip {_slip_number(fork_dir)} --perm K` "
                             "(or `gouge study`) again to finish it")
 
@@ -120,6 +121,11 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 ds = u.series(["time", "deborah"])
                 uinfo = u.info
             result = classify_pair(drained, undrained, info.V_s, info.k, info.m_b, info.sigma, definition)
+            failure = next((f"{name} branch {st}" for name, st in (("drained", info.status), ("undrained", uinfo.status))
+                            if st.startswith("failed")), "")
+            if failure:     # a failed branch is no pair type: reported as failed, with its message
+                result = replace(result, type=FAILED, base_type=FAILED, complex=False, undrained_event=FAILED,
+                                 criteria={k: False for k in result.criteria}, note=failure)
             d_main, u_main = result.drained_slip, result.undrained_slip
             fired = [name for name, on in result.criteria.items() if on]
             de_onset, de_max = deborah_during(ds["time"], ds["deborah"], u_main)
@@ -170,6 +176,7 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 "deborah_onset": de_onset,
                 "deborah_max": de_max,
                 "note": result.note,
+                "status": FAILED if failure else "finished",
             }
             pairs.append(ForkPair(row, result, drained_dir, udir))
     return pairs
@@ -195,8 +202,18 @@ def run_pairs(run_dir: Path, strict: bool = False, main: str = "first") -> tuple
         except (AnalysisError, DamagedFileError) as exc:      # a damaged branch is skipped, named
             if strict:
                 raise
-            skipped.append(str(exc))
+            skipped.append(Skipped(exc))
     return pairs, skipped
+
+
+class Skipped(str):
+    """Why a fork was skipped (its message); ``damaged``: False for a fork that is only unfinished
+    (a branch still running or interrupted), which `gouge analyze` does not count as damaged."""
+
+    def __new__(cls, exc: BaseException):
+        text = super().__new__(cls, str(exc))
+        text.damaged = not isinstance(exc, (RunStillRunningError, BranchInterruptedError))
+        return text
 
 
 

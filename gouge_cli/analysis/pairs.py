@@ -360,7 +360,7 @@ def campaign_summary(results: list[PairResult]) -> dict:
     counts = {lab: 0 for lab in labels}
     for r in results:
         counts[r.type] = counts.get(r.type, 0) + 1
-    classified = [r for r in results if r.base_type != "none"]
+    classified = [r for r in results if r.base_type not in ("none", "failed")]
     return {
         "n": len(results),
         "counts": counts,

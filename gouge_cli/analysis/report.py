@@ -11,6 +11,7 @@ name the case); the CLI turns them into exit code 2.
 from __future__ import annotations
 
 import csv
+import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +20,8 @@ import numpy as np
 
 from ..errors import NoSlipsError
 from ..io.filedoc import json_safe
+from ..io.outputs import require_space, write_bytes
+from ..io.rundir import SPACE_MARGIN
 from ..io.runfile import RunInfo, RunReader, write_analysis_tables
 from .catalog import CATALOG_COLUMNS, FIT_COLUMNS, catalog_table, fit_table, read_catalog, summary_statistics
 from .forkpairs import PAIR_COLUMNS, ForkPair, campaign, run_pairs
@@ -98,11 +101,12 @@ def analyze_run(run_dir: Path | str, notch: bool = True, main: str = "first") ->
 
 
 def _write_csv(path: Path, rows: list[dict], columns) -> None:
-    with open(path, "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(columns), extrasaction="ignore")
-        writer.writeheader()
-        for row in rows:
-            writer.writerow({c: row.get(c, "") for c in columns})
+    text = io.StringIO(newline="")
+    writer = csv.DictWriter(text, fieldnames=list(columns), extrasaction="ignore")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({c: row.get(c, "") for c in columns})
+    write_bytes(path, text.getvalue().encode())
 
 
 def _json_default(obj):
@@ -131,10 +135,13 @@ def write_analysis(analysis: RunAnalysis, out_dir: Path | None = None, into_h5: 
     elif pairs_csv.exists():
         pairs_csv.unlink()
     summary = {k: v for k, v in analysis.to_dict().items() if k not in ("catalog", "fits", "pairs")}
-    (out_dir / "summary.json").write_text(json.dumps(json_safe(summary), indent=2, default=_json_default,
-                                                     allow_nan=False))
+    write_bytes(out_dir / "summary.json", json.dumps(json_safe(summary), indent=2, default=_json_default,
+                                                     allow_nan=False).encode())
     written["summary"] = out_dir / "summary.json"
     if into_h5:
+        rows = sum(len(r) for r in (analysis.catalog, analysis.fits, analysis.pair_rows if analysis.pairs else []))
+        # run.h5 is written in place: HDF5 must never meet a full disk there (rundir.SPACE_MARGIN kept free)
+        require_space(info.h5_path.parent, 64 * 40 * rows + SPACE_MARGIN, f"the /analysis tables in {info.h5_path}")
         try:
             tables = {"catalog": (analysis.catalog, CATALOG_COLUMNS), "fits": (analysis.fits, FIT_COLUMNS)}
             if analysis.pairs:

@@ -134,7 +134,7 @@ def study_summary(rows: list[dict]) -> dict:
     m_eff (in m_b) mean, std, cv.
     """
     steady = [r for r in rows if not r["transient"]]
-    classified = [r for r in steady if r["type"] != "none"]
+    classified = [r for r in steady if r["type"] not in ("none", "failed")]
     base = [r["type"].replace("-C", "") for r in classified]
     drained = {r["slip"]: r for r in steady}.values()
     durations = [r["drained_duration"] for r in drained if math.isfinite(r["drained_duration"])]
@@ -150,7 +150,8 @@ def study_summary(rows: list[dict]) -> dict:
         "n_rows": len(rows), "n_transient_rows": len(rows) - len(steady), "n": len(steady),
         "n_classified": len(classified),
         "n_type_I": base.count("I"), "n_type_II": base.count("II"), "n_tie": base.count("tie"),
-        "n_none": len(steady) - len(classified),
+        "n_none": sum(1 for r in steady if r["type"] == "none"),
+        "n_failed": sum(1 for r in steady if r["type"] == "failed"),
         "n_complex": sum(1 for r in classified if r["type"].endswith("-C")),
         "I-C": sum(1 for r in classified if r["type"] == "I-C"),
         "II-C": sum(1 for r in classified if r["type"] == "II-C"),
@@ -196,6 +197,7 @@ def summary_lines(s: dict) -> list[tuple[str, str, str]]:
         ("Type II (of them -C)", f"{s['n_type_II']} ({s['II-C']})", f"{t['n_type_II']} ({t['II-C']})"),
         ("tie", str(s["n_tie"]), str(t["n_tie"])),
         ("none (undrained did not move)", str(s["n_none"]), "–"),
+        ("failed (a branch failed: see its note)", str(s["n_failed"]), "–"),
         ("complex (-C)", f"{s['n_complex']} of {s['n_classified']}", f"{t['n_complex']} of {t['n']}"),
         ("slow slip below trigger", str(s["n_slow"]), "– (not a category)"),
         ("undrained slower (peak v ratio < 1)", _pct(s["frac_slower"]), "not tabulated"),

@@ -7,8 +7,10 @@ Bad input (not a run, still running, no slips, no such slip) exits with code 2.
 
 from __future__ import annotations
 
+import errno
 import json
 import math
+import shlex
 from pathlib import Path
 from typing import List, Optional
 
@@ -195,15 +197,21 @@ def register(app: typer.Typer) -> None:
         from ..api import analyze as analyze_run
         from ..errors import AnalysisError, DamagedFileError
         from ..errors import describe_os_error
-        from ..errors import EXIT_BAD_INPUT
+        from ..errors import EXIT_BAD_INPUT, EXIT_PHYSICS, EXIT_SKIPPED, NoSpaceError
         from .common import err, fail, out
 
-        done, failed = [], []
+        done, failed, full = [], [], False
         for run_dir in run_dirs:
             try:
                 analysis = analyze_run(run_dir, notch=notch, main=_main(main), write=False)
                 written = write_analysis(analysis)
             except (AnalysisError, DamagedFileError, OSError) as exc:
+                if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+                    full = True
+                    if not getattr(exc, "next_step", None):
+                        exc = NoSpaceError(exc.filename or str(run_dir), "run `" + shlex.join(
+                            ["gouge", "analyze", *map(str, run_dirs)]) + "` again (with the same options)",
+                                           getattr(exc, "need", None), getattr(exc, "detail", ""))
                 exc = exc if not isinstance(exc, OSError) else describe_os_error(exc, str(run_dir))[0]
                 failed.append(str(exc))
                 if not as_json:
@@ -224,10 +232,20 @@ def register(app: typer.Typer) -> None:
             })))
         elif summary is not None:
             _print_campaign(out, summary, len({a.info.run_dir for a, _ in done}))
+        skipped = sum(1 for a, _ in done for r in a.skipped if getattr(r, "damaged", True))
         if failed:
             if as_json:
-                raise typer.Exit(EXIT_BAD_INPUT)
-            fail(f"{len(failed)} of {len(run_dirs)} run(s) could not be analysed")
+                raise typer.Exit(EXIT_PHYSICS if full else EXIT_BAD_INPUT)
+            if len(failed) == 1 and len(run_dirs) == 1 and not skipped:    # one message, already printed
+                raise typer.Exit(EXIT_PHYSICS if full else EXIT_BAD_INPUT)
+            fail(f"{len(failed)} of {len(run_dirs)} run(s) could not be analysed"
+                 + (f"; {skipped} damaged fork(s) skipped (listed above)" if skipped else ""),
+                 EXIT_PHYSICS if full else EXIT_BAD_INPUT)
+        if skipped:         # exit 4: done, but incomplete (a script can tell)
+            if not as_json:
+                err.print(f"summary: {len(done)} run(s) analysed; {skipped} damaged fork(s) skipped (listed above: "
+                          "their pairs are not in the tables)", highlight=False)
+            raise typer.Exit(EXIT_SKIPPED)
 
     @app.command()
     def plot(

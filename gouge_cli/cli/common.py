@@ -54,6 +54,27 @@ def confirm_long(yes: bool):
     return confirm
 
 
+def _with_next_step(exc, name: str, kwargs: dict):
+    """A full disk met by command `name` without its own advice: the advice that continues it
+    (`gouge resume RUN` for a run; for the other commands, the same command again)."""
+    from ..errors import NoSpaceError, hdf5_os_error
+    from ..io.outputs import is_no_space
+
+    if getattr(exc, "next_step", None) or not is_no_space(exc):
+        return exc
+    name = {"figures": "plot"}.get(name, name)          # `gouge plot` runs api.figures guarded
+    cause = exc if isinstance(exc, OSError) else hdf5_os_error(exc) or exc
+    path = getattr(cause, "filename", None) or str(kwargs.get("run_dir") or kwargs.get("out_dir") or ".")
+    run = kwargs.get("out_dir") if name == "run" else kwargs.get("run_dir")
+    if name in ("run", "resume"):
+        step = f"`gouge resume{f' {run}' if run is not None else ''}` (the last good checkpoint is kept)"
+    else:
+        target = f" {kwargs['run_dir']}" if kwargs.get("run_dir") and not isinstance(kwargs["run_dir"], list) else ""
+        step = (f"run `gouge {name.replace('_', '-')}{target}` again with the same options (what it wrote is "
+                "kept or written anew)")
+    return NoSpaceError(path, step)
+
+
 def guarded(command):
     """Run a command with the exit-code mapping of gouge_cli.errors.describe: bad input 2,
     physics failure or a full disk 3, Ctrl-C 130, each with a short message naming the key or path."""
@@ -64,6 +85,8 @@ def guarded(command):
             return command(*args, **kwargs)
         except (InputError, PhysicsFailure, OSError, RuntimeError, KeyboardInterrupt) as e:
             where = next((kwargs[k] for k in ("run_dir", "out_dir", "config", "run_dirs") if kwargs.get(k)), None)
+            if isinstance(e, (OSError, RuntimeError)):
+                e = _with_next_step(e, command.__name__, kwargs)
             described = describe(e, str(where) if where is not None else None)
             if described is None:
                 raise

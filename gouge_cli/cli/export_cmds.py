@@ -6,6 +6,7 @@ Bad input (not a run, no snapshots, no such fork or slip) exits with code 2.
 
 from __future__ import annotations
 
+import shlex
 from pathlib import Path
 from typing import Optional
 
@@ -33,7 +34,10 @@ def _branches(run_dir: Path, fork: Optional[str]) -> list[Path]:
 def register(app: typer.Typer) -> None:
     """Add the `export` and `movie` commands to ``app``."""
 
+    from .common import guarded
+
     @app.command()
+    @guarded
     def export(
         run_dir: Path = typer.Argument(..., help="run directory"),
         fork: Optional[str] = typer.Option(None, "--fork", help="a fork branch under RUN/forks, e.g. "
@@ -43,6 +47,8 @@ def register(app: typer.Typer) -> None:
                                            "RUN/export/<run>.vtkhdf or RUN/export/slip_NNN_<branch>.vtkhdf)"),
         split: bool = typer.Option(False, "--split", help="one temporal PolyData file per block (grains, "
                                    "contacts, walls, pressure_grid) instead of one collection"),
+        force: bool = typer.Option(False, "--force", help="replace an existing --out file that is a gouge "
+                                   "export (never anything else)"),
     ):
         """Write a run's (or fork branch's) snapshots as one time-dependent VTKHDF file for ParaView:
         grains, contacts (normal and tangential force), walls, pressure grid; time in t0 since loading began."""
@@ -57,7 +63,10 @@ def register(app: typer.Typer) -> None:
             if out is not None and len(targets) > 1:
                 fail(f"--out names one file, but --fork {fork} has {len(targets)} branches; give one branch")
             for target in targets:
-                result = export_run(target, out, split=split)
+                command = shlex.join(["gouge", "export", str(run_dir)] + (["--fork", fork] if fork else [])
+                                     + (["--out", str(out), "--force"] if out is not None else [])
+                                     + (["--split"] if split else []))
+                result = export_run(target, out, split=split, force=force, command=command)
                 counts = ", ".join(f"{k} {v}" for k, v in result.blocks.items())
                 console.print(f"{', '.join(map(str, result.paths))}: {result.times.size} steps, t = {result.times[0]:.6g} .. "
                               f"{result.times[-1]:.6g} t0 since loading began (last step: {counts} points)",
@@ -66,6 +75,7 @@ def register(app: typer.Typer) -> None:
             fail(str(exc))
 
     @app.command()
+    @guarded
     def movie(
         run_dir: Path = typer.Argument(..., help="run directory whose slip was forked (`gouge restart`)"),
         slip: int = typer.Option(..., "--slip", help="slip number (see `gouge slips RUN`)"),
@@ -74,6 +84,8 @@ def register(app: typer.Typer) -> None:
         out: Optional[Path] = typer.Option(None, "--out", help="output file (default "
                                            "RUN/figures/slip_NNN_movie.mp4; .gif for a GIF)"),
         fps: int = typer.Option(12, "--fps", min=1, max=60, help="frames per second"),
+        force: bool = typer.Option(False, "--force", help="replace an existing --out file that is a movie "
+                                   "(MP4 or GIF; never anything else)"),
     ):
         """MP4 of one slip, drained and undrained side by side from the same packing: force chains,
         pore pressure P/sigma on a fixed colour scale, time since onset, v_w/V_s with a moving marker."""
@@ -82,7 +94,12 @@ def register(app: typer.Typer) -> None:
         from .common import fail, out as console
 
         try:
-            path, frames = make_movie(run_dir, slip, perm, out, fps=fps)      # progress lines on stderr
+            command = shlex.join(["gouge", "movie", str(run_dir), "--slip", str(slip)]
+                                 + (["--perm", f"{perm:g}"] if perm is not None else [])
+                                 + (["--out", str(out), "--force"] if out is not None else [])
+                                 + (["--fps", str(fps)] if fps != 12 else []))
+            path, frames = make_movie(run_dir, slip, perm, out, fps=fps, force=force,      # progress lines on stderr
+                                      command=command)
         except (AnalysisError, DamagedFileError) as exc:
             fail(str(exc))
         console.print(f"{path}: {frames} frames at {fps} fps ({path.stat().st_size / 1e6:.2f} MB)", highlight=False)

@@ -1,4 +1,5 @@
-"""`gouge` command line. Exit codes: 0 done, 2 bad input, 3 physics failure, 130 interrupted."""
+"""`gouge` command line. Exit codes: 0 done, 2 bad input, 3 physics failure or full disk, 4 done with
+damaged forks skipped (analyze, study), 130 interrupted."""
 
 from __future__ import annotations
 
@@ -185,8 +186,9 @@ def show_config(
     out.print(dump_config(cfg), highlight=False, end="")
     out.print(f"# time step {pre.dt:.6g} t0 (stability bound {bound.bound:.6g} t0, {bound.mode} mode)",
               highlight=False)
-    if pre.note:
-        out.print(f"# {pre.note}", highlight=False)
+    for line in (pre.note, pre.warning):
+        if line:
+            out.print(f"# {line}", highlight=False)
 
 
 @app.command()

@@ -69,5 +69,14 @@ def register(app: typer.Typer) -> None:
                              "out) next to the thesis (κ_c = 1e-05)",
                              [("quantity", "quantity"), ("this study", "this study"), ("thesis", "thesis")], side,
                              wide=wide))
+        from ..errors import EXIT_SKIPPED
+        from .common import err
+
+        for reason in result.damaged:
+            err.print(f"skipped fork: {reason}", highlight=False, markup=False)
         out.print(f"ran {len(result.ran)} branches, {len(result.skipped)} done before; wrote "
                   f"{result.run_dir / 'study'}", highlight=False)
+        if result.damaged:      # exit 4: done, but forks were left out (listed above)
+            err.print(f"summary: {len(result.rows)} pairs in the study; {len(result.damaged)} damaged fork(s) "
+                      "skipped (listed above)", highlight=False, markup=False)
+            raise typer.Exit(EXIT_SKIPPED)

@@ -37,8 +37,8 @@ for temporal collections (also for files written by VTK's own vtkHDFWriter), not
 
 from __future__ import annotations
 
+import io
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -47,6 +47,7 @@ import numpy as np
 
 from ..driver.progress import ItemProgress
 from ..errors import ExportError
+from ..io.outputs import check_out, write_bytes
 from ..io.runfile import RunReader
 from ..io.filedoc import BODY_CODES, TIME_ORIGIN
 
@@ -262,12 +263,29 @@ def default_export_path(info) -> Path:
     return out
 
 
+def is_export(path: Path) -> bool:
+    """Whether `path` is a file `gouge export` wrote (HDF5 with /VTKHDF and /gouge's source)."""
+    try:
+        with h5py.File(path, "r") as h5:
+            return "VTKHDF" in h5 and "gouge" in h5 and "source" in h5["gouge"].attrs
+    except (OSError, KeyError, RuntimeError):
+        return False
+
+
 def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool = False,
-               progress: bool = True) -> ExportResult:
+               progress: bool = True, force: bool = False, command: str | None = None) -> ExportResult:
     """Write every snapshot of a run (or fork branch) directory to ``out`` (default
     ``RUN/export/<run or branch>.vtkhdf``, for a fork ``PARENT/export/slip_NNN_<branch>.vtkhdf``).
     ``split``: one temporal PolyData file per block instead (``<out stem>_<block>.vtkhdf``), for
-    readers without temporal collections. ``progress``: a plain line on stderr every few seconds."""
+    readers without temporal collections. ``progress``: a plain line on stderr every few seconds.
+    An existing ``out`` is replaced only if it is an export and ``force`` is given (or it is the
+    default path); each file is built in memory, checked against the free space and written
+    through a temporary file (:mod:`gouge_cli.io.outputs`); ``command``: what a full disk names
+    to continue."""
+    default = out is None
+    if out is not None:
+        for path in _out_paths(Path(out), split):
+            check_out(path, is_export, "a VTKHDF export", force)
     with RunReader(run_dir) as reader:
         info = reader.info
         names = reader.snapshot_names()
@@ -297,6 +315,10 @@ def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool =
             out = default_export_path(info)
         source = info.h5_path
     out = Path(out)
+    if default:
+        for path in _out_paths(out, split):
+            check_out(path, is_export, "a VTKHDF export", force, default=True)
+    next_step = f"run `{command or f'gouge export {run_dir}'}` again"
     out.parent.mkdir(parents=True, exist_ok=True)
     times = np.asarray(times)
     last = {k: int(v[-1].points.shape[0]) for k, v in blocks.items()}
@@ -305,7 +327,7 @@ def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool =
         for name, pieces in blocks.items():
             path = out.with_name(f"{out.stem}_{name}.vtkhdf")
             _atomic(path, lambda h5, pieces=pieces: write_block(h5.create_group("VTKHDF", track_order=True),
-                                                                pieces, times), info, source)
+                                                                pieces, times), info, source, next_step)
             paths.append(path)
         return ExportResult(paths[0], times, last, source, paths)
 
@@ -320,14 +342,21 @@ def export_run(run_dir: Path | str, out: Path | str | None = None, split: bool =
             block.attrs["Index"] = index
             assembly[name] = h5py.SoftLink(f"/VTKHDF/{name}")
 
-    _atomic(out, collection, info, source)
+    _atomic(out, collection, info, source, next_step)
     return ExportResult(out, times, last, source, [out])
 
 
-def _atomic(path: Path, fill, info, source: Path) -> None:
-    """Write ``fill(h5)`` plus the /gouge metadata group to a temporary file, then rename it."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    with h5py.File(tmp, "w", track_order=True) as h5:
+def _out_paths(out: Path, split: bool) -> list[Path]:
+    if not split:
+        return [out]
+    return [out.with_name(f"{out.stem}_{name}.vtkhdf") for name in ("grains", "contacts", "walls", "pressure_grid")]
+
+
+def _atomic(path: Path, fill, info, source: Path, next_step: str) -> None:
+    """Build ``fill(h5)`` plus the /gouge metadata group in memory, then write it whole through a
+    temporary file (HDF5 never meets a full disk, so no half-closed file can crash)."""
+    image = io.BytesIO()
+    with h5py.File(image, "w", track_order=True) as h5:
         fill(h5)
         meta = h5.create_group("gouge", track_order=True)
         meta.attrs["source"] = str(source)
@@ -338,4 +367,4 @@ def _atomic(path: Path, fill, info, source: Path) -> None:
         meta.attrs["body_codes"] = json.dumps(BODY_CODES)
         meta.attrs["width"] = info.width
         meta.attrs["sigma"] = info.sigma
-    tmp.replace(path)
+    write_bytes(path, image.getbuffer(), next_step)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import errno
 import fcntl
 import os
+import shlex
 import shutil
 from pathlib import Path
 
@@ -27,6 +28,7 @@ from ..errors import RunDirError
 from .layout import OWNED, RUN_FILE, RunLayout, runs_under
 
 LOCK_NAME = ".gouge.lock"
+CONTINUE = "; continued by: "       # in a lock file: the command that continues the holder's work
 # a campaign point directory (gouge campaign) holds its state point and ledger beside the run:
 # they make no directory foreign, count as no run, and are never removed by --force
 CAMPAIGN_ENTRIES = ("point.yaml", "ledger")
@@ -35,19 +37,23 @@ CAMPAIGN_ENTRIES = ("point.yaml", "ledger")
 class RunLock:
     """Exclusive lock of a run directory (module doc). Use as a context manager or release()."""
 
-    def __init__(self, run_dir: Path, what: str = "gouge"):
+    def __init__(self, run_dir: Path, what: str = "gouge", then: str | None = None):
+        """``then``: the command that continues the holder's work once it is stopped (written
+        into the lock file and named to a second process; default `gouge resume RUN`)."""
         self.run_dir = Path(run_dir)
         path = self.run_dir / LOCK_NAME
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            holder = os.pread(fd, 200, 0).decode(errors="replace").strip() or "unknown process"
+            holder = os.pread(fd, 1000, 0).decode(errors="replace").strip() or "unknown process"
             os.close(fd)
+            holder, _, then = holder.partition(CONTINUE)
+            then = then.strip() or shlex.join(["gouge", "resume", str(self.run_dir)])
             raise RunDirError(f"{self.run_dir} is in use by a gouge process in progress ({holder}); wait for it "
-                              "to finish, or stop it (Ctrl-C) and `gouge resume` it") from None
+                              f"to finish, or stop it (Ctrl-C) and run `{then}` to continue its work") from None
         os.ftruncate(fd, 0)
-        os.pwrite(fd, f"PID {os.getpid()}, {what}\n".encode(), 0)
+        os.pwrite(fd, f"PID {os.getpid()}, {what}{CONTINUE + then if then else ''}\n".encode(), 0)
         self.fd = fd
 
     def release(self):
@@ -179,6 +185,7 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
 
 
 SPACE_MARGIN = 4_000_000     # bytes kept free beyond the next checkpoints
+RESERVE_BYTES = 500_000      # of them, held by a run file's reserve (io.outputs.Reserve) while it is written
 
 
 def ensure_space(run_dir: Path, need: float):
@@ -186,7 +193,7 @@ def ensure_space(run_dir: Path, need: float):
     its file system: raised before a write, so the run stops cleanly (files closed, the last
     checkpoint intact) instead of HDF5 failing half-way through one."""
     free = shutil.disk_usage(run_dir).free
-    if free < need + SPACE_MARGIN:
+    if free + RESERVE_BYTES < need + SPACE_MARGIN:        # (the run file's reserve is part of the margin)
         raise OSError(errno.ENOSPC, f"No space left on device ({free / 1e6:.1f} MB free, the next checkpoints need "
                       f"about {(need + SPACE_MARGIN) / 1e6:.1f} MB)", str(run_dir))
 

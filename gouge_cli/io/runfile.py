@@ -62,6 +62,7 @@ from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, d
 from ..kernels import layout as L
 from .integrity import SEAL, STRUCTURE_ERRORS, check_seal, read, seal, seal_tree, stored_seal, structure_error
 from .layout import RUN_FILE, RunLayout
+from .outputs import Reserve
 from .rundir import open_run_file
 
 # name -> (unit, description); units are the dimensionless scales of docs/physics/units.md
@@ -110,6 +111,7 @@ class RunFile:
         self.path = Path(path)
         self.flush_rows = flush_rows
         self._rows: list[dict] = []
+        self.reserve = Reserve(self.path)      # released before a close on a full disk (io.outputs)
         self.h5 = h5py.File(self.path, mode)
         if mode == "w":
             a = self.h5.attrs
@@ -221,7 +223,17 @@ class RunFile:
         self.h5.attrs[key] = value
         seal(self.h5)
 
-    def close(self, status: str = "finished", final_state_hash: str | None = None):
+    def close(self, status: str = "finished", final_state_hash: str | None = None, full_disk: bool = False):
+        """Write the final attributes and close. ``full_disk``: the reserve beside the file is
+        released first, so that HDF5 has room to flush (io.outputs.Reserve)."""
+        if full_disk:
+            self.reserve.release()
+        try:
+            self._close(status, final_state_hash)
+        finally:
+            self.reserve.release()
+
+    def _close(self, status: str, final_state_hash: str | None):
         if self.h5.id.valid:
             self.flush()
             if final_state_hash is not None:

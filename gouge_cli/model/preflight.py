@@ -19,6 +19,9 @@
 * the run length: (compaction.max_time + run.duration) / dt steps of n_grains grains, estimated at
   RATE grain-steps per second per thread; above MAX_HOURS it is refused, above NOTE_HOURS the
   estimate is returned as a note to print;
+* every interval (output.*_interval, slips.lead, slips.merge_gap, slips.min_duration) is at most
+  MAX_STEPS steps of dt, so that its step count is a finite integer (1e308 is refused naming the key);
+* numerics.threads above the machine's cores: a warning (the threads would share cores);
 * every derived quantity above (contact stiffness, grain mass, reference overlap, step bound,
   dashpot frequency, step, step count, hours) is a finite positive number: an over- or underflow
   (e.g. material.youngs_modulus: 1e308, packing.diameter_min: 1e-300) is refused naming the keys
@@ -28,6 +31,7 @@
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 
 from ..config import Config, build_config
@@ -38,6 +42,9 @@ from .timestep import choose_dt, contact_constants, stability_bound
 RATE = 2e7              # grain-steps per second and thread, about (README Speed: 1.5-3.5e7)
 NOTE_HOURS = 1.0
 MAX_HOURS = 1e5         # eleven years on one thread
+MAX_STEPS = 2 ** 62     # step counts are int64
+INTERVALS = ("output.series_interval", "output.snapshot_interval", "output.checkpoint_interval",
+             "slips.lead", "slips.merge_gap", "slips.min_duration")
 #: Keys the derived quantities of the checks come from (searched for the culprit of a non-finite one).
 DERIVED_FROM = ("material.youngs_modulus", "material.poisson_ratio", "material.tangential_stiffness_factor",
                 "material.density", "material.damping", "packing.diameter_min", "packing.diameter_max",
@@ -61,6 +68,7 @@ class Preflight:
     steps: float        # steps of compaction (at most) and loading
     hours: float        # estimated wall time on one thread [h]
     note: str           # "" or the estimate, for runs longer than NOTE_HOURS
+    warning: str = ""   # "" or what may make the run slow (numerics.threads above the cores)
 
 
 def _pair_normal_mode(config: Config) -> tuple[float, float]:
@@ -153,6 +161,12 @@ def _check(config: Config, threads: int) -> Preflight:
         reason = availability()
         if reason:
             raise ConfigError(f"numerics.device = gpu cannot run here: {reason}; use numerics.device: cpu")
+    for key in INTERVALS:
+        section, name = key.split(".")
+        value = getattr(getattr(config, section), name)
+        if value is not None and not value / dt <= MAX_STEPS:
+            raise ConfigError(f"{key} = {value:g} t0 is {value / dt:.3g} steps of dt = {dt:.3g} t0, beyond a "
+                              f"finite step count (at most {MAX_STEPS * dt:.3g} t0); give a shorter interval")
     steps = _finite("the number of steps", (config.compaction.max_time + config.run.duration) / dt)
     hours = _finite("the estimated run time", steps * config.packing.n_grains / RATE / 3600.0)
     per = max(1, threads)
@@ -163,4 +177,20 @@ def _check(config: Config, threads: int) -> Preflight:
                           "(or numerics.dt_safety), or shorten run.duration / compaction.max_time")
     note = f"note: this run is long, {estimate} (Ctrl-C stops it; `gouge resume` continues)" \
         if hours / per > NOTE_HOURS else ""
-    return Preflight(dt, steps, hours, note)
+    return Preflight(dt, steps, hours, note, _threads_warning(config.numerics.threads))
+
+
+def machine_cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
+def _threads_warning(requested: int) -> str:
+    cores = machine_cores()
+    if requested > cores:
+        return (f"warning: numerics.threads = {requested} is above this machine's {cores} core(s); at most "
+                f"{cores} thread(s) are worth running (set numerics.threads <= {cores}, or 0 for automatic)")
+    return ""

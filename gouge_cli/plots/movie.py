@@ -27,6 +27,7 @@ from ..analysis.forkpairs import fork_branches
 from ..io.layout import RunLayout, branch_name, branch_perm, perm_text
 from ..driver.progress import ItemProgress
 from ..errors import MovieError
+from ..io.outputs import check_out, require_space, temporary
 from ..io.runfile import RunReader
 from .snapshot import CHAIN, chain_segments, draw_discs, draw_pressure, pressure_grid
 from .style import DRAINED, LABEL, UNDRAINED
@@ -215,28 +216,63 @@ def _encoder(path: Path, fps: int):
     return lambda f: frames.append(Image.fromarray(f).quantize(colors=128)), close, path
 
 
+BYTES_PER_FRAME = {".mp4": 60_000, ".gif": 400_000}    # upper sizes of an encoded frame (free-space check)
+
+
+def is_movie(path: Path) -> bool:
+    """Whether `path` is an MP4 or GIF file (what `gouge movie` writes), by its first bytes."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(12)
+    except OSError:
+        return False
+    return head[4:8] == b"ftyp" or head[:4] == b"GIF8"
+
+
 def make_movie(run_dir: Path | str, slip: int, perm: float | None = None, out: Path | str | None = None,
-               fps: int = FPS, max_frames: int | None = None, progress: bool = True) -> tuple[Path, int]:
+               fps: int = FPS, max_frames: int | None = None, progress: bool = True, force: bool = False,
+               command: str | None = None) -> tuple[Path, int]:
     """Write the movie of slip ``slip`` (default ``RUN/figures/slip_NNN_movie.mp4``, RUN as given);
-    returns (path, frames). ``progress``: a plain line on stderr every few seconds."""
+    returns (path, frames). ``progress``: a plain line on stderr every few seconds. An existing
+    ``out`` is replaced only if it is a movie and ``force`` is given (or it is the default path);
+    the frames are encoded into a temporary file beside it, renamed when complete
+    (:mod:`gouge_cli.io.outputs`); ``command``: what a full disk names to continue."""
+    default = out is None
+    out = Path(out) if out else Path(run_dir) / "figures" / f"slip_{slip:03d}_movie.mp4"
+    check_out(out, is_movie, "a movie (MP4 or GIF)", force, default=default)
     drained, undrained = open_fork(run_dir, slip, perm)
     try:
         taus = frame_times(drained, undrained)
         if max_frames:
             taus = taus[:max_frames]
-        out = Path(out) if out else Path(run_dir) / "figures" / f"slip_{slip:03d}_movie.mp4"
+        next_step = f"run `{command or f'gouge movie {run_dir} --slip {slip}'}` again"
+        final = _encoded_path(out)
+        require_space(final.parent, len(taus) * BYTES_PER_FRAME.get(final.suffix, BYTES_PER_FRAME[".mp4"]),
+                      f"a movie of {len(taus)} frames", next_step)
         out.parent.mkdir(parents=True, exist_ok=True)
         renderer = FrameRenderer(drained, undrained, title=f"{Path(run_dir).name}, slip {slip}")
-        write, close, path = _encoder(out, fps)
         try:
-            ticker = ItemProgress(f"movie slip {slip}: frames", len(taus), quiet=not progress)
-            for done, tau in enumerate(taus):
-                ticker.update(done)
-                write(renderer.render(float(tau)))
+            with temporary(final, next_step) as tmp:
+                write, close, _ = _encoder(tmp, fps)
+                try:
+                    ticker = ItemProgress(f"movie slip {slip}: frames", len(taus), quiet=not progress)
+                    for done, tau in enumerate(taus):
+                        ticker.update(done)
+                        write(renderer.render(float(tau)))
+                finally:
+                    close()
         finally:
-            close()
             renderer.close()
     finally:
         drained.reader.close()
         undrained.reader.close()
-    return path, len(taus)
+    return final, len(taus)
+
+
+def _encoded_path(path: Path) -> Path:
+    """The file the encoder writes for `path`: itself, or with .gif where no MP4 encoder is installed."""
+    try:
+        import imageio_ffmpeg  # noqa: F401
+    except ImportError:
+        return path.with_suffix(".gif")
+    return path if path.suffix == ".gif" else path

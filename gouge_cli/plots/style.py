@@ -6,6 +6,8 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 
+from ..io.outputs import temporary
+
 DPI = 120
 # figure sizes in inches (pixel size = inches * DPI; no tight bbox, so sizes are exact)
 FIGSIZE = {
@@ -45,8 +47,11 @@ def save(fig, path: Path, metadata: dict | None = None) -> Path:
     text chunks (e.g. {"Title": ..., "Description": ...}) so tests can read what a figure says."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=DPI, format="png", metadata=metadata)
-    plt.close(fig)
+    try:
+        with temporary(path) as tmp:         # renamed when complete: a full disk leaves no partial figure
+            fig.savefig(tmp, dpi=DPI, format="png", metadata=metadata)
+    finally:
+        plt.close(fig)
     return path
 
 

@@ -41,13 +41,14 @@ from typing import Any, Literal, Optional
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
-from ..config import Config, find_config, load_config
+from ..config import MAX_FILE_BYTES, Config, find_config, load_config, not_a_file
 from ..errors import ConfigError, SpecError
 from ..model.preflight import check_config
 
 
 #: Most sweep points a campaign expands unless its spec's ``max_points`` (or --max-points) says otherwise.
 MAX_POINTS = 10_000
+MAX_SPEC_BYTES = MAX_FILE_BYTES     # like a config: read before parsing
 
 
 class _Section(BaseModel):
@@ -104,8 +105,8 @@ class Sweep(_Section):
     @field_validator("seeds")
     @classmethod
     def _seeds(cls, seeds):
-        if any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
-            raise ValueError("sweep.seeds: distinct non-negative integers")
+        if any(not 0 <= s <= 2 ** 63 - 1 for s in seeds) or len(set(seeds)) != len(seeds):
+            raise ValueError("sweep.seeds: distinct integers from 0 to 2**63 - 1")
         return seeds
 
     @model_validator(mode="after")
@@ -227,9 +228,18 @@ def load_spec(path: str | Path, max_points: int | None = None) -> CampaignSpec:
     ``max_points`` (default: the spec's, see :func:`check_size`) before anything is expanded."""
     path = Path(path)
     if not path.is_file():
-        raise SpecError(f"campaign file {path} does not exist")
+        kind = not_a_file(path)
+        raise SpecError(f"campaign file {path} is {kind}, not a file" if kind else f"campaign file {path} does not exist")
     try:
-        data = yaml.safe_load(path.read_text())
+        with open(path, "rb") as fh:
+            raw = fh.read(MAX_SPEC_BYTES + 1)      # the cap is checked before anything is parsed
+    except OSError as exc:
+        raise SpecError(f"campaign file {path} cannot be read ({exc.strerror or exc})") from None
+    if len(raw) > MAX_SPEC_BYTES:
+        raise SpecError(f"campaign file {path} is larger than {MAX_SPEC_BYTES:,} bytes; a campaign spec is a short "
+                        "text file; sweep fewer values")
+    try:
+        data = yaml.safe_load(raw.decode("utf-8", errors="replace"))
     except yaml.YAMLError as exc:
         raise SpecError(f"{path}: not valid YAML: {exc}") from None
     if not isinstance(data, dict):

@@ -23,12 +23,13 @@ from ..io.layout import RunLayout, branch_name
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint
 from ..config import build_config, Config
-from ..errors import AnalysisError, ConfigError, NoSpaceError
+from ..errors import AnalysisError, ConfigError, InputError, NoSpaceError, PhysicsFailure
 from ..driver.slips import lead_time
 from ..io.runfile import RunFile, RunReader, slip_catalog
 from ..model.preflight import check_config
 from ..errors import RunDirError
-from ..io.rundir import check_run_dir, refuse_if_in_progress, RunLock
+from ..io.outputs import require_space
+from ..io.rundir import SPACE_MARGIN, check_run_dir, refuse_if_in_progress, RunLock
 from ..driver.phases import load_phase
 from ..driver.simulation import Simulation
 from .pairs import branch_status
@@ -73,6 +74,18 @@ def fork_entry(run_dir: Path, slip: int) -> dict:
     return next(e for e in catalog if int(e["number"]) == slip)
 
 
+SNAPSHOT_BYTES_PER_GRAIN = 130     # a snapshot's grains (7 float64) and about 3 contacts (2 int32, 2 float64)
+
+
+def branch_bytes(config: Config) -> float:
+    """Bytes a branch needs on disk, about: its dense snapshots (output.slip_frames per predicted
+    slip duration over up to 6 of them, plus 4 regular ones) and the room the run keeps free for
+    its in-memory slip states (driver.phases: the ring and SPACE_MARGIN)."""
+    n = config.packing.n_grains
+    frames = 6 * config.output.slip_frames + 4
+    return frames * SNAPSHOT_BYTES_PER_GRAIN * n + 2.0 * (config.slips.ring + 2) * 200 * n + SPACE_MARGIN
+
+
 def check_perms(perms) -> None:
     for perm in perms:
         if not (perm is None or (perm > 0 and math.isfinite(perm))):
@@ -81,11 +94,13 @@ def check_perms(perms) -> None:
 
 def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | None = None,
                overrides: list[str] | None = None, live=None, quiet: bool = False,
-               stop_after_slip: bool | None = None, checkpoint=None) -> BranchResult:
+               stop_after_slip: bool | None = None, checkpoint=None, command: str | None = None) -> BranchResult:
     """Run one branch (drained: ``perm=None``) of slip ``slip`` into ``RUN/forks/slip_NNN/<branch>``.
 
     ``duration`` [t0] from the checkpoint; None: 5 x (end - checkpoint time) + 2 leads.
     ``stop_after_slip``: stop when the branch's first slip ends (default: when ``duration`` is None).
+    ``command``: the `gouge restart` line that continues this work once stopped (named to a
+    second process that finds the branch locked; default: this branch's own).
     Overwrites an existing branch directory. The branch directory is locked while it runs (so
     branches of one run may run in parallel), and the run itself must not be in progress. Dense
     snapshots while the branch slips: output.slip_frames, FORK_SLIP_FRAMES unless overridden.
@@ -101,14 +116,18 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     config = branch_config(ck.config, perm, frames)
     check_config(config)
     name = branch_name(perm)
+    duration_given = duration
     if stop_after_slip is None:
         stop_after_slip = duration is None
     if duration is None:
         span = float(entry["end_time"]) - ck.time
         duration = 5.0 * span + 2.0 * lead_time(ck.config)
     out_dir = RunLayout(run_dir).fork(slip).branch(perm).root
+    require_space(run_dir, branch_bytes(config), f"branch {name} of slip {slip}",
+                  f"run `gouge restart {run_dir} --slip {slip}` again")     # (run_fork names its command)
     out_dir.mkdir(parents=True, exist_ok=True)
-    with RunLock(out_dir, f"gouge restart --slip {slip} ({name})"):
+    then = command or restart_command(run_dir, slip, [perm] if perm is not None else [], overrides, duration_given)
+    with RunLock(out_dir, f"gouge restart --slip {slip} ({name})", then=then):
         return _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet)
 
 
@@ -183,12 +202,14 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     results = []
     for perm in branches:
         try:
-            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet, checkpoint=ck)
+            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet, checkpoint=ck,
+                           command=command)
         except OSError as exc:
             if exc.errno != errno.ENOSPC:
                 raise
             raise NoSpaceError(exc.filename or str(run_dir), f"run `{command}` again: the fork's branches are "
-                               "run again (no --force needed)") from None
+                               "run again (no --force needed)", need=getattr(exc, "need", None),
+                               detail=getattr(exc, "detail", "")) from None
         if r.status == "interrupted":
             raise KeyboardInterrupt(f"interrupted: branch {r.name} of slip {slip} stopped; no pair was classified. "
                                     f"Run `{command}` again to finish the fork (no --force needed)")
@@ -209,9 +230,18 @@ def restart(run_dir: Path, slip: int, perms: list[float], overrides: list[str] |
     permeabilities, the fork's pair.json (its record also under "pair" in the returned summary)."""
     from .pairs import write_pair_json
 
-    summary = run_fork(run_dir, slip, perms, overrides, duration, force=force, live=live, quiet=quiet)
+    fork_dir = RunLayout(run_dir).fork(slip).root
+    try:
+        summary = run_fork(run_dir, slip, perms, overrides, duration, force=force, live=live, quiet=quiet)
+    except PhysicsFailure:
+        if perms:        # the failed branch is reported as failed in pair.json, with its message
+            try:
+                write_pair_json(fork_dir, main)
+            except (InputError, OSError):
+                pass
+        raise
     if perms:
-        summary["pair"] = write_pair_json(RunLayout(run_dir).fork(slip).root, main)
+        summary["pair"] = write_pair_json(fork_dir, main)
     return summary
 
 

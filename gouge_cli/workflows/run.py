@@ -3,6 +3,7 @@ outputs, slip checkpoints, periodic checkpoints and clean stops."""
 
 from __future__ import annotations
 
+import errno
 import sys
 import time
 from dataclasses import dataclass
@@ -21,7 +22,8 @@ from ..model.params import choose_threads
 from ..model.preflight import check_config
 from ..driver.phases import compaction_phase, load_phase
 from ..errors import RunDirError
-from ..io.rundir import check_run_dir, open_run_file, prepare_run_dir, RunLock
+from ..io.outputs import require_space
+from ..io.rundir import SPACE_MARGIN, check_run_dir, open_run_file, prepare_run_dir, RunLock
 from ..driver.simulation import Simulation
 from ..driver.slips import recorded_count
 from ..errors import PhysicsError
@@ -91,7 +93,7 @@ def stopped_by_os_error(writer: RunFile, err: BaseException) -> BaseException:
     if cause is None:
         return err
     try:
-        writer.close(f"failed: {cause.strerror or cause}")
+        writer.close(f"failed: {cause.strerror or cause}", full_disk=cause.errno == errno.ENOSPC)
     except (OSError, RuntimeError):
         pass
     return cause
@@ -124,10 +126,22 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
     pre = check_config(config, choose_threads(config.numerics.threads, config.packing.n_grains))
     if pre.note and confirm is not None and not confirm(pre.note):
         raise ConfigError(f"not started (nothing was written): {pre.note.removeprefix('note: ')}")
-    if pre.note:
-        print(pre.note, file=sys.stderr, flush=True)
+    for line in (pre.note, pre.warning):
+        if line:
+            print(line, file=sys.stderr, flush=True)
+    require_space(out_dir, start_bytes(config), f"the start of run {config.name}",
+                  "run the same `gouge run` again (nothing was written)")
     with prepare_run_dir(out_dir, force):
         return _new_run(config, out_dir, live, quiet, f"loading {config.name}")
+
+
+def start_bytes(config: Config) -> float:
+    """Bytes a run needs free to start (its first files and the room driver.phases keeps for its
+    checkpoints): HDF5 then never meets a full disk while the run can still stop cleanly."""
+    return 2.0 * (config.slips.ring + 2) * STATE_BYTES_PER_GRAIN * config.packing.n_grains + SPACE_MARGIN
+
+
+STATE_BYTES_PER_GRAIN = 110     # driver.phases.state_bytes of a dry state, about (104 measured), plus a fluid grid's share
 
 
 def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> RunResult:
@@ -140,12 +154,14 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
         latest = layout.latest
         remove_stale_temps(latest)
         if not latest.is_file():
+            _refuse_branch(run_dir)
             if not layout.config_file.is_file():
                 raise RunDirError(f"{run_dir} has neither checkpoints/latest.h5 nor config.yaml; start it again "
                                   "with `gouge run ... --force`")
             config = load_config(layout.config_file)
             return _new_run(config, run_dir, live, quiet, f"resume {config.name}")
         ck = read_checkpoint(latest)
+        require_space(run_dir, start_bytes(ck.config), f"resuming {run_dir}", f"`gouge resume {run_dir}`")
         note = provenance.risk_line(ck.provenance, f"{latest}")
         if note:
             print(note, file=sys.stderr, flush=True)
@@ -163,6 +179,24 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
             writer.set_attr("status", "running")
         return _drive(sim, writer, run_dir, live=live, quiet=quiet, label=f"resume {ck.config.name}",
                       resume_from=ck)
+
+
+def _refuse_branch(run_dir: Path) -> None:
+    """RunDirError naming the `gouge restart` that finishes a fork branch (branches are run again,
+    not resumed: they keep no checkpoints)."""
+    try:
+        with open_run_file(RunLayout(run_dir).run_file) as h5:
+            slip, branch, parent = (h5.attrs.get(k) for k in ("fork_slip", "branch", "parent_run"))
+    except (OSError, RuntimeError):
+        return
+    if slip is None or parent is None:
+        return
+    from .fork import restart_command
+
+    perm = str(branch).removeprefix("perm_") if str(branch).startswith("perm_") else None
+    command = restart_command((run_dir / str(parent)).resolve(), int(slip), [float(perm)] if perm else [])
+    raise RunDirError(f"{run_dir} is a fork branch, which is run again rather than resumed: run `{command}` "
+                      "(it runs the fork's unfinished branches; no --force needed)")
 
 
 def _refuse_damaged(path: Path, time: float, step: int, slips: int) -> None:

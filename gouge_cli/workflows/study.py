@@ -21,10 +21,12 @@ Steps (each skipped when its output is already there, so the study is idempotent
 from __future__ import annotations
 
 import csv
+import errno
 import json
 import math
 import multiprocessing
 import os
+import shlex
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
@@ -34,7 +36,7 @@ from ..analysis.report import analyze_run, write_analysis
 from ..analysis.study import STUDY_COLUMNS, study_rows, study_summaries, summary_lines, transient_slips
 from ..io.checkpoint import read_checkpoint
 from ..config import load_config
-from ..errors import ConfigError, StudyInterrupted
+from ..errors import ConfigError, NoSpaceError, StudyInterrupted
 from ..io.runfile import slip_catalog
 from .fork import check_perms, run_branch
 from ..errors import RunDirError
@@ -115,6 +117,7 @@ class StudyResult:
     transient: list[int]
     ran: list[dict] = field(default_factory=list)
     skipped: list[str] = field(default_factory=list)
+    damaged: list[str] = field(default_factory=list)      # forks left out of the tables (analysis.skipped)
     rows: list[dict] = field(default_factory=list)
     summary: list = field(default_factory=list)      # one study_summary per permeability
     written: dict = field(default_factory=dict)
@@ -205,7 +208,18 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
                                  initargs=(os.getpid(),)) as pool:
             futures = [pool.submit(branch_task, str(run_dir), s, p, w, main == "first") for s, p, w in todo]
             for fut in as_completed(futures):
-                rec = fut.result()
+                try:
+                    rec = fut.result()
+                except OSError as exc:
+                    if exc.errno != errno.ENOSPC:
+                        raise
+                    for other in futures:
+                        other.cancel()
+                    command = shlex.join(["gouge", "study", str(run_dir), *[a for k in perms for a in ("--perm", f"{k:g}")],
+                                          "--slips", ",".join(map(str, chosen)), "--main", main])
+                    raise NoSpaceError(exc.filename or str(run_dir), f"run `{command}` again (the branches that "
+                                       "finished are kept)", getattr(exc, "need", None),
+                                       getattr(exc, "detail", "")) from None
                 result.ran.append(rec)
                 say(f"slip {rec['slip']} {rec['branch']}: {rec['status']} ({rec['wall_seconds']:.0f} s)")
     for slip in chosen:
@@ -214,6 +228,8 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
         except Exception as exc:       # a failed branch: the pair is reported as skipped below
             say(f"slip {slip}: no pair ({exc})")
     analysis = analyze_run(run_dir, main=main)
+    result.damaged = [r for r in analysis.skipped if getattr(r, "damaged", True)
+                      and any(f"slip_{s:03d}" in r for s in chosen)]
     result.written.update(write_analysis(analysis))
     pairs = [p for p in analysis.pairs if int(p.row["slip"]) in set(chosen)
              and p.row["branch"] in {branch_name(k) for k in perms}]

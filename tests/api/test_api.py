@@ -30,6 +30,7 @@ from gouge_cli.analysis.catalog import CATALOG_COLUMNS  # noqa: E402
 from gouge_cli.analysis.forkpairs import PAIR_COLUMNS  # noqa: E402
 from gouge_cli.cli.main import app  # noqa: E402
 from gouge_cli.errors import EXIT_BAD_INPUT, AnalysisError, NotARunError  # noqa: E402
+from slipping import slipping_run  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = {
@@ -52,15 +53,10 @@ def gouge_cli(*args):
 @pytest.fixture(scope="module")
 def forked(tmp_path_factory):
     """The tiny scene of tests/plots, forked before its first slip with a checkpoint (drained + one
-    undrained branch writing snapshots with a pressure grid)."""
-    base = tmp_path_factory.mktemp("api")
-    scene = base / "tiny.yaml"
-    scene.write_text(yaml.safe_dump(SCENE))
-    out = base / "tiny"
-    result = gouge_cli("run", scene, "--out", out, "--quiet")
-    assert result.exit_code == 0, result.output
-    slips = json.loads(gouge_cli("slips", out, "--json").output)
-    slip = next(e["number"] for e in slips if e["checkpoint"])
+    undrained branch writing snapshots with a pressure grid); the packing found through
+    tests/slipping.py, so that it slips at every GOUGE_TEST_SEED_OFFSET."""
+    _, out, numbers = slipping_run(SCENE, tmp_path_factory.mktemp("api"), slips=1)    # any seed offset
+    slip = numbers[0]
     result = gouge_cli("restart", out, "--slip", slip, "--perm", PERM, "--set", "output.snapshot_interval=1000",
                        "--quiet")
     assert result.exit_code == 0, result.output

@@ -20,10 +20,10 @@ import h5py
 import pytest
 import yaml
 
-from gouge_cli.io.runfile import slip_catalog
 from gouge_cli.workflows.campaign import read_ledger
 from gouge_cli.workflows.pairs import branch_status
 from gouge_cli.workflows.watchdog import POLL
+from slipping import slipping_run
 
 ROOT = Path(__file__).resolve().parents[2]
 BOUND = 20.0        # seconds within which every process of the killed command must be gone
@@ -88,14 +88,10 @@ def kill_and_count(proc: subprocess.Popen, workers: int) -> tuple[list[int], flo
 
 @pytest.fixture(scope="module")
 def loaded(tmp_path_factory):
-    """A loaded run with a slip kept with a checkpoint."""
+    """A loaded run with a slip kept with a checkpoint (the packing found through tests/slipping.py,
+    so that it slips at every GOUGE_TEST_SEED_OFFSET)."""
     folder = tmp_path_factory.mktemp("orphans")
-    (folder / "orphans.yaml").write_text(yaml.safe_dump(SCENE))
-    run_dir = folder / "run"
-    done = gouge("run", folder / "orphans.yaml", "--out", run_dir, "--quiet")
-    assert done.returncode == 0, done.stderr
-    slips = [int(e["number"]) for e in slip_catalog(run_dir) if e["checkpoint"]]
-    assert slips, "the scene kept no slip with a checkpoint"
+    _, run_dir, slips = slipping_run(SCENE, folder, slips=1, grow=2.0)   # folder/orphans.yaml: the seed it used
     return folder, run_dir, slips[0]
 
 

@@ -1,0 +1,183 @@
+"""Files a command writes beside or outside a run (an export, a movie): what ``--out`` may name,
+the free space a sized write needs, and the temporary file that becomes the output only when
+it is complete.
+
+* :func:`check_out` refuses (InputError, exit 2) an ``--out`` that is a directory, a device or
+  a FIFO, one of a run's own files (``run.h5``, ``config.yaml``, checkpoints, the lock, a
+  fork's ``pair.json``), or an existing file of another kind than the command writes; an
+  existing file of its own kind is replaced only with ``--force`` (or at the command's default
+  path, which is its own).
+* :func:`require_space` refuses a write of a known size when the file system lacks it plus
+  SPACE_MARGIN (NoSpaceError, exit 3, naming how much to free and the command that continues).
+* :func:`temporary` yields a hidden temporary path in the destination folder; the caller writes
+  it whole and it is renamed onto the output, or removed when anything fails (a full disk
+  included), so no partial output and no temporary file is left.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import shutil
+import stat
+from contextlib import contextmanager
+from pathlib import Path
+
+from ..errors import InputError, NoSpaceError
+from .layout import CHECKPOINTS, CONFIG_FILE, LATEST, PAIR_FILE, RUN_FILE
+from .rundir import LOCK_NAME, RESERVE_BYTES
+
+SPACE_MARGIN = 256_000          # bytes left free beyond a sized write
+RUN_FILES = {RUN_FILE, CONFIG_FILE, LOCK_NAME, PAIR_FILE, LATEST, "point.yaml"}
+
+
+def kind_of(path: Path) -> str | None:
+    """'a directory', 'a character device', ... for an existing path that is no regular file."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError:
+        return None
+    for test, what in ((stat.S_ISDIR, "a directory"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+                       (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return what
+    return None
+
+
+def run_owned(path: Path) -> bool:
+    """Whether `path` is one of a run's own files: run.h5, config.yaml, the lock, pair.json, or
+    anything under a run's checkpoints/ (a run: a folder holding run.h5 or the lock)."""
+    path = Path(path).absolute()
+    if path.name in RUN_FILES or (path.name.startswith("slip_") and path.suffix == ".h5"):
+        return True
+    for parent in path.parents:
+        if parent.name == CHECKPOINTS and ((parent.parent / RUN_FILE).exists()
+                                             or (parent.parent / LOCK_NAME).exists()):
+            return True
+    return False
+
+
+def check_out(path: Path | str, same_kind, what: str, force: bool, default: bool = False) -> Path:
+    """``path`` if the command may write it (module doc), else InputError naming why.
+    ``same_kind(path)``: whether an existing file is one this command wrote; ``what``: its
+    description ('a VTKHDF export'); ``default``: the command's own default path."""
+    path = Path(path)
+    kind = kind_of(path)
+    if kind is not None:
+        raise InputError(f"--out {path} is {kind}, not a file; name the file to write (nothing was written)")
+    if not path.exists():
+        if run_owned(path):
+            raise InputError(f"--out {path} names a run's own file; choose a path outside the run's own files "
+                             "(nothing was written)")
+        if (parent := _existing_parent(path)) is not None and not parent.is_dir():
+            raise InputError(f"--out {path}: {parent} is a file, not a directory (nothing was written)")
+        return path
+    if run_owned(path) or not same_kind(path):
+        raise InputError(f"--out {path} exists and is not {what} this command wrote (it is kept; nothing was "
+                         "written): choose another --out")
+    if not (force or default):
+        raise InputError(f"--out {path} exists ({what}); pass --force to replace it, or choose another --out "
+                         "(nothing was written)")
+    return path
+
+
+def _existing_parent(path: Path) -> Path | None:
+    for parent in Path(path).absolute().parents:
+        if os.path.lexists(parent):
+            return parent
+    return None
+
+
+def free_bytes(folder: Path) -> int:
+    """Free bytes for this process on the file system of `folder` (or its nearest existing parent)."""
+    folder = Path(folder)
+    existing = folder if folder.exists() else _existing_parent(folder)
+    return shutil.disk_usage(existing or Path.cwd()).free
+
+
+def require_space(folder: Path, need: float, what: str, next_step: str | None = None) -> None:
+    """NoSpaceError unless `need` + SPACE_MARGIN bytes are free where `folder` is (module doc)."""
+    free = free_bytes(folder)
+    if free < need + SPACE_MARGIN:
+        raise NoSpaceError(str(folder), next_step, need=need + SPACE_MARGIN - free,
+                           detail=f"{what} needs about {(need + SPACE_MARGIN) / 1e6:.1f} MB, "
+                                  f"{free / 1e6:.1f} MB are free")
+
+
+def temp_for(path: Path) -> Path:
+    """The temporary file of an output: hidden, in its folder, with its suffix (encoders choose by it)."""
+    path = Path(path)
+    return path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+
+
+@contextmanager
+def temporary(path: Path, next_step: str | None = None):
+    """Yield the temporary path of output `path` (module doc); on success it is renamed onto
+    `path`. A full disk (ENOSPC, also inside an encoder) raises NoSpaceError naming `next_step`
+    (None: the command's own advice, cli.common.guarded)."""
+    path = Path(path)
+    tmp = temp_for(path)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException as exc:
+        _remove(tmp)
+        if is_no_space(exc) or (isinstance(exc, (OSError, RuntimeError, BrokenPipeError))
+                                and free_bytes(path.parent) < SPACE_MARGIN):
+            raise NoSpaceError(str(path.parent), next_step) from None
+        raise
+
+
+def write_bytes(path: Path, data: bytes, next_step: str | None = None) -> None:
+    """Write `data` to `path` through its temporary file (checked for space first, fsync'd)."""
+    path = Path(path)
+    require_space(path.parent, len(data), f"{path.name} ({len(data) / 1e6:.1f} MB)", next_step)
+    with temporary(path, next_step) as tmp:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+        try:
+            view = memoryview(data)
+            while view:
+                view = view[os.write(fd, view):]
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def is_no_space(exc: BaseException) -> bool:
+    """Whether `exc` (or what it wraps) is a full disk."""
+    seen = 0
+    while exc is not None and seen < 5:
+        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            return True
+        if "No space left on device" in str(exc) or "errno = 28" in str(exc):
+            return True
+        exc, seen = exc.__cause__ or exc.__context__, seen + 1
+    return False
+
+
+def _remove(path: Path) -> None:
+    try:
+        os.unlink(path)
+    except FileNotFoundError:
+        pass
+
+
+
+class Reserve:
+    """A file of RESERVE_BYTES beside an HDF5 file being written (``.<name>.reserve``). HDF5
+    cannot close a file whose metadata it cannot flush (on a full disk it crashed the process):
+    :meth:`release` frees this room first, so the close that follows can complete and the file
+    stays readable. Released (removed) on every close; a stale one is simply rewritten."""
+
+    def __init__(self, path: Path):
+        self.path = Path(path).with_name(f".{Path(path).name}.reserve")
+        try:
+            with open(self.path, "wb") as fh:
+                fh.truncate(0)
+                os.posix_fallocate(fh.fileno(), 0, RESERVE_BYTES)
+        except OSError:         # no room even for the reserve: what the writes after it will meet
+            _remove(self.path)
+
+    def release(self) -> None:
+        _remove(self.path)

@@ -1,0 +1,439 @@
+"""A full disk on a real small file system (a tmpfs mounted for the test; skipped with the reason
+where this process cannot mount one): every command that writes ends with exit 3 and one
+`error:` line naming what to free and the command that continues, with no traceback, no crash,
+no temporary file, nothing of the run destroyed; and the command it names, run once space is
+freed, does continue the work. Then the other error paths of issue 50, each with real files: an
+`--out` that names what the command does not own, values `gouge config` accepts, config and
+campaign paths of the wrong kind, a failed branch, damaged forks (exit 4), and the advice of a held
+lock and of Ctrl-C, each run."""
+
+from __future__ import annotations
+
+import csv
+import errno
+import json
+import os
+import re
+import shlex
+import signal
+import shutil
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import h5py
+import pytest
+import yaml
+
+from slipping import TINY, slipping_run
+
+GOUGE = [sys.executable, "-m", "gouge_cli.cli"]
+SIZE_MB = 48
+
+
+def _mount_tmpfs(where: Path, size_mb: int) -> str | None:
+    """None when a tmpfs of size_mb is mounted at `where`, else why not."""
+    if not hasattr(os, "geteuid") or os.geteuid() != 0:
+        return "needs root to mount a small file system (tmpfs)"
+    if shutil.which("mount") is None:
+        return "no mount command"
+    where.mkdir(parents=True, exist_ok=True)
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size_mb}M", "tmpfs", str(where)],
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        return f"mount -t tmpfs failed: {done.stderr.strip()[:200]}"
+    return None
+
+
+@pytest.fixture
+def small_fs(tmp_path):
+    """A real SIZE_MB file system (tmpfs) at tmp_path/fs."""
+    fs = tmp_path / "fs"
+    why = _mount_tmpfs(fs, SIZE_MB)
+    if why:
+        pytest.skip(why)
+    yield fs
+    subprocess.run(["umount", "-l", str(fs)], check=False)
+
+
+def fill(fs: Path, leave: int) -> Path:
+    """Fill the file system of `fs` with one file until `leave` bytes are free; returns it."""
+    filler = fs / f"filler-{uuid.uuid4().hex[:6]}"
+    free = shutil.disk_usage(fs).free
+    with open(filler, "wb", buffering=0) as fh:
+        remaining = max(0, free - leave)
+        block = b"\0" * (1 << 20)
+        try:
+            while remaining > 0:
+                remaining -= fh.write(block[:min(len(block), remaining)])
+        except OSError as exc:          # filled up to the last byte (a writer beside it took some)
+            if exc.errno != errno.ENOSPC:
+                raise
+    return filler
+
+
+def gouge(*args, cwd=None, timeout=600) -> subprocess.CompletedProcess:
+    env = dict(os.environ, NUMBA_NUM_THREADS=os.environ.get("NUMBA_NUM_THREADS", "2"))
+    return subprocess.run(GOUGE + [str(a) for a in args], capture_output=True, text=True, cwd=cwd, env=env,
+                          timeout=timeout)
+
+
+def temp_files(root: Path) -> list[Path]:
+    return [p for p in root.rglob("*") if ".tmp" in p.name or p.name.endswith("~")]
+
+
+def full_disk_message(done: subprocess.CompletedProcess) -> str:
+    """The one `error:` line of a command stopped by a full disk (exit 3, no traceback)."""
+    text = done.stdout + done.stderr
+    assert done.returncode == 3, (done.returncode, text[-3000:])
+    assert "Traceback" not in text and "Exception ignored" not in text, text[-3000:]
+    errors = [line for line in text.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, text[-3000:]
+    assert "no space left on device" in errors[0] and "free" in errors[0], errors[0]
+    return errors[0]
+
+
+def advised(message: str) -> list[str]:
+    """The command the message names to continue (the last `gouge ...` in backquotes)."""
+    commands = re.findall(r"`(gouge [^`]*)`", message)
+    assert commands, message
+    return shlex.split(commands[-1])[1:]
+
+
+def readable(run_file: Path) -> str:
+    with h5py.File(run_file, "r") as h5:
+        return str(h5.attrs["status"])
+
+
+@pytest.fixture(scope="module")
+def forked(tmp_path_factory):
+    """The tiny scene with slips, one slip forked (drained + kappa_c 1e-3 writing snapshots):
+    (run directory, slip number, config)."""
+    config, out, numbers = slipping_run(TINY, tmp_path_factory.mktemp("fulldisk"), slips=1)
+    done = gouge("restart", out, "--slip", numbers[0], "--perm", 1e-3, "--quiet")
+    assert done.returncode == 0, done.stderr[-2000:]
+    return out, numbers[0], config
+
+
+def _copy(run: Path, fs: Path) -> Path:
+    target = fs / run.name
+    shutil.copytree(run, target)
+    return target
+
+
+def test_run_and_resume_on_a_full_disk(small_fs, tmp_path):
+    """`gouge run` onto a full disk stops before writing; one whose disk fills while it runs is
+    stopped cleanly (its run file readable, status failed) and `gouge resume` continues it."""
+    config = tmp_path / "short.yaml"
+    config.write_text(yaml.safe_dump(dict(TINY, name="short", run={"duration": 20000},
+                                          output={"series_interval": 10, "snapshot_interval": 1000,
+                                                  "checkpoint_interval": 1000})))
+    out = small_fs / "short"
+    filler = fill(small_fs, 1_000_000)
+    message = full_disk_message(gouge("run", config, "--out", out, "--quiet"))
+    assert "gouge run" in message and not out.exists()
+    filler.unlink()
+    # the disk fills while the run goes: stopped at the next row (driver.phases.ensure_space)
+    proc = subprocess.Popen(GOUGE + ["run", str(config), "--out", str(out), "--quiet"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=dict(os.environ, NUMBA_NUM_THREADS="2"))
+    for _ in range(600):
+        if (out / "checkpoints" / "latest.h5").exists() or proc.poll() is not None:
+            break
+        time.sleep(0.1)
+    filler = fill(small_fs, 0)          # to the last byte: the run file is closed on its reserve
+    stdout, stderr = proc.communicate(timeout=600)
+    done = subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
+    if done.returncode == 0:
+        pytest.skip("the run finished before the disk filled (too fast here)")
+    message = full_disk_message(done)
+    assert readable(out / "run.h5").startswith("failed"), "the run file stays readable"
+    assert not temp_files(out) and not list(out.glob(".*.reserve"))
+    command = advised(message)
+    assert command[0] == "resume"
+    again = gouge(*command)         # still full: refused again, nothing lost
+    full_disk_message(again)
+    filler.unlink()
+    final = gouge(*command, "--quiet")
+    assert final.returncode == 0, final.stderr[-2000:]
+    assert readable(out / "run.h5") == "finished"
+
+
+def test_restart_on_a_full_disk(forked, small_fs):
+    """`gouge restart RUN --slip N --perm K` onto a nearly full disk: exit 3 naming the size, no
+    segfault, nothing created, the parent run intact; the named command then runs the fork."""
+    run, slip, _ = forked
+    target = _copy(run, small_fs)
+    shutil.rmtree(target / "forks")
+    filler = fill(small_fs, 300_000)
+    message = full_disk_message(gouge("restart", target, "--slip", slip, "--perm", 1e-3, "--quiet"))
+    assert "MB" in message and "--perm 0.001" in message
+    assert not (target / "forks" / f"slip_{slip:03d}" / "drained" / "run.h5").exists()
+    assert readable(target / "run.h5") == "finished" and not temp_files(small_fs)
+    assert gouge("verify", target).returncode == 0
+    filler.unlink()
+    done = gouge(*advised(message), "--quiet")
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (target / "forks" / f"slip_{slip:03d}" / "pair.json").is_file()
+
+
+def test_export_on_a_full_disk(forked, small_fs):
+    run, _, _ = forked
+    target = _copy(run, small_fs)
+    filler = fill(small_fs, 200_000)
+    message = full_disk_message(gouge("export", target))
+    assert "MB" in message and not temp_files(small_fs) and not any((target / "export").glob("*"))
+    filler.unlink()
+    done = gouge(*advised(message))
+    assert done.returncode == 0, done.stderr
+    assert (target / "export" / f"{target.name}.vtkhdf").is_file() and not temp_files(small_fs)
+
+
+def test_movie_on_a_full_disk(forked, small_fs):
+    run, slip, _ = forked
+    target = _copy(run, small_fs)
+    filler = fill(small_fs, 300_000)
+    message = full_disk_message(gouge("movie", target, "--slip", slip, "--out", small_fs / "m.mp4"))
+    assert not (small_fs / "m.mp4").exists() and not temp_files(small_fs)
+    filler.unlink()
+    done = gouge(*advised(message))
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (small_fs / "m.mp4").stat().st_size > 0 and not temp_files(small_fs)
+
+
+@pytest.mark.parametrize("command", ["analyze", "plot"])
+def test_analyze_and_plot_on_a_full_disk(forked, small_fs, command):
+    """They advise running themselves again (not `gouge resume`: the run is finished), and that works."""
+    run, slip, _ = forked
+    target = _copy(run, small_fs)
+    shutil.rmtree(target / "analysis", ignore_errors=True)
+    shutil.rmtree(target / "figures", ignore_errors=True)
+    filler = fill(small_fs, 100_000)
+    message = full_disk_message(gouge(command, target))
+    assert "resume" not in message and not temp_files(small_fs)
+    assert readable(target / "run.h5") == "finished"
+    assert gouge("verify", target).returncode == 0
+    filler.unlink()
+    done = gouge(*advised(message))
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert not temp_files(small_fs)
+
+
+def test_study_on_a_full_disk(forked, small_fs):
+    run, slip, _ = forked
+    target = _copy(run, small_fs)
+    shutil.rmtree(target / "forks")
+    filler = fill(small_fs, 300_000)
+    done = gouge("study", target, "--perm", 1e-3, "--slips", slip, "--no-figures", "--quiet")
+    message = full_disk_message(done)
+    assert readable(target / "run.h5") == "finished" and not temp_files(small_fs)
+    filler.unlink()
+    again = gouge(*advised(message), "--quiet")
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert (target / "study" / "table.csv").is_file()
+
+
+# ----------------------------------------------------------------------------- the issue-50 table
+# each case: exit 2 (or 3) with one message, no traceback, nothing destroyed, no temporary file left
+
+
+def refused(done: subprocess.CompletedProcess, code: int = 2) -> str:
+    text = done.stdout + done.stderr
+    assert done.returncode == code, (done.returncode, text[-3000:])
+    assert "Traceback" not in text and "Exception ignored" not in text, text[-3000:]
+    errors = [line for line in text.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1, text[-3000:]
+    return text[text.index(errors[0]):]         # the message (a config's may list its keys below)
+
+
+def digest(path: Path) -> str:
+    import hashlib
+
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def test_export_never_replaces_what_it_does_not_own(forked, tmp_path):
+    run, _, _ = forked
+    other = tmp_path / "B"
+    shutil.copytree(run, other)
+    before = {p: digest(p) for p in other.rglob("*") if p.is_file()}
+    for target in (other / "run.h5", other / "config.yaml", other / "checkpoints" / "latest.h5"):
+        message = refused(gouge("export", run, "--out", target, "--force"))
+        assert str(target) in message
+    message = refused(gouge("export", run, "--out", tmp_path))
+    assert "is a directory" in message
+    assert {p: digest(p) for p in other.rglob("*") if p.is_file()} == before
+    assert gouge("verify", other).returncode == 0
+    assert not temp_files(tmp_path)
+    mine = other / "mine.vtkhdf"                # an export: replaced only with --force
+    assert gouge("export", run, "--out", mine).returncode == 0
+    assert "--force" in refused(gouge("export", run, "--out", mine))
+    assert gouge("export", run, "--out", mine, "--force").returncode == 0
+    assert not temp_files(tmp_path)
+
+
+def test_movie_out_refused(forked, tmp_path):
+    run, slip, _ = forked
+    for target, said in ((Path("/dev/full"), "character device"), (tmp_path, "directory"),
+                         (run / "run.h5", "not a movie")):
+        before = digest(run / "run.h5")
+        message = refused(gouge("movie", run, "--slip", slip, "--out", target))
+        assert said in message
+        assert digest(run / "run.h5") == before
+    assert not temp_files(tmp_path) and not temp_files(run)
+
+
+@pytest.mark.parametrize("key, value", [("seed", 10 ** 30), ("output.series_interval", 1e308),
+                                        ("output.snapshot_interval", 1e308), ("output.checkpoint_interval", 1e308)])
+def test_what_config_accepts_run_starts_or_refuses(tmp_path, key, value):
+    """`gouge config` and `gouge run` agree: both refuse with exit 2 naming the key; nothing created."""
+    data = dict(TINY)
+    section, _, name = key.rpartition(".")
+    if section:
+        data[section] = dict(data[section], **{name: value})
+    else:
+        data[name] = value
+    config = tmp_path / "c.yaml"
+    config.write_text(yaml.safe_dump(data))
+    assert key in refused(gouge("config", config))
+    out = tmp_path / "run"
+    assert key in refused(gouge("run", config, "--out", out, "--quiet"))
+    assert not out.exists()
+
+
+def test_largest_seed_runs(tmp_path):
+    config = tmp_path / "c.yaml"
+    config.write_text(yaml.safe_dump(dict(TINY, seed=2 ** 63 - 1, run={"duration": 200},
+                                          compaction={"max_time": 600})))
+    done = gouge("run", config, "--out", tmp_path / "run", "--quiet")
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert gouge("verify", tmp_path / "run").returncode == 0
+
+
+def test_config_path_kinds(tmp_path):
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    for path, said in ((tmp_path, "a directory"), (Path("/dev/zero"), "a character device"),
+                       (fifo, "a FIFO")):
+        message = refused(gouge("config", path), 2)
+        assert said in message and "does not exist" not in message
+
+
+def test_campaign_spec_size_cap(tmp_path):
+    spec = tmp_path / "big.yaml"
+    spec.write_text("name: big\nbase: tiny.yaml\nsweep:\n  seeds: [" + ", ".join(map(str, range(10 ** 6))) + "]\n")
+    start = time.perf_counter()
+    message = refused(gouge("campaign", spec, "--status"))
+    assert "1,000,000 bytes" in message and time.perf_counter() - start < 20
+
+
+def test_threads_above_cores_warned(tmp_path):
+    config = tmp_path / "c.yaml"
+    config.write_text(yaml.safe_dump(dict(TINY, numerics=dict(TINY["numerics"], threads=1024))))
+    done = gouge("config", config)
+    assert done.returncode == 0 and "numerics.threads = 1024 is above this machine's" in done.stdout
+
+
+def test_analyze_exits_4_with_a_damaged_fork(forked, tmp_path):
+    run, slip, _ = forked
+    target = tmp_path / "run"
+    shutil.copytree(run, target)
+    branch = target / "forks" / f"slip_{slip:03d}" / "perm_1e-03" / "run.h5"
+    with open(branch, "r+b") as fh:            # damage the branch: its first kilobytes zeroed
+        fh.write(b"\0" * 4096)
+    done = gouge("analyze", target)
+    assert done.returncode == 4, done.stdout[-2000:] + done.stderr[-2000:]
+    assert "Traceback" not in done.stdout + done.stderr
+    assert "skipped fork" in done.stdout and done.stderr.strip().splitlines()[-1].startswith("summary:")
+
+
+def test_failed_branch_reported_as_failed(forked, tmp_path):
+    """A branch stopped by a physics failure (a real one: the fluid step far above what the
+    coupling bears) is reported as failed, with its message, in pair.json, the analysis table, the
+    study table and the API: never as a pair type."""
+    run, slip, _ = forked
+    target = tmp_path / "run"
+    shutil.copytree(run, target)
+    done = gouge("restart", target, "--slip", slip, "--perm", 1e-7, "--set", "fluid.step=500", "--quiet")
+    if done.returncode == 0:
+        pytest.skip("this packing's branch did not blow up within its window; the rule needs a failed branch")
+    message = refused(done, 3)
+    assert "physics failure" in message
+    pair = json.loads((target / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())
+    assert pair["branches"]["perm_1e-07"].startswith("failed")
+    row = next(r for r in pair["pairs"] if r["branch"] == "perm_1e-07")
+    assert (row["type"], row["base_type"], row["status"]) == ("failed", "failed", "failed")
+    assert row["note"].startswith("undrained branch failed") and row["criteria"] == ""
+    assert gouge("analyze", target).returncode == 0
+    with open(target / "analysis" / "pairs.csv") as fh:
+        rows = [r for r in csv.DictReader(fh) if r["branch"] == "perm_1e-07"]
+    assert rows[0]["type"] == "failed" and rows[0]["note"] == row["note"]
+    from gouge_cli import api
+
+    frame = api.open_study(target)
+    failed = frame[frame["branch"] == "perm_1e-07"]
+    assert list(failed["type"]) == ["failed"] and list(failed["status"]) == ["failed"]
+
+
+def test_advice_of_a_held_lock_and_ctrl_c_continues_the_restart(forked, tmp_path):
+    """A second `gouge restart` while one runs is told what continues the first one's work once it
+    is stopped; after Ctrl-C on the first, that command (and the one the first names) finishes the fork."""
+    from gouge_cli.io.rundir import holder
+
+    run, slip, _ = forked
+    target = tmp_path / "run"
+    shutil.copytree(run, target)
+    shutil.rmtree(target / "forks")
+    args = ["restart", str(target), "--slip", str(slip), "--perm", "1e-3", "--quiet"]
+    first = subprocess.Popen(GOUGE + args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             env=dict(os.environ, NUMBA_NUM_THREADS="1"), start_new_session=True)
+    branch = target / "forks" / f"slip_{slip:03d}" / "drained"
+    try:
+        for _ in range(1200):
+            if holder(branch) is not None or first.poll() is not None:
+                break
+            time.sleep(0.05)
+        assert first.poll() is None, "the first restart ended before the test could meet its lock"
+        message = refused(gouge(*args))
+        assert "in use" in message
+        command = advised(message)
+        assert command[:2] == ["restart", str(target)] and "0.001" in command
+        first.send_signal(signal.SIGINT)
+        stdout, stderr = first.communicate(timeout=120)
+    finally:
+        if first.poll() is None:
+            first.kill()
+    assert first.returncode == 130, stderr[-2000:]
+    assert "Traceback" not in stdout + stderr
+    named = advised(stderr)                           # what the interrupted restart itself names
+    assert named[:2] == ["restart", str(target)]
+    resumed = refused(gouge("resume", branch))       # a branch is not resumed: told the restart to run
+    assert advised(resumed)[:4] == ["restart", str(target.resolve()), "--slip", str(slip)]
+    done = gouge(*command, "--quiet")
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert json.loads((target / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())["pairs"]
+    again = gouge(*named, "--quiet")                # all finished: refused, naming --force (exit 2)
+    assert again.returncode == 2 and "--force" in again.stderr
+
+
+def test_study_exits_4_with_a_damaged_branch(forked, tmp_path):
+    """A finished branch whose series fail their checksum is kept by the study (it is finished)
+    but cannot be classified: the study and analyze list it, print a summary last and exit 4."""
+    run, slip, _ = forked
+    target = tmp_path / "run"
+    shutil.copytree(run, target)
+    branch = target / "forks" / f"slip_{slip:03d}" / "perm_1e-03" / "run.h5"
+    with h5py.File(branch, "r") as h5:              # one byte of its wall velocity flipped on disk
+        chunk = h5["series/wall_vx"].id.get_chunk_info(0)
+    with open(branch, "r+b") as fh:
+        fh.seek(chunk.byte_offset + 100)
+        byte = fh.read(1)[0]
+        fh.seek(chunk.byte_offset + 100)
+        fh.write(bytes([byte ^ 0xFF]))
+    for args in (("study", target, "--perm", 1e-3, "--slips", slip, "--no-figures", "--quiet"), ("analyze", target)):
+        done = gouge(*args)
+        text = done.stdout + done.stderr
+        assert done.returncode == 4, text[-3000:]
+        assert "Traceback" not in text and "skipped fork" in text
+        assert done.stderr.strip().splitlines()[-1].startswith("summary:")
