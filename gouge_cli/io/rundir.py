@@ -213,3 +213,16 @@ def latest_run(runs_root: Path = Path("runs")) -> Path:
     if not candidates:
         raise RunDirError(f"no runs under {runs_root}/; run `gouge run CONFIG` first or name the run directory")
     return max(candidates, key=lambda p: RunLayout(p).run_file.stat().st_mtime)
+
+
+def restart_command(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
+                    duration: float | None = None) -> str:
+    """The `gouge restart` command line that runs this fork (named in the messages of a stopped one)."""
+    args = ["gouge", "restart", str(run_dir), "--slip", str(slip)]
+    for perm in perms:
+        args += ["--perm", f"{perm:g}"]
+    for o in overrides or []:
+        args += ["--set", o]
+    if duration is not None:
+        args += ["--duration", f"{duration:g}"]
+    return shlex.join(args)

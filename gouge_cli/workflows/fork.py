@@ -13,7 +13,6 @@ from __future__ import annotations
 import errno
 import math
 import os
-import shlex
 import sys
 import time
 from dataclasses import dataclass
@@ -29,7 +28,7 @@ from ..io.runfile import RunFile, RunReader, slip_catalog
 from ..model.preflight import check_config
 from ..errors import RunDirError
 from ..io.outputs import require_space
-from ..io.rundir import SPACE_MARGIN, check_run_dir, refuse_if_in_progress, RunLock
+from ..io.rundir import SPACE_MARGIN, check_run_dir, refuse_if_in_progress, restart_command, RunLock
 from ..driver.phases import load_phase
 from ..driver.simulation import Simulation
 from .pairs import branch_status
@@ -150,19 +149,6 @@ def _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_
     writer.close(status, provenance.sim_hash(sim))
     first = recorder.slips[0] if recorder.slips else None
     return BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first)
-
-
-def restart_command(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
-                    duration: float | None = None) -> str:
-    """The `gouge restart` command line that runs this fork (named in the messages of a stopped one)."""
-    args = ["gouge", "restart", str(run_dir), "--slip", str(slip)]
-    for perm in perms:
-        args += ["--perm", f"{perm:g}"]
-    for o in overrides or []:
-        args += ["--set", o]
-    if duration is not None:
-        args += ["--duration", f"{duration:g}"]
-    return shlex.join(args)
 
 
 def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,

@@ -15,7 +15,7 @@ from ..io.checkpoint import read_checkpoint, remove_stale_temps
 from ..config import Config, dump_config, load_config
 from ..errors import ConfigError, DamagedFileError, hdf5_os_error
 from ..kernels import layout as L
-from ..io.layout import RunLayout
+from ..io.layout import DRAINED, RunLayout, branch_perm
 from ..io.runfile import RunFile
 from ..io.verify import continued_problems
 from ..model.params import choose_threads
@@ -23,7 +23,7 @@ from ..model.preflight import check_config
 from ..driver.phases import compaction_phase, load_phase
 from ..errors import RunDirError
 from ..io.outputs import require_space
-from ..io.rundir import SPACE_MARGIN, check_run_dir, open_run_file, prepare_run_dir, RunLock
+from ..io.rundir import SPACE_MARGIN, check_run_dir, open_run_file, prepare_run_dir, restart_command, RunLock
 from ..driver.simulation import Simulation
 from ..driver.slips import recorded_count
 from ..errors import PhysicsError
@@ -191,10 +191,8 @@ def _refuse_branch(run_dir: Path) -> None:
         return
     if slip is None or parent is None:
         return
-    from .fork import restart_command
-
-    perm = str(branch).removeprefix("perm_") if str(branch).startswith("perm_") else None
-    command = restart_command((run_dir / str(parent)).resolve(), int(slip), [float(perm)] if perm else [])
+    perm = branch_perm(str(branch)) if str(branch) != DRAINED else None
+    command = restart_command((run_dir / str(parent)).resolve(), int(slip), [perm] if perm is not None else [])
     raise RunDirError(f"{run_dir} is a fork branch, which is run again rather than resumed: run `{command}` "
                       "(it runs the fork's unfinished branches; no --force needed)")
 
