@@ -13,7 +13,8 @@ the coupling is converged for a metric when the grid difference is well below th
 Resumable: a finished loading run or fork is kept. Writes OUT/convergence.csv (one row per slip
 and grid) and OUT/summary.csv, and prints the summary. Example (the validation page's table):
 
-    .venv/bin/python benchmarks/coupling_convergence.py --seeds 1 2 --slips 5 --out runs/convergence
+    .venv/bin/python benchmarks/coupling_convergence.py --seeds 1 2 --slips 5 --out runs/convergence \
+        --figure docs/figures/convergence/pairs_on_two_grids.png
 """
 
 from __future__ import annotations
@@ -74,6 +75,33 @@ def fork(run: Path, grid_dir: Path, slip: int, perm: float, width: float, h: flo
             **{m: float(v) if v is not None else float("nan") for m, v in value.items()}}
 
 
+def figure(rows: list[dict], fine: float, finer: float, path: Path):
+    """Each pair's metric on grid `fine` against grid `finer` (one panel per metric), the identity
+    line, seeds by colour: points on the line are converged; the spread along it is the slips'."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    by = {(int(r["seed"]), int(r["slip"]), float(r["h"])): r for r in rows if r["status"] == "ok"}
+    fig, axes = plt.subplots(1, len(METRICS), figsize=(4 * len(METRICS), 3.8))
+    for ax, m in zip(axes, METRICS):
+        for seed in sorted({k[0] for k in by}):
+            pts = [(float(by[(s, n, finer)][m]), float(by[(s, n, fine)][m])) for s, n, h in by
+                   if s == seed and h == fine and (s, n, finer) in by]
+            if pts:
+                x, y = np.array(pts, float).T
+                ax.plot(x, y, "o", label=f"seed {seed}")
+        lo, hi = ax.get_xlim()
+        lo, hi = min(lo, ax.get_ylim()[0]), max(hi, ax.get_ylim()[1])
+        ax.plot([lo, hi], [lo, hi], "k-", lw=0.8)
+        ax.set_xlabel(f"h = {finer:g} d")
+        ax.set_ylabel(f"h = {fine:g} d")
+        ax.set_title(m, fontsize=10)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
@@ -83,6 +111,7 @@ def main(argv=None):
     parser.add_argument("--perm", type=float, default=1e-5)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out", type=Path, default=REPO / "runs" / "convergence")
+    parser.add_argument("--figure", type=Path, help="also draw the pairs on the two finest grids here")
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     with ThreadPoolExecutor(args.jobs) as pool:
@@ -120,6 +149,8 @@ def main(argv=None):
         writer = csv.DictWriter(f, list(summary[0]))
         writer.writeheader()
         writer.writerows(summary)
+    if args.figure is not None:
+        figure(rows, fine, finer, args.figure)
 
 
 if __name__ == "__main__":
