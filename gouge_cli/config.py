@@ -228,7 +228,7 @@ class FluidConfig(_Section):
                             "second-order explicit (Heun) step while dt_f <= 0.25 x the FTCS bound (where its error "
                             "is at most a third of backward Euler's), implicit otherwise")
     step: Time = Field(
-        0.25, gt=0, le=1000,
+        0.5, gt=0, le=1000,
         description="[t0] fluid update period dt_f, rounded to whole DEM steps; between updates the drag is "
                     "that of the pressure extrapolated to the interval's middle (accuracy: `gouge accuracy`, "
                     "ladder fluid.step)")

@@ -196,19 +196,30 @@ def drag_triples(P, s, grad_s_x, grad_s_z, q, rx, rz):
             zf[c] = 0.0
 
 
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def interleave_triples(q, rx, rz, triples):
+    """triples[3c], [3c + 1], [3c + 2] = q, rx, rz of flat cell c (float64[3 nx nz]): a grain's cells
+    (c00, c01) and (c10, c11) are then two runs of six adjacent values."""
+    qf, xf, zf = flat(q), flat(rx), flat(rz)
+    for c in range(np.uint64(qf.size)):
+        k = np.uint64(3) * c
+        triples[k] = qf[c]
+        triples[k + np.uint64(1)] = xf[c]
+        triples[k + np.uint64(2)] = zf[c]
+
+
 @njit(cache=NUMBA_CACHE, error_model="numpy", parallel=True)
-def grain_drag_consistent(corners, n, nz, inv_dx, q, rx, rz, drag_x, drag_z):
+def grain_drag_consistent(corners, n, nz, inv_dx, triples, drag_x, drag_z):
     """F_k = -a_k sum_c [q_c dW_kc/dx_k + W_kc r_c] [E d^2] with the corner cells, areas and d fz/dz
     the deposit stored (kernels.deposit: dW/dx_k of the bilinear weights is -(1 - fz)/dx, (1 - fz)/dx,
     -fz/dx, fz/dx on the cells 00, 10, 01, 11, and the same in z with d fz/dz, 0 where a grain's
-    z-weight is clamped to a boundary row). q, rx, rz: float64[nx, nz] (drag_triples, then S^T).
-    Each grain on its own: the same bits on any thread count."""
+    z-weight is clamped to a boundary row). triples: (q, rx, rz) per cell (drag_triples, then S^T,
+    then interleave_triples). Each grain on its own: the same bits on any thread count."""
     cells = corners[CR_CELL].view(np.int64)
     a00s, a10s, a01s, a11s, dfz = corners[CR_A00], corners[CR_A10], corners[CR_A01], corners[CR_A11], corners[CR_DFZ]
-    qf, xf, zf = flat(q), flat(rx), flat(rz)
-    column = np.uint64(nz)
-    end = np.uint64(qf.size)
-    one = np.uint64(1)
+    column = np.uint64(3 * nz)
+    end = np.uint64(triples.size)
+    three = np.uint64(3)
     for kk in prange(n):
         k = np.uint64(kk)
         cell = cells[k] - CELL_BITS
@@ -216,13 +227,18 @@ def grain_drag_consistent(corners, n, nz, inv_dx, q, rx, rz, drag_x, drag_z):
             drag_x[k] = 0.0
             drag_z[k] = 0.0
             continue
-        c00 = np.uint64(cell)
-        c10 = c00 + column
-        c10 = c10 - end if c10 >= end else c10
-        c01 = c00 + one
-        c11 = c10 + one
+        i00 = np.uint64(cell) * three
+        i10 = i00 + column
+        i10 = i10 - end if i10 >= end else i10
+        i01 = i00 + three
+        i11 = i10 + three
         a00, a10, a01, a11 = a00s[k], a10s[k], a01s[k], a11s[k]
-        dqx = ((a00 + a10) * (qf[c10] - qf[c00]) + (a01 + a11) * (qf[c11] - qf[c01])) * inv_dx
-        dqz = ((a00 + a01) * (qf[c01] - qf[c00]) + (a10 + a11) * (qf[c11] - qf[c10])) * dfz[k]
-        drag_x[k] = -(dqx + a00 * xf[c00] + a10 * xf[c10] + a01 * xf[c01] + a11 * xf[c11])
-        drag_z[k] = -(dqz + a00 * zf[c00] + a10 * zf[c10] + a01 * zf[c01] + a11 * zf[c11])
+        q00, q10, q01, q11 = triples[i00], triples[i10], triples[i01], triples[i11]
+        dqx = ((a00 + a10) * (q10 - q00) + (a01 + a11) * (q11 - q01)) * inv_dx
+        dqz = ((a00 + a01) * (q01 - q00) + (a10 + a11) * (q11 - q10)) * dfz[k]
+        one = np.uint64(1)
+        two = np.uint64(2)
+        drag_x[k] = -(dqx + a00 * triples[i00 + one] + a10 * triples[i10 + one] + a01 * triples[i01 + one]
+                      + a11 * triples[i11 + one])
+        drag_z[k] = -(dqz + a00 * triples[i00 + two] + a10 * triples[i10 + two] + a01 * triples[i01 + two]
+                      + a11 * triples[i11 + two])

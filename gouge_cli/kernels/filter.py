@@ -14,7 +14,9 @@ fixed w converges to the filtered continuum model. S is separable, S = S_z S_x:
 * S_x: periodic, a circulant of taps exp(-(m dx)^2 / (2 sigma_x^2)) for offsets |m| <= 3 sigma_x / dx
   (and at most (nx - 1)/2), normalised to sum 1;
 * S_z: between the wall planes, a Gaussian with mirror images in both planes (no solid crosses a
-  wall), kernel_z[jo, ji] for |jo - ji| <= 3 sigma_z / dz, each column ji normalised to sum 1.
+  wall), K[jo, ji] for |jo - ji| <= 3 sigma_z / dz, each column ji normalised to sum 1, stored as
+  its diagonals: bands_z[0, mz + d, jo] = K[jo, jo + d] (S_z) and bands_z[1, mz + d, ji] =
+  K[ji + d, ji] (S_z^T), so that both products run along contiguous rows.
 
 Both keep every column sum at 1, so S conserves the deposited solid area exactly. The drag goes
 back through S^T = S_x S_z^T: with A the raw deposit and f = -(grad P)/s~ the drag density on
@@ -45,15 +47,16 @@ def filter_sigmas(width, dx, dz):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def filter_setup(width, dx, dz, taps_x, kernel_z):
-    """Taps of S_x and the band of S_z for the current cell sizes; returns (mx, mz), the half widths
-    in cells (0: no smoothing on that axis).
+def filter_setup(width, dx, dz, taps_x, bands_z):
+    """Taps of S_x and the diagonals of S_z for the current cell sizes; returns (mx, mz), the half
+    widths in cells (0: no smoothing on that axis).
 
     taps_x : float64[nx] out, taps_x[m] for offsets 0..mx (symmetric), summing to 1 over -mx..mx
-    kernel_z : float64[nz, nz] out, column-normalised Gaussian with wall images, zero outside the band
+    bands_z : float64[2, 2 nz - 1, nz] out, the diagonals of S_z and of S_z^T (module doc); zero
+              where a diagonal leaves the grid
     """
     nx = taps_x.shape[0]
-    nz = kernel_z.shape[0]
+    nz = bands_z.shape[2]
     sx, sz = filter_sigmas(width, dx, dz)
     mx = 0
     if sx > 1e-3 * dx:
@@ -72,11 +75,13 @@ def filter_setup(width, dx, dz, taps_x, kernel_z):
     if mz > 0:
         thickness = nz * dz
         reach = TRUNCATION * sz
+        for b in range(2 * mz + 1):
+            for j in range(nz):
+                bands_z[0, b, j] = 0.0
+                bands_z[1, b, j] = 0.0
         for ji in range(nz):
             zi = (ji + 0.5) * dz
             total = 0.0
-            for jo in range(nz):
-                kernel_z[jo, ji] = 0.0
             for jo in range(max(0, ji - mz), min(nz, ji + mz + 1)):
                 zo = (jo + 0.5) * dz
                 value = 0.0
@@ -84,59 +89,74 @@ def filter_setup(width, dx, dz, taps_x, kernel_z):
                     if abs(distance) <= reach:
                         u = distance / sz
                         value += math.exp(-0.5 * u * u)
-                kernel_z[jo, ji] = value
+                bands_z[1, mz + jo - ji, ji] = value          # K[jo, ji], column ji
                 total += value
             for jo in range(max(0, ji - mz), min(nz, ji + mz + 1)):
-                kernel_z[jo, ji] /= total
+                value = bands_z[1, mz + jo - ji, ji] / total
+                bands_z[1, mz + jo - ji, ji] = value
+                bands_z[0, mz + ji - jo, jo] = value          # the same entry on the row diagonal
     return mx, mz
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
 def _smooth_x(field, tmp, taps_x, mx):
-    """tmp = S_x field (periodic circulant; symmetric, so also S_x^T)."""
+    """tmp = S_x field (periodic circulant; symmetric, so also S_x^T). Flat loops over the cells
+    (a cell's x neighbours m columns away are m nz apart; the first and last m columns wrap)."""
     nx, nz = field.shape
-    for i in range(nx):
-        for j in range(nz):
-            tmp[i, j] = taps_x[0] * field[i, j]
-        for m in range(1, mx + 1):
-            right = i + m if i + m < nx else i + m - nx
-            left = i - m if i - m >= 0 else i - m + nx
-            t = taps_x[m]
-            for j in range(nz):
-                tmp[i, j] += t * (field[right, j] + field[left, j])
+    f = field.reshape(field.size)
+    out = tmp.reshape(tmp.size)
+    size = np.uint64(f.size)
+    zero = np.uint64(0)
+    t0 = taps_x[0]
+    for c in range(zero, size):
+        out[c] = t0 * f[c]
+    for m in range(1, mx + 1):
+        t = taps_x[m]
+        shift = np.uint64(m * nz)
+        back = size - shift
+        for c in range(zero, shift):                 # (unsigned: no negative-index checks)
+            out[c] += t * (f[c + shift] + f[c + back])
+        for c in range(shift, back):
+            out[c] += t * (f[c + shift] + f[c - shift])
+        for c in range(back, size):
+            out[c] += t * (f[c - back] + f[c - shift])
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _smooth_z(source, target, kernel_z, mz, transpose):
-    """target = S_z source (kernel_z[jo, ji]), or S_z^T source if transpose."""
+def _smooth_z(source, target, bands, mz):
+    """target = the band matrix of diagonals bands[mz + d, j] (d = -mz..mz) times source, along z:
+    target[i, j] = sum_d bands[mz + d, j] source[i, j + d] (S_z with bands_z[0], S_z^T with [1])."""
     nx, nz = source.shape
     for i in range(nx):
-        for jo in range(nz):
-            acc = 0.0
-            for ji in range(max(0, jo - mz), min(nz, jo + mz + 1)):
-                k = kernel_z[ji, jo] if transpose else kernel_z[jo, ji]
-                acc += k * source[i, ji]
-            target[i, jo] = acc
+        for j in range(nz):
+            target[i, j] = bands[mz, j] * source[i, j]
+        for d in range(1, mz + 1):
+            up = bands[mz + d]
+            down = bands[mz - d]
+            for j in range(nz - d):
+                target[i, j] += up[j] * source[i, j + d]
+            for j in range(d, nz):
+                target[i, j] += down[j] * source[i, j - d]
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def apply_filter(field, tmp, taps_x, kernel_z, mx, mz):
+def apply_filter(field, tmp, taps_x, bands_z, mx, mz):
     """field = S field in place (S_x, then S_z); tmp: float64[nx, nz] scratch."""
     if mx > 0:
         _smooth_x(field, tmp, taps_x, mx)
     else:
         tmp[:, :] = field
     if mz > 0:
-        _smooth_z(tmp, field, kernel_z, mz, False)
+        _smooth_z(tmp, field, bands_z[0], mz)
     else:
         field[:, :] = tmp
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def apply_filter_transpose(field, tmp, taps_x, kernel_z, mx, mz):
+def apply_filter_transpose(field, tmp, taps_x, bands_z, mx, mz):
     """field = S^T field in place (S_z^T, then S_x); tmp: float64[nx, nz] scratch."""
     if mz > 0:
-        _smooth_z(field, tmp, kernel_z, mz, True)
+        _smooth_z(field, tmp, bands_z[1], mz)
     else:
         tmp[:, :] = field
     if mx > 0:
@@ -146,7 +166,7 @@ def apply_filter_transpose(field, tmp, taps_x, kernel_z, mx, mz):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def filter_deposit(s, ux, uz, grad_s_x, grad_s_z, tmp, taps_x, kernel_z, mx, mz):
+def filter_deposit(s, ux, uz, grad_s_x, grad_s_z, tmp, taps_x, bands_z, mx, mz):
     """The deposit's fields filtered in place: s~ = S s, grad s~ = S grad s (the same linear map of
     the same deposit, so still its derivative with respect to the cell position), and the
     velocities as S(s u) / S(s) (0 where S(s) = 0). All float64[nx, nz]."""
@@ -157,11 +177,11 @@ def filter_deposit(s, ux, uz, grad_s_x, grad_s_z, tmp, taps_x, kernel_z, mx, mz)
         for j in range(nz):
             ux[i, j] *= s[i, j]
             uz[i, j] *= s[i, j]
-    apply_filter(s, tmp, taps_x, kernel_z, mx, mz)
-    apply_filter(ux, tmp, taps_x, kernel_z, mx, mz)
-    apply_filter(uz, tmp, taps_x, kernel_z, mx, mz)
-    apply_filter(grad_s_x, tmp, taps_x, kernel_z, mx, mz)
-    apply_filter(grad_s_z, tmp, taps_x, kernel_z, mx, mz)
+    apply_filter(s, tmp, taps_x, bands_z, mx, mz)
+    apply_filter(ux, tmp, taps_x, bands_z, mx, mz)
+    apply_filter(uz, tmp, taps_x, bands_z, mx, mz)
+    apply_filter(grad_s_x, tmp, taps_x, bands_z, mx, mz)
+    apply_filter(grad_s_z, tmp, taps_x, bands_z, mx, mz)
     for i in range(nx):
         for j in range(nz):
             if s[i, j] > 0.0:

@@ -22,7 +22,7 @@ corners : float64[N_CORNERS, N]    per-grain deposit cells and areas (see deposi
 partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit);
                             allocate it zeroed: between calls it is zero outside the columns flagged
                             in it (M_FLAG)
-taps_x : float64[nx], kernel_z : float64[nz, nz]   the filter's operators (kernels.filter), scratch
+taps_x : float64[nx], bands_z : float64[2, 2 nz - 1, nz]   the filter's operators (kernels.filter), scratch
 drag_x, drag_z : float64[N]        force on each grain [E d^2]
 
 Status: STATUS_OK 0; STATUS_SOLVER 1 (CG not converged in max_iter: P is the
@@ -37,13 +37,13 @@ import numpy as np
 from numba import njit
 
 from . import NUMBA_CACHE
-from .layout import (AUTO_EXPLICIT, G_CAPACITY, G_DIAG, G_FQ, G_FX, G_FZ, G_P, G_PREV, G_Q, G_RHS, G_SX,
+from .layout import (AUTO_EXPLICIT, G_CAPACITY, G_DIAG, G_FQ, G_FX, G_FZ, G_P, G_PREV, G_Q, G_R, G_RHS, G_SX,
                      G_SZ, G_TB, G_TMP, G_TX, G_TZ, G_Z, P_BETA, P_ETA, P_FILTER_WIDTH, P_KAPPA_C, P_MAX_ITER,
                      P_MAX_SUBSTEPS, P_PHI_MAX, P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT,
                      STATUS_NONFINITE, STATUS_OK, STATUS_SOLVER, S_DT_MAX, S_EXPLICIT_UPDATES, S_ITERATIONS,
                      S_RESIDUAL, S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
 from .deposit import deposit, deposit_finish
-from .drag import drag_triples, grain_drag_consistent
+from .drag import drag_triples, grain_drag_consistent, interleave_triples
 from .filter import apply_filter_transpose, filter_deposit, filter_setup
 from .pressure import (conjugate_gradient, copy_grid, explicit_bound, explicit_diffusion, face_conductances,
                        flat, heun_diffusion, implicit_system, permeability_field, undrained_source)
@@ -89,8 +89,16 @@ def _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, extrapolate, mx, mz):
     drag_triples(ext, s, work[G_SX], work[G_SZ], work[G_FQ], work[G_FX], work[G_FZ])
     if mx > 0 or mz > 0:
         for row in (G_FQ, G_FX, G_FZ):
-            apply_filter_transpose(work[row], work[G_TMP], fluid.taps_x, fluid.kernel_z, mx, mz)
+            apply_filter_transpose(work[row], work[G_TMP], fluid.taps_x, fluid.bands_z, mx, mz)
+    interleave_triples(work[G_FQ], work[G_FX], work[G_FZ], _triples(work))
     return STATUS_OK
+
+
+@njit(cache=NUMBA_CACHE, inline="always")
+def _triples(work):
+    """The drag's interleaved (q, r_x, r_z) per cell: work rows G_R..G_P (free after the solve) as one
+    flat float64[3 nx nz] (kernels.drag.interleave_triples)."""
+    return work[G_R:G_P + 1].reshape(3 * work.shape[1] * work.shape[2])
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -98,9 +106,9 @@ def _filter(Lx, z_bot, z_top, fluid):
     """The filter's taps for the current cells, then the deposit filtered (kernels.filter);
     returns (mx, mz)."""
     nx, nz = fluid.s.shape
-    mx, mz = filter_setup(fluid.params[P_FILTER_WIDTH], Lx / nx, (z_top - z_bot) / nz, fluid.taps_x, fluid.kernel_z)
+    mx, mz = filter_setup(fluid.params[P_FILTER_WIDTH], Lx / nx, (z_top - z_bot) / nz, fluid.taps_x, fluid.bands_z)
     work = fluid.work
-    filter_deposit(fluid.s, fluid.ux, fluid.uz, work[G_SX], work[G_SZ], work[G_TMP], fluid.taps_x, fluid.kernel_z,
+    filter_deposit(fluid.s, fluid.ux, fluid.uz, work[G_SX], work[G_SZ], work[G_TMP], fluid.taps_x, fluid.bands_z,
                    mx, mz)
     return mx, mz
 
@@ -116,8 +124,7 @@ def fluid_drag(n, Lx, fluid, drag_x, drag_z, status):
             drag_z[k] = 0.0
         return
     work = fluid.work
-    grain_drag_consistent(fluid.corners, n, work.shape[2], work.shape[1] / Lx, work[G_FQ], work[G_FX], work[G_FZ],
-                          drag_x, drag_z)
+    grain_drag_consistent(fluid.corners, n, work.shape[2], work.shape[1] / Lx, _triples(work), drag_x, drag_z)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")

@@ -109,7 +109,8 @@ G_TB = 2             # conductance of the Dirichlet wall face of a boundary cell
 G_CAPACITY = 3       # beta phi
 G_DIAG = 4           # diagonal of C/dt + L
 G_RHS = 5            # right-hand side; P* before the solve
-G_R = 6              # CG residual
+G_R = 6              # CG residual; after the solve, rows G_R..G_P hold the drag's interleaved
+                     # (q, r_x, r_z) triples (kernels.drag.interleave_triples)
 G_Z = 7              # preconditioned residual
 G_P = 8              # CG direction
 G_Q = 9              # operator times direction; explicit scratch
@@ -129,7 +130,7 @@ N_GRID_WORK = 21
 # the grid's arrays as kernels.coupled takes them, addressed by name (model.fluid.FluidGrid.record;
 # shapes: kernels.fluid_update's module doc)
 FluidArrays = namedtuple("FluidArrays", ("params", "state", "pressure", "s", "s_old", "ux", "uz", "permeability",
-                                         "div_u", "work", "corners", "partial", "taps_x", "kernel_z"))
+                                         "div_u", "work", "corners", "partial", "taps_x", "bands_z"))
 
 STATUS_OK = 0
 STATUS_SOLVER = 1

@@ -4,7 +4,7 @@ Three 300-grain scenes (15 d wide, seed 2, compaction of 200-600 t0, then 3,000 
 V = 4e-3 v0 through k = 2e-4 E/d, grains re-numbered at every rebuild): dry; undrained at
 kappa_c = 1e-5 d^2, where the porous cells at the walls make the ``auto`` solver take the implicit
 (backward Euler) update; undrained at kappa_c = 1e-6 d^2, where ``auto`` takes the explicit
-(Heun) update. The state hash (:func:`gouge_cli.io.provenance.sim_hash`) of each scene's last
+(Heun) update at fluid.step 0.25 t0. The state hash (:func:`gouge_cli.io.provenance.sim_hash`) of each scene's last
 state must not depend on the thread count or the CPU; the test suite holds the expected values
 (tests/driver/test_golden_hashes.py). A change that is meant to keep the bits is checked with
 
@@ -25,7 +25,8 @@ from ..kernels.layout import S_EXPLICIT_UPDATES, S_UPDATES
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}, "compaction": {"min_time": 200.0, "max_time": 600.0},
          "loading": {"spring_constant": 2e-4, "velocity": 4e-3}, "numerics": {"sort_every": 1}, "seed": 2}
-FLUIDS = {"dry": None, "undrained": {"permeability": 1e-5}, "undrained-heun": {"permeability": 1e-6}}
+FLUIDS = {"dry": None, "undrained": {"permeability": 1e-5},
+          "undrained-heun": {"permeability": 1e-6, "step": 0.25}}     # (0.25 t0: every update within Heun's bound)
 LOADING_STEPS = 3000
 
 

@@ -29,7 +29,7 @@ from needs import two_threads
 
 REPO = Path(__file__).resolve().parents[2]
 
-GOLDEN = {"dry": "e9db53e39dbb39ad", "undrained": "6e78b70cc5d83dc9", "undrained-heun": "4367fc078df7a3f6"}
+GOLDEN = {"dry": "e9db53e39dbb39ad", "undrained": "998b6bbb331e65b6", "undrained-heun": "8d46fa779dee2700"}
 DEMO_HASH, DEMO_SLIPS = "20f13256aca04f30", 11
 
 

@@ -13,9 +13,9 @@ from gouge_cli.model.fluid import FluidGrid
 
 
 def _operators(nx, nz, dx, dz, width):
-    taps, kz = np.zeros(nx), np.zeros((nz, nz))
-    mx, mz = KFI.filter_setup(width, dx, dz, taps, kz)
-    return taps, kz, mx, mz
+    taps, bands = np.zeros(nx), np.zeros((2, 2 * nz - 1, nz))
+    mx, mz = KFI.filter_setup(width, dx, dz, taps, bands)
+    return taps, bands, mx, mz
 
 
 def _matrix(nx, nz, taps, kz, mx, mz, transpose=False):
