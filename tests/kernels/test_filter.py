@@ -32,7 +32,8 @@ def _matrix(nx, nz, taps, kz, mx, mz, transpose=False):
     return out
 
 
-@pytest.mark.parametrize("nx, nz, dx, dz, width", [(12, 9, 1.0, 1.1, 3.0), (7, 4, 2.0, 2.5, 4.0), (5, 30, 0.5, 0.4, 2.0)])
+@pytest.mark.parametrize("nx, nz, dx, dz, width",
+                         [(12, 9, 1.0, 1.1, 3.0), (7, 4, 2.0, 2.5, 4.0), (5, 30, 0.5, 0.4, 2.0)])
 def test_filter_conserves_and_transposes(nx, nz, dx, dz, width):
     taps, kz, mx, mz = _operators(nx, nz, dx, dz, width)
     assert mx > 0 and mz > 0
