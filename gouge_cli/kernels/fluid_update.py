@@ -175,7 +175,8 @@ def fluid_update(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid, drag_x,
         half kick: the deposit then takes the whole-step velocities without storing them.
 
     Order: deposit s^{n+1} and u_rel (keeping each grain's corner cells and areas in
-    corners) and filter them over the width w (kernels.filter); exact undrained source -> P*; Carman-Kozeny permeability from s^{n+1};
+    corners) and filter them over the width w (kernels.filter); exact undrained source -> P*;
+    Carman-Kozeny permeability from s^{n+1};
     conductances with (1 + beta P^n); implicit or explicit diffusion over dt_f (auto: one
     explicit (Heun) step while dt_f <= AUTO_EXPLICIT times the FTCS bound, kernels.pressure);
     grad P (extrapolated to the middle of the next interval) and the drag through the filter's
