@@ -19,30 +19,16 @@ from __future__ import annotations
 import errno
 import os
 import shutil
-import stat
 from contextlib import contextmanager
 from pathlib import Path
 
+from ..config import not_a_file
 from ..errors import InputError, NoSpaceError
 from .layout import CHECKPOINTS, CONFIG_FILE, LATEST, PAIR_FILE, RUN_FILE
 from .rundir import LOCK_NAME, RESERVE_BYTES
 
 SPACE_MARGIN = 256_000          # bytes left free beyond a sized write
 RUN_FILES = {RUN_FILE, CONFIG_FILE, LOCK_NAME, PAIR_FILE, LATEST, "point.yaml"}
-
-
-def kind_of(path: Path) -> str | None:
-    """'a directory', 'a character device', ... for an existing path that is no regular file."""
-    try:
-        mode = os.stat(path).st_mode
-    except OSError:
-        return None
-    for test, what in ((stat.S_ISDIR, "a directory"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
-                       (stat.S_ISSOCK, "a socket")):
-        if test(mode):
-            return what
-    return None
 
 
 def run_owned(path: Path) -> bool:
@@ -63,7 +49,7 @@ def check_out(path: Path | str, same_kind, what: str, force: bool, default: bool
     ``same_kind(path)``: whether an existing file is one this command wrote; ``what``: its
     description ('a VTKHDF export'); ``default``: the command's own default path."""
     path = Path(path)
-    kind = kind_of(path)
+    kind = not_a_file(path)
     if kind is not None:
         raise InputError(f"--out {path} is {kind}, not a file; name the file to write (nothing was written)")
     if not path.exists():

@@ -22,7 +22,7 @@ from ..io.layout import RunLayout, branch_name
 from ..io import provenance
 from ..io.checkpoint import read_checkpoint
 from ..config import build_config, Config
-from ..errors import AnalysisError, ConfigError, InputError, NoSpaceError, PhysicsFailure
+from ..errors import ConfigError, InputError, NoSpaceError, PhysicsFailure
 from ..driver.slips import lead_time
 from ..io.runfile import RunFile, RunReader, slip_catalog
 from ..model.preflight import check_config
