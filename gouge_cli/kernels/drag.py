@@ -219,7 +219,7 @@ def grain_drag_consistent(corners, n, nz, inv_dx, triples, drag_x, drag_z):
     a00s, a10s, a01s, a11s, dfz = corners[CR_A00], corners[CR_A10], corners[CR_A01], corners[CR_A11], corners[CR_DFZ]
     column = np.uint64(3 * nz)
     end = np.uint64(triples.size)
-    three = np.uint64(3)
+    one, two, three = np.uint64(1), np.uint64(2), np.uint64(3)
     for kk in prange(n):
         k = np.uint64(kk)
         cell = cells[k] - CELL_BITS
@@ -236,8 +236,6 @@ def grain_drag_consistent(corners, n, nz, inv_dx, triples, drag_x, drag_z):
         q00, q10, q01, q11 = triples[i00], triples[i10], triples[i01], triples[i11]
         dqx = ((a00 + a10) * (q10 - q00) + (a01 + a11) * (q11 - q01)) * inv_dx
         dqz = ((a00 + a01) * (q01 - q00) + (a10 + a11) * (q11 - q10)) * dfz[k]
-        one = np.uint64(1)
-        two = np.uint64(2)
         drag_x[k] = -(dqx + a00 * triples[i00 + one] + a10 * triples[i10 + one] + a01 * triples[i01 + one]
                       + a11 * triples[i11 + one])
         drag_z[k] = -(dqz + a00 * triples[i00 + two] + a10 * triples[i10 + two] + a01 * triples[i01 + two]
