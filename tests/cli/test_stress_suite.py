@@ -102,6 +102,8 @@ def check_nearly_undrained(sim, s):
 
 def check_low_permeability(sim, s):
     check_nearly_undrained(sim, s)
+    sigma = sim.config.loading.normal_stress
+    assert max(-s["pressure_min"].min(), s["pressure_max"].max()) > 0.1 * sigma    # (1e-9: pressures matter more)
     assert s["deborah"].max() > 10.0
 
 
