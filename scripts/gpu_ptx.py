@@ -1,5 +1,6 @@
 """Compile the GPU dry kernel (kernels.gpu.dry.advance_layers) to PTX without a GPU, and count
-what the bits depend on: FMA instructions (must be 0), atomics (0), IEEE div/sqrt, barriers.
+what the bits depend on: FMA instructions (must be 0), floating-point atomics (0; integer atomics
+count and claim slots in kernels.gpu.parallel), IEEE div/sqrt, barriers.
 
     pip install 'gouge[gpu-ptx]'; .venv/bin/python scripts/gpu_ptx.py [cc, default 9.0] [out.ptx]
 
@@ -7,6 +8,7 @@ numba-cuda asks the driver for the compute capability when it compiles device fu
 no driver here it is given as the argument (a development check: run scripts/gpu_check.sh on a GPU).
 """
 
+import re
 import sys
 import time
 import types as _types
@@ -29,17 +31,21 @@ ORDER = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inerti
          "torque", "top", "ntop", "id", "start", "index", "shear", "rev_start", "rev_slot", "x_build", "z_build",
          "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count", "pair_fx", "pair_fz",
          "pair_ti", "pair_tj", "wall", "clock", "params", "counters")
+# then todo, done, status (int64), none (float64), parallel (int64), timers (int64 [B, phases])
 
 sim = Simulation(build_config({"packing": {"n_grains": 40, "width": 6}}))
 layers = Layers([sim.state], sim.params, 64)
 arrays = {name: layers._stack(name, sim.state.index.shape[0]) for name in GRAIN + LISTS + RECORDS}
 arrays.update(top=np.zeros((1, 1), np.int64), ntop=np.zeros(1, np.int64), params=layers.params)
-signature = tuple(typeof(arrays[name]) for name in ORDER) + (types.int64[::1],) * 3 + (types.float64[::1],)
+signature = (tuple(typeof(arrays[name]) for name in ORDER) + (types.int64[::1],) * 3 + (types.float64[::1],)
+             + (types.int64, types.int64[:, ::1]))
 t0 = time.perf_counter()
 ptx, _ = cuda.compile_ptx(dry.advance_layers.py_func, signature, cc=CC)
+float_atomics = len(re.findall(r"atom\.[a-z.]*\.f(32|64)", ptx))
 print(f"sm_{CC[0]}{CC[1]}: compiled in {time.perf_counter() - t0:.1f} s; fma.rn.f64 {ptx.count('fma.rn.f64')}, "
-      f"atom. {ptx.count('atom.')}, div.rn.f64 {ptx.count('div.rn.f64')}, sqrt.rn.f64 {ptx.count('sqrt.rn.f64')}, "
+      f"float atomics {float_atomics}, integer atomics {ptx.count('atom.') - float_atomics}, "
+      f"div.rn.f64 {ptx.count('div.rn.f64')}, sqrt.rn.f64 {ptx.count('sqrt.rn.f64')}, "
       f"barriers {ptx.count('bar.sync') + ptx.count('barrier.sync')}")
 if len(sys.argv) > 2:
     open(sys.argv[2], "w").write(ptx)
-sys.exit(1 if ptx.count("fma.rn.f64") or ptx.count("atom.") else 0)
+sys.exit(1 if ptx.count("fma.rn.f64") or float_atomics else 0)

@@ -27,18 +27,27 @@ PAIR_SLOTS = ("index", "shear", "rev_slot", "new_index", "new_shear", "pair_fx",
 RECORDS = ("wall", "clock", "counters")
 THREADS = 256       # threads per layer's block on a GPU
 SIM_THREADS = 4     # under numba-cuda's simulator (each simulated thread is a Python thread)
+PARALLEL = False    # the rebuild's bookkeeping on the whole block (kernels.gpu.parallel) by default
 
 
 class Layers:
     """The ensemble (module docstring). states: B States with equal N; params: B params vectors
     (kernels.layout, N_PARAMS) or one for all; threads: threads per block (None: the environment's
-    GOUGE_GPU_THREADS, else THREADS, or SIM_THREADS under the simulator; the bits do not depend on it)."""
+    GOUGE_GPU_THREADS, else THREADS, or SIM_THREADS under the simulator; the bits do not depend on it);
+    parallel: the rebuild's bookkeeping by the whole block (kernels.gpu.parallel; None: the
+    environment's GOUGE_GPU_PARALLEL, else PARALLEL; same bits either way); timed: add up
+    per-phase cycles (``phase_cycles``)."""
 
-    def __init__(self, states: list[State], params, threads: int | None = None):
+    def __init__(self, states: list[State], params, threads: int | None = None, parallel: bool | None = None,
+                 timed: bool = False):
         from numba import config, cuda
 
         if threads is None:
             threads = int(os.environ.get("GOUGE_GPU_THREADS", SIM_THREADS if config.ENABLE_CUDASIM else THREADS))
+        if parallel is None:
+            parallel = os.environ.get("GOUGE_GPU_PARALLEL", "1" if PARALLEL else "0") == "1"
+        self.parallel = bool(parallel)
+        self.timed = bool(timed)
         self.cuda = cuda
         self.states = list(states)
         if len({s.n for s in self.states}) != 1:
@@ -74,6 +83,17 @@ class Layers:
         self.d["ntop"] = cuda.to_device(ntop)
         self.d["params"] = cuda.to_device(self.params)
         self.d["none"] = cuda.to_device(np.zeros(0))
+        from ..kernels.gpu.dry import N_PHASES
+
+        self.d["timers"] = cuda.to_device(np.zeros((self.size, N_PHASES + 1 if self.timed else 0), np.int64))
+
+    def phase_cycles(self) -> dict[str, np.ndarray]:
+        """{phase: (B,) clock64 cycles spent in it since the last upload} (timed ensembles;
+        kernels.gpu.dry.PHASES)."""
+        from ..kernels.gpu.dry import PHASES
+
+        cycles = self.d["timers"].copy_to_host()
+        return {name: cycles[:, k] for k, name in enumerate(PHASES)} if self.timed else {}
 
     def download(self):
         """Copy the device arrays back into the States (pair arrays enlarged where needed); the
@@ -104,7 +124,7 @@ class Layers:
             d["shear"], d["rev_start"], d["rev_slot"], d["x_build"], d["z_build"], d["new_start"], d["new_index"],
             d["new_shear"], d["layout"], d["cell_of"], d["order"], d["cell_count"], d["pair_fx"], d["pair_fz"],
             d["pair_ti"], d["pair_tj"], d["wall"], d["clock"], d["params"], d["counters"], cuda.to_device(todo),
-            done, status, d["none"])
+            done, status, d["none"], int(self.parallel), d["timers"])
         self.launches += 1
         return done.copy_to_host(), status.copy_to_host()
 

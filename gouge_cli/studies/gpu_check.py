@@ -64,16 +64,18 @@ def differences(a: State, b: State, needed: bool = True) -> dict[str, float]:
     return out
 
 
-def lockstep(sim: Simulation, chunks, threads: int, capacity: int | None = None) -> list[dict]:
+def lockstep(sim: Simulation, chunks, threads: int, capacity: int | None = None, parallel: bool | None = None,
+             timed: bool = False) -> list[dict]:
     """Advance the scene chunk by chunk on the CPU and a copy of it on the GPU; after each chunk
-    a row {step, pairs, rebuilds, gpu_launches (so far), diff}. capacity: start the GPU copy with
-    this few pair slots (at least N and its pairs), so that it runs out of list and grows it
-    where the CPU does not (counters[K_NEEDED_CAPACITY] is then not compared)."""
+    a row {step, pairs, rebuilds, gpu_launches (so far), diff} (timed: and cycles, the GPU's
+    per-phase clock of that chunk). capacity: start the GPU copy with this few pair slots (at
+    least N and its pairs), so that it runs out of list and grows it where the CPU does not
+    (counters[K_NEEDED_CAPACITY] is then not compared). parallel, timed: as model.gpu_layers.Layers."""
     gpu = copy.deepcopy(sim.state)
     if capacity is not None:
         npairs = int(gpu.start[-1])
         gpu._allocate_pairs(max(capacity, gpu.n, npairs), keep=npairs)     # (>= N: re-numbering scratch)
-    layers = Layers([gpu], sim.params, threads)
+    layers = Layers([gpu], sim.params, threads, parallel=parallel, timed=timed)
     rows = []
     for n in chunks:
         layers.params[0] = sim.params            # a phase change on the host reaches the GPU
@@ -82,6 +84,8 @@ def lockstep(sim: Simulation, chunks, threads: int, capacity: int | None = None)
         s = sim.state
         rows.append({"step": int(s.step), "pairs": int(s.counters[L.K_PAIRS]), "rebuilds": int(s.counters[L.K_REBUILDS]),
                      "gpu_launches": layers.launches, "diff": differences(s, gpu, capacity is None)})
+        if timed:
+            rows[-1]["cycles"] = {k: int(v[0]) for k, v in layers.phase_cycles().items()}
     return rows
 
 
@@ -98,24 +102,34 @@ def ensemble(sims: list[Simulation], nsteps: int, threads: int) -> list[dict[str
     return out
 
 
-def throughput(state: State, params: np.ndarray, layers: int, steps: int, threads: int, launch_steps: int) -> dict:
+def throughput(state: State, params: np.ndarray, layers: int, steps: int, threads: int, launch_steps: int,
+               parallel: bool | None = None, timed: bool = False) -> dict:
     """Grain-steps per second of `layers` copies of `state` on the GPU (device resident: one
-    upload, timed launches of launch_steps steps, one download), after a warm-up launch."""
+    upload, timed launches of launch_steps steps, one download), after a warm-up launch; timed:
+    also the per-phase share of layer 0's cycles (``phases``, fractions of the timed steps)."""
     copies = [copy.deepcopy(state) for _ in range(layers)]
-    ens = Layers(copies, params, threads)
+    ens = Layers(copies, params, threads, parallel=parallel, timed=timed)
     ens.upload()
     ens.run(launch_steps, launch_steps)               # compile and warm up
     from numba import cuda
 
     cuda.synchronize()
+    before = ens.phase_cycles()
     t0 = time.perf_counter()
     ens.run(steps, launch_steps)
     cuda.synchronize()
     seconds = time.perf_counter() - t0
+    cycles = {k: int(v[0] - before[k][0]) for k, v in ens.phase_cycles().items()}
     ens.download()
-    return {"layers": layers, "grains": state.n, "steps": steps, "launch_steps": launch_steps, "threads": threads,
-            "seconds": seconds, "grain_steps_per_s": layers * state.n * steps / seconds,
-            "hashes_equal": len({provenance_hash(c) for c in copies}) == 1}
+    out = {"layers": layers, "grains": state.n, "steps": steps, "launch_steps": launch_steps, "threads": threads,
+           "parallel": ens.parallel, "seconds": seconds, "grain_steps_per_s": layers * state.n * steps / seconds,
+           "rebuilds": int(copies[0].counters[L.K_REBUILDS]),
+           "hashes_equal": len({provenance_hash(c) for c in copies}) == 1}
+    if timed:
+        total = max(sum(cycles.values()), 1)
+        out["cycles_per_step"] = total / steps
+        out["phases"] = {k: round(v / total, 4) for k, v in cycles.items()}
+    return out
 
 
 def provenance_hash(state: State) -> str:

@@ -3,7 +3,11 @@ test_gpu_sim.py in a fresh process: NUMBA_ENABLE_CUDASIM must be set before numb
 imported, and only in this process). GOUGE_GPU_DEVICE=1: on the real device instead
 (scripts/gpu_check.sh).
 
-    python tests/gpu/sim_check.py lockstep|ensemble|planted [seed]
+    python tests/gpu/sim_check.py lockstep|parallel|ensemble|planted|planted_parallel [seed]
+
+parallel: the lockstep comparison with the rebuild's bookkeeping on the whole block
+(kernels.gpu.parallel) and the per-phase timers on; planted_parallel: the same with the
+block-wide counting sort made unstable (each bucket sorted descending), which must be caught.
 """
 
 from __future__ import annotations
@@ -39,6 +43,22 @@ def plant():
     device.d_hertz_mindlin = cuda.jit(device=True)(planted)
 
 
+def plant_parallel():
+    """Each bucket of the block-wide counting sort in descending order (not the CPU's stable order)."""
+    from numba import cuda
+
+    from gouge_cli.kernels.gpu import parallel
+
+    def descending(values, lo, hi, carry):
+        for a in range(lo + 1, hi):
+            for b in range(a, lo, -1):
+                if values[b - 1] < values[b]:
+                    values[b - 1], values[b] = values[b], values[b - 1]
+                    carry[b - 1], carry[b] = carry[b], carry[b - 1]
+
+    parallel._sort_segment = cuda.jit(device=True)(descending)
+
+
 def growing(sim, steps: int, tries: int = 30):
     """`sim` advanced, 50 steps at a time, to a point where its pair list outgrows max(N, its
     present length) within `steps` steps (a GPU copy started with that capacity must then grow
@@ -61,11 +81,15 @@ def main(mode: str, seed: int):
         plant()
     if mode == "planted":
         return {"rows": gpu_check.lockstep(gpu_check.scene(40, 6.0, seed), (1, 2), THREADS)}
-    if mode == "lockstep":
+    if mode == "planted_parallel":
+        plant_parallel()
+        return {"rows": gpu_check.lockstep(gpu_check.scene(40, 6.0, seed), (20, 40), THREADS, parallel=True)}
+    if mode in ("lockstep", "parallel"):
+        par = mode == "parallel"
         sim = growing(gpu_check.scene(40, 6.0, seed), 70)
-        rows = gpu_check.lockstep(sim, (1, 1, 8, 60), THREADS, capacity=1)
+        rows = gpu_check.lockstep(sim, (1, 1, 8, 60), THREADS, capacity=1, parallel=par, timed=par)
         sim.start_loading()                          # spring and drive on, no background damping
-        rows += gpu_check.lockstep(sim, (50, 80), THREADS)
+        rows += gpu_check.lockstep(sim, (50, 80), THREADS, parallel=par, timed=par)
         return {"rows": rows, "loading": sim.phase == L.LOADING}
     if mode == "ensemble":
         sims = [gpu_check.scene(30, 5.0, seed + b, kick=0.03 * (b + 1), compact=False) for b in range(3)]

@@ -11,6 +11,8 @@ simulator must be chosen before numba.cuda is imported, and must not reach this 
 * ensemble: three 30-grain layers (different seeds, velocities, one of them loading) advanced
   as one ensemble equal each layer advanced alone, bit for bit;
 * planted: a last-bit change in the GPU's contact law alone makes the lockstep comparison fail;
+* parallel / planted_parallel: the lockstep with the rebuild's bookkeeping on the whole block
+  (kernels.gpu.parallel) and the per-phase timers on; an unstable block sort must fail it;
 * `gouge config` refuses numerics.device: gpu (exit 2) where no device is found, and (validation
   only) `gouge run` on the simulated GPU writes the CPU's run.h5 and checkpoint.
 """
@@ -58,6 +60,29 @@ def test_gpu_list_overflow_grows_on_device(lockstep):
     first = lockstep["rows"][:4]
     assert first[-1]["gpu_launches"] > len(first)               # a launch stopped at an overflow and resumed
     assert all(r["diff"] == {} for r in first)
+
+
+@pytest.fixture(scope="module")
+def parallel_lockstep():
+    return _run("parallel")
+
+
+def test_block_wide_rebuild_equals_cpu_bits(parallel_lockstep):
+    """The rebuild's bookkeeping on the whole block (kernels.gpu.parallel: counting sorts by
+    integer atomics, prefix sums) gives the CPU's list, numbering and state bit for bit,
+    through overflows, rebuilds and re-numberings, with the per-phase timers on."""
+    rows = parallel_lockstep["rows"]
+    assert [r["diff"] for r in rows] == [{}] * len(rows)
+    assert rows[-1]["rebuilds"] - rows[0]["rebuilds"] >= 5
+    assert rows[0]["gpu_launches"] >= 1 and rows[3]["gpu_launches"] > 4      # grew its list on the device
+    timed = rows[-1]["cycles"]
+    assert min(timed[p] for p in ("move", "renumber", "bin", "offsets", "reverse", "law", "sum", "wall")) > 0
+
+
+def test_unstable_block_sort_is_caught():
+    """The block-wide counting sort made unstable (buckets descending): the lockstep fails."""
+    rows = _run("planted_parallel")["rows"]
+    assert any(r["diff"] for r in rows)
 
 
 def test_ensemble_equals_single_layers():

@@ -15,7 +15,11 @@ and per-row loops and __syncthreads between phases:
   3. the law per list row (kernels.contact), then each grain sums its own pairs in _sum_range's
        order (no atomics); reverse list by thread 0 (kernels.step.reverse_list) after a rebuild
   4. wall force and kick (thread 0); 5. close_step's kick per grain on the last step.
-Every function named above is the CPU kernel's own code (gpu.device). Status per layer: OK, or
+Every function named above is the CPU kernel's own code (gpu.device). With ``parallel`` = 1 the
+thread-0 phases of the rebuild (binning, offsets, re-numbering, reverse list) run on the whole
+block instead (kernels.gpu.parallel: counting sorts by integer atomics and prefix sums), the same
+lists and the same bits; only the wall (its force sum and kick, O(top grains)) stays on thread 0.
+With a timers row, thread 0 adds up clock64 cycles per phase (PHASES). Status per layer: OK, or
 LIST_OVERFLOW with done[b] whole steps done and counters[K_NEEDED_CAPACITY] set; the host
 enlarges the pair arrays and launches again (the step resumes at its rebuild, as on the CPU).
 The pair constants are computed per pair and step (kernels.contact.pair_constants, same bits)
@@ -24,6 +28,7 @@ instead of stored, so pairs.pair_const is not used here (the host marks it stale
 
 from __future__ import annotations
 
+import numpy as np
 from numba import cuda
 
 from ..layout import (BG_DAMPING, C_NORMAL, C_TANGENTIAL, DAMPING, DT, FRICTION, K_NEEDED_CAPACITY, K_NEED_REBUILD,
@@ -34,6 +39,7 @@ from ..step import open_step, renumber
 from .device import (d_bucket_order, d_carry_history, d_half_kick, d_hertz_mindlin, d_minimum_image, d_move_one,
                      d_pair_constants, d_permute, d_renumber_list, d_reverse_list, d_scan_row, d_set_wall_grain_velocity,
                      d_spatial_order, d_sum_range, d_wall_force, d_wall_kick, device)
+from .parallel import SHARED_FLOATS, SHARED_INTS, clock64, p_bin_cells, p_renumber, p_reverse_list, p_scan
 
 d_open_step = device(open_step, wall_kick=d_wall_kick, _set_wall_grain_velocity=d_set_wall_grain_velocity)
 d_renumber = device(renumber, spatial_order=d_spatial_order, renumber_list=d_renumber_list, permute=d_permute)
@@ -43,11 +49,31 @@ d_bin_cells = device(bin_cells, bucket_order=d_bucket_order)
 # cell grid and pair count from thread 0 to the block
 _NCX, _NCZ, _TOTAL = L_SCRATCH, L_SCRATCH + 1, L_SCRATCH + 2
 
+# per-phase timers (timers[b, phase] in clock64 cycles of layer b's SM, thread 0's view after the
+# phase's barrier; slot N_PHASES holds the last reading)
+PHASES = ("open", "move", "renumber", "bin", "count_rows", "offsets", "write_rows", "reverse", "law", "sum",
+          "wall", "close")
+P_OPEN, P_MOVE, P_RENUMBER, P_BIN, P_COUNT, P_OFFSETS, P_WRITE, P_REVERSE, P_LAW, P_SUM, P_WALL, P_CLOSE = \
+    range(len(PHASES))
+N_PHASES = len(PHASES)
+
 
 @cuda.jit(device=True)
-def _build(t, nt, g, li, params):
+def _mark(t, timers, phase):
+    """Thread 0 charges the cycles since the last mark to `phase` (-1: only note the time);
+    nothing when timers is empty (untimed launch)."""
+    if t == 0 and timers.shape[0] > 0:
+        now = clock64()
+        if phase >= 0:
+            timers[phase] += now - timers[N_PHASES]
+        timers[N_PHASES] = now
+
+
+@cuda.jit(device=True)
+def _build(t, nt, g, li, params, parallel, timers, sh, shf):
     """kernels.neighbors.build_neighbors by the block: the pair count, or -(pairs) if the list
-    does not fit (the list is unchanged then)."""
+    does not fit (the list is unchanged then). parallel: binning and offsets by the block
+    (kernels.gpu.parallel) instead of thread 0."""
     x, z, radius, body = g.x, g.z, g.radius, g.body
     width = params[WIDTH]
     skin = params[SKIN]
@@ -55,23 +81,32 @@ def _build(t, nt, g, li, params):
     index = li[1]                   # (li.index is typed as tuple.index by numba-cuda)
     capacity = index.shape[0]
     layout = li.layout
-    if t == 0:
-        layout[_NCX], layout[_NCZ] = d_bin_cells(x, z, radius, width, skin, li.cell_of, li.order, li.cell_count)
-    cuda.syncthreads()
-    ncx = layout[_NCX]
-    ncz = layout[_NCZ]
+    if parallel:
+        ncx, ncz = p_bin_cells(t, nt, x, z, radius, width, skin, li.cell_of, li.order, li.cell_count, sh, shf)
+    else:
+        if t == 0:
+            layout[_NCX], layout[_NCZ] = d_bin_cells(x, z, radius, width, skin, li.cell_of, li.order, li.cell_count)
+        cuda.syncthreads()
+        ncx = layout[_NCX]
+        ncz = layout[_NCZ]
+    _mark(t, timers, P_BIN)
     new_start = li.new_start
     for i in range(t, n, nt):
         new_start[i + 1] = d_scan_row(i, x, z, radius, body, width, skin, li.cell_of, li.cell_count, li.order,
                                       ncx, ncz, li.new_index, 0, 0)
-    cuda.syncthreads()
     if t == 0:
         new_start[0] = 0
-        for i in range(n):
-            new_start[i + 1] += new_start[i]
-        layout[_TOTAL] = new_start[n]
     cuda.syncthreads()
-    total = layout[_TOTAL]
+    _mark(t, timers, P_COUNT)
+    if parallel:
+        p_scan(t, nt, new_start, 0, n + 1, sh)
+    else:
+        if t == 0:
+            for i in range(n):
+                new_start[i + 1] += new_start[i]
+        cuda.syncthreads()
+    total = new_start[n]
+    _mark(t, timers, P_OFFSETS)
     if total > capacity:
         return -total
     for i in range(t, n, nt):
@@ -88,18 +123,23 @@ def _build(t, nt, g, li, params):
         li.x_build[i] = x[i]
         li.z_build[i] = z[i]
     cuda.syncthreads()
+    _mark(t, timers, P_WRITE)
     return total
 
 
 @cuda.jit(device=True)
-def _rebuild(t, nt, g, li, params, counters, none):
+def _rebuild(t, nt, g, li, params, counters, none, parallel, timers, sh, shf):
     """kernels.step.rebuild by the block; False (K_NEEDED_CAPACITY set) if the list does not fit."""
     every = int(params[SORT_EVERY])
     if every > 0 and counters[K_REBUILDS] % every == 0:
-        if t == 0:
-            d_renumber(g, li, none, none, params[WIDTH])
-        cuda.syncthreads()
-    npairs = _build(t, nt, g, li, params)
+        if parallel:
+            p_renumber(t, nt, g, li, params[WIDTH], sh, shf)
+        else:
+            if t == 0:
+                d_renumber(g, li, none, none, params[WIDTH])
+            cuda.syncthreads()
+        _mark(t, timers, P_RENUMBER)
+    npairs = _build(t, nt, g, li, params, parallel, timers, sh, shf)
     cuda.syncthreads()
     if t == 0:
         if npairs < 0:
@@ -114,7 +154,8 @@ def _rebuild(t, nt, g, li, params, counters, none):
 
 
 @cuda.jit(device=True)
-def _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none):
+def _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none, parallel, timers,
+            sh):
     """kernels.step.compute_forces and the wall's second half kick (step 3-4)."""
     x, z, vx, vz, spin, radius, mass = g.x, g.z, g.vx, g.vz, g.spin, g.radius, g.mass
     start, index, shear = li.start, li[1], li.shear
@@ -122,10 +163,15 @@ def _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, param
     built = li.layout[L_BUILT]
     cuda.syncthreads()
     if built < 0:
-        if t == 0:
+        if parallel:
+            p_reverse_list(t, nt, start, index, n, li.rev_start, li.rev_slot, sh)
+        elif t == 0:
             d_reverse_list(start, index, n, li.rev_start, li.rev_slot)
+        cuda.syncthreads()
+        if t == 0:
             li.layout[L_BUILT] = 1
         cuda.syncthreads()
+        _mark(t, timers, P_REVERSE)
     dt = params[DT]
     width = params[WIDTH]
     c_n = params[C_NORMAL]
@@ -153,19 +199,22 @@ def _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, param
             pair_tj[k] = tj
             shear[k] = ds
     cuda.syncthreads()
+    _mark(t, timers, P_LAW)
     for i in range(t, n, nt):                   # each grain gathers its pairs in the CPU's order
         d_sum_range(i, i + 1, start, li.rev_start, li.rev_slot, pair_fx, pair_fz, pair_ti, pair_tj, g.force_x,
                     g.force_z, g.torque, False, none, none)
     cuda.syncthreads()
+    _mark(t, timers, P_SUM)
     if t == 0:
         d_wall_force(g.force_x, g.force_z, g.top, wall)
         d_wall_kick(wall, clock, params)
         counters[K_STEP] += 1
     cuda.syncthreads()
+    _mark(t, timers, P_WALL)
 
 
 @cuda.jit(device=True)
-def _close(t, nt, g, wall, params):
+def _close(t, nt, g, wall, params, timers):
     """kernels.step.close_step by the block: the wall's grains take its velocity, free grains
     get their second half kick (kernels.step._kick)."""
     if t == 0:
@@ -178,10 +227,12 @@ def _close(t, nt, g, wall, params):
             g.vz[i] = d_half_kick(g.vz[i], g.force_z[i] * g.inv_mass[i], half, damp)
             g.spin[i] = d_half_kick(g.spin[i], g.torque[i] * g.inv_inertia[i], half, damp)
     cuda.syncthreads()
+    _mark(t, timers, P_CLOSE)
 
 
 @cuda.jit(device=True)
-def _step(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none, owed, close):
+def _step(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none, owed, close,
+          parallel, timers, sh, shf):
     """kernels.step._step (drifted False) by the block; False if the rebuild overflows (the
     step is then left drifted, counters[K_NEED_REBUILD] = MID_STEP)."""
     resume = counters[K_NEED_REBUILD] == MID_STEP
@@ -190,6 +241,7 @@ def _step(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params,
         if t == 0:
             d_open_step(g, wall, clock, params)
         cuda.syncthreads()
+        _mark(t, timers, P_OPEN)
         dt = params[DT]
         width = params[WIDTH]
         damp = params[BG_DAMPING]
@@ -200,17 +252,19 @@ def _step(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params,
                           g.inv_inertia, g.body, li.x_build, li.z_build, owed, dt, width, damp, reach2) > 0:
                 counters[K_NEED_REBUILD] = 1
         cuda.syncthreads()
+        _mark(t, timers, P_MOVE)
     pending = counters[K_NEED_REBUILD] != 0
     cuda.syncthreads()
     if pending:
-        if not _rebuild(t, nt, g, li, params, counters, none):
+        if not _rebuild(t, nt, g, li, params, counters, none, parallel, timers, sh, shf):
             if t == 0:
                 counters[K_NEED_REBUILD] = MID_STEP
             cuda.syncthreads()
             return False
-    _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none)
+    _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none, parallel, timers,
+            sh)
     if close:
-        _close(t, nt, g, wall, params)
+        _close(t, nt, g, wall, params, timers)
     return True
 
 
@@ -218,9 +272,13 @@ def _step(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params,
 def advance_layers(x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ntop,
                    ident, start, index, shear, rev_start, rev_slot, x_build, z_build, new_start, new_index, new_shear,
                    layout, cell_of, order, cell_count, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params,
-                   counters, todo, done, status, none):
+                   counters, todo, done, status, none, parallel, timers):
     """kernels.step.advance of layer blockIdx.x for todo[b] steps (module docstring); done[b]:
-    whole steps done, status[b]: OK or LIST_OVERFLOW. none: an empty float64 array (no drag)."""
+    whole steps done, status[b]: OK or LIST_OVERFLOW. none: an empty float64 array (no drag).
+    parallel (0/1): the rebuild's bookkeeping by the block (kernels.gpu.parallel), same bits;
+    timers: int64 [B, N_PHASES + 1] per-phase cycles added up (timed), or [B, 0] (untimed)."""
+    sh = cuda.shared.array(SHARED_INTS, np.int64)
+    shf = cuda.shared.array(SHARED_FLOATS, np.float64)
     b = cuda.blockIdx.x
     t = cuda.threadIdx.x
     nt = cuda.blockDim.x
@@ -229,9 +287,11 @@ def advance_layers(x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body
     li = Lists(start[b], index[b], shear[b], rev_start[b], rev_slot[b], x_build[b], z_build[b], new_start[b],
                new_index[b], new_shear[b], layout[b], cell_of[b], order[b], cell_count[b])
     nsteps = todo[b]
+    timer = timers[b]
+    _mark(t, timer, -1)
     for s in range(nsteps):
         if not _step(t, nt, g, li, pair_fx[b], pair_fz[b], pair_ti[b], pair_tj[b], wall[b], clock[b], params[b],
-                     counters[b], none, s > 0, s == nsteps - 1):
+                     counters[b], none, s > 0, s == nsteps - 1, parallel, timer, sh, shf):
             if t == 0:
                 status[b] = LIST_OVERFLOW
                 done[b] = s
