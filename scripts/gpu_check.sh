@@ -32,6 +32,16 @@ if [ -n "${WHEELS:-}" ] && ls "$WHEELS"/*.whl >/dev/null 2>&1; then
   $PY -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site "$WHEELS"/*.whl \
     >"$W/pip.log" 2>&1 && export PYTHONPATH=$PWD:/tmp/site || log "pip failed (see pip.log)"
 fi
+# numba-cuda releases that still register np.row_stack (and a few other aliases) fail to import
+# under numpy >= 2.4, which removed them; the aliases are put back for this script's processes only
+mkdir -p /tmp/site
+cat >/tmp/site/sitecustomize.py <<'PYEOF'
+import numpy
+for old, new in (("row_stack", "vstack"), ("trapz", "trapezoid"), ("in1d", "isin")):
+    if old not in numpy.__dict__ and hasattr(numpy, new):
+        setattr(numpy, old, getattr(numpy, new))
+PYEOF
+case ":$PYTHONPATH:" in *:/tmp/site:*) ;; *) export PYTHONPATH=$PYTHONPATH:/tmp/site ;; esac
 nvidia-smi >"$W/nvidia-smi.txt" 2>&1
 log "gpu: $(nvidia-smi --query-gpu=name,driver_version,clocks.max.sm --format=csv,noheader 2>/dev/null | head -1)"
 log "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2) x $(nproc); commit $(git rev-parse --short HEAD 2>/dev/null)"
