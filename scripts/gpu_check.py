@@ -37,7 +37,7 @@ OUT = Path(sys.argv[1])
 QUICK = "--quick" in sys.argv
 # under numba-cuda's simulator (NUMBA_ENABLE_CUDASIM=1: the rehearsal, every stage at toy size)
 SIM = bool(numba.config.ENABLE_CUDASIM)
-THREADS, BIG_THREADS = (4, 8) if SIM else (256, 1024)
+THREADS, BIG_THREADS = (4, 8) if SIM else (256, 512)
 LOCK_SCENE, CHUNKS = ((40, 6.0), (1, 1, 18)) if SIM else ((300, 15.0), (1, 1, 98, 900) if QUICK else (1, 1, 98, 900, 9000))
 BENCH_N = 400 if SIM else 10000
 LAYERS, TIMED_LAYERS = ((1, 2), 2) if SIM else ((1, 8, 32, 128), 32)
@@ -80,6 +80,25 @@ def _lockstep300():
     for parallel in (False, True):
         rows = gpu_check.lockstep(copy.deepcopy(sim), CHUNKS, threads=THREADS, parallel=parallel)
         out["parallel" if parallel else "serial"] = {"bitwise": all(not r["diff"] for r in rows), "rows": rows}
+    return out
+
+
+@stage("ptx")
+def _ptx():
+    """What the compiled kernel's bits depend on, read from its PTX on this machine."""
+    import re
+
+    import numba_cuda
+
+    from gouge_cli.kernels.gpu import dry
+
+    out = {"numba_cuda": getattr(numba_cuda, "__version__", "?")}
+    for sig, ptx in dry.advance_layers.inspect_asm().items():
+        out[str(len(out))] = {"fma.rn.f64": ptx.count("fma.rn.f64"),
+                              "float atomics": len(re.findall(r"atom\.[a-z.]*\.f(32|64)", ptx)),
+                              "div.rn.f64": ptx.count("div.rn.f64"), "div.approx": ptx.count("div.approx"),
+                              "sqrt.rn.f64": ptx.count("sqrt.rn.f64"), "sqrt.approx": ptx.count("sqrt.approx")}
+    out["registers"] = str(dry.advance_layers.get_regs_per_thread())
     return out
 
 
@@ -135,13 +154,16 @@ def _breakdown():
 
 @stage("bench10k_gpu")
 def _bench10k_gpu():
-    rows = []
-    for layers in LAYERS:
-        for parallel in (False, True):
-            rows.append(_gpu_rate(layers, parallel))
-    rows.append(_gpu_rate(1, True, threads=BIG_THREADS))
-    rows.append(_gpu_rate(TIMED_LAYERS, True, timed=True))
-    return rows
+    rows = RESULTS.setdefault("bench10k_gpu_rows", [])
+    runs = [(layers, parallel, THREADS, False) for layers in LAYERS for parallel in (True, False)]
+    runs += [(1, True, BIG_THREADS, False), (TIMED_LAYERS, True, THREADS, True)]
+    for layers, parallel, threads, timed in runs:
+        try:
+            rows.append(_gpu_rate(layers, parallel, threads=threads, timed=timed))
+        except Exception as exc:          # (too many threads for the kernel's registers, say)
+            rows.append({"layers": layers, "parallel": parallel, "threads": threads, "error": repr(exc)[:500]})
+        (OUT / "gpu_check.json").write_text(json.dumps(RESULTS, indent=1, default=str))
+    return {"rows": len(rows)}
 
 
 @stage("bench10k_bits")

@@ -36,6 +36,19 @@ def contract_off():
 
     compile_ir.gouge_fma_off = True
     nvvm.compile_ir = compile_ir
+    # releases whose callers hold their own reference to compile_ir still build a CompilationUnit
+    # (fastmath has become fma=True by then, which setdefault keeps)
+    unit = getattr(nvvm, "CompilationUnit", None)
+    if unit is not None and not getattr(unit.__init__, "gouge_fma_off", False):
+        init = unit.__init__
+
+        def unit_init(self, options, *args, **kwargs):
+            options = dict(options or {})
+            options.setdefault("fma", False)
+            init(self, options, *args, **kwargs)
+
+        unit_init.gouge_fma_off = True
+        unit.__init__ = unit_init
 
 
 def _simulated() -> bool:
