@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import copy
 import json
+import os
 import sys
 import time
 import traceback
@@ -47,8 +48,13 @@ if SIM:
 RESULTS: dict = {}
 
 
+ONLY = set(filter(None, os.environ.get("GPU_CHECK_ONLY", "").split(",")))   # run only these stages
+
+
 def stage(name):
     def wrap(fn):
+        if ONLY and name not in ONLY:
+            return fn
         t0 = time.perf_counter()
         try:
             RESULTS[name] = fn()
@@ -155,7 +161,7 @@ def _breakdown():
 @stage("bench10k_gpu")
 def _bench10k_gpu():
     rows = RESULTS.setdefault("bench10k_gpu_rows", [])
-    runs = [(layers, parallel, THREADS, False) for layers in LAYERS for parallel in (True, False)]
+    runs = [(layers, parallel, THREADS, False) for parallel in (True, False) for layers in LAYERS]
     runs += [(1, True, BIG_THREADS, False), (TIMED_LAYERS, True, THREADS, True)]
     for layers, parallel, threads, timed in runs:
         try:

@@ -49,7 +49,7 @@ log "versions: $($PY -c 'import numba, numpy, pydantic; from numba import cuda; 
 
 if [[ $STAGES == *1* ]]; then
 log "1. gpu_check.py (device tests, bench, bits)"
-timeout "$(left 200)" $PY scripts/gpu_check.py "$OUT" >"$W/gpu_check.out" 2>&1
+timeout "$(left $([[ $STAGES == 1 ]] && echo 3 || echo 200))" $PY scripts/gpu_check.py "$OUT" >"$W/gpu_check.out" 2>&1
 log "  rc=$? $(grep -o '"bitwise": [a-z]*\|"gpu_equals_cpu": [a-z]*\|"gpu_twice_same": [a-z]*' "$OUT/gpu_check.json" | tr '\n' ' ')"
 pack
 fi
