@@ -23,10 +23,11 @@ flushed so far.
 Units are the dimensionless scales of the run file (length d, stress E, time t0, velocity v0,
 density rho_s; V_s and sigma the run's loading velocity and normal stress); every variable carries
 ``units``, ``long_name`` and ``description``, and a dimensionless one has ``units`` '1'. These
-scale names are not pint's units (pint reads ``d`` as a day): convert with :func:`to_si`
-(``run.to_si(obj)``), whose results carry SI units that pint and pint-xarray read. Every time is
-counted from the start of loading unless its name says ``clock`` (the stored clock, which also
-counts the compaction).
+scale names are not pint's own units (pint reads ``d`` as a day): convert with :func:`to_si`
+(``run.to_si(obj)``), whose results carry SI units, or quantify as they are with the run's
+registry (``ds.pint.quantify(unit_registry=run.pint_registry())``; definitions as text:
+``run.pint_definitions()``, :mod:`gouge_cli.units`). Every time is counted from the start of
+loading unless its name says ``clock`` (the stored clock, which also counts the compaction).
 Errors are gouge_cli.errors exceptions with the CLI's message; ``exc.exit_code`` is the CLI's code.
 """
 
@@ -51,6 +52,7 @@ from .errors import AnalysisError, ConfigError, SlipNotFoundError
 from .io.filedoc import ANALYSIS_UNITS, SLIP_ATTRS, TIME_ORIGIN
 from .io.layout import RunLayout
 from .io.runfile import RunInfo, RunReader, read_series_items
+from .units import pint_definitions, pint_registry, pint_unit, si_of, unit_sizes
 
 __all__ = ["Run", "Fork", "Pair", "open_run", "open_study", "open_campaign", "analyze", "figures", "run", "restart",
            "study", "to_si", "Snapshots"]
@@ -81,60 +83,27 @@ class _SeriesArray(BackendArray):
 
 
 def _unit(unit: str) -> str:
-    """A run file's unit as pint spells it: the dimensionless '-' is '1'; the scales (d, E, t0, v0,
-    rho_s, V_s, sigma) stay as named units (:func:`to_si` converts them; docs/physics/units.md)."""
-    return "1" if unit in ("-", "") else unit
+    """A run file's unit as pint spells it (:func:`gouge_cli.units.pint_unit`: '-' is '1')."""
+    return pint_unit(unit)
 
 
 def _attrs(unit: str, description: str) -> dict:
     return {"units": _unit(unit), "long_name": description, "description": description}
 
 
-#: SI unit and Run.scales key of each of the run file's unit symbols ('V_s' and 'sigma': the run's own)
-_SI = {"d": ("m", "length_m"), "E": ("Pa", "stress_pa"), "t0": ("s", "time_s"), "v0": ("m / s", "velocity_m_s"),
-       "rho_s": ("kg / m**3", "density_kg_m3"), "rho": ("kg / m**3", "density_kg_m3")}
-_BASE = {"m": {"m": 1}, "Pa": {"Pa": 1}, "s": {"s": 1}, "m / s": {"m": 1, "s": -1}, "kg / m**3": {"kg": 1, "m": -3}}
+def _si_of(unit: str, scales: dict, V_s: float, sigma: float, m_b: float = _NAN) -> tuple[float, str] | None:
+    """(factor, SI unit) of ``unit`` for a run's scales (:func:`gouge_cli.units.si_of`)."""
+    return si_of(unit, unit_sizes(scales, V_s, sigma, m_b))
 
 
-def _si_of(unit: str, scales: dict, V_s: float, sigma: float) -> tuple[float, str] | None:
-    """(factor, SI unit) turning a value in ``unit`` (e.g. 'E d^3', '1/t0', 'rho_s d^2') into SI; None
-    when the unit is not made of the run's scales (already SI, like 'MPa', or a word)."""
-    unit = _unit(unit.strip())
-    if unit == "1":
-        return 1.0, "1"
-    factor, dims = 1.0, {}
-    for sign, part in ((1, unit.split("/")[0]), *((-1, q) for q in unit.split("/")[1:])):
-        for token in part.split():
-            name, _, power = token.partition("^")
-            n = sign * (float(power) if power else 1.0)
-            if name == "1":
-                continue
-            if name == "V_s":
-                f, base = V_s * scales["velocity_m_s"], "m / s"
-            elif name == "sigma":
-                f, base = sigma * scales["stress_pa"], "Pa"
-            elif name in _SI:
-                base, key = _SI[name]
-                f = scales[key]
-            else:
-                return None
-            factor *= f ** n
-            for b, e in _BASE[base].items():
-                dims[b] = dims.get(b, 0) + e * n
-    up = [f"{b}**{e:g}" if e != 1 else b for b, e in dims.items() if e > 0]
-    down = [f"{b}**{-e:g}" if e != -1 else b for b, e in dims.items() if e < 0]
-    text = " * ".join(up) or "1"
-    return factor, text + "".join(f" / {d}" for d in down)
-
-
-def to_si(obj, scales: dict, V_s: float = _NAN, sigma: float = _NAN):
+def to_si(obj, scales: dict, V_s: float = _NAN, sigma: float = _NAN, m_b: float = _NAN):
     """A copy of ``obj`` in SI units: an xarray DataArray or Dataset (each variable and coordinate by
     its ``units`` attribute) or a pandas DataFrame (each column by ``df.attrs["units"]``). Values in
-    units made of the scales (d, E, t0, v0, rho_s; V_s and sigma of the run) are multiplied by their
+    units made of the scales (d, E, t0, v0, rho_s; V_s, sigma and m_b of the run) are multiplied by their
     SI size and their unit becomes the SI one ('E d^3' -> 'Pa * m**3'); the rest is left as it is.
     ``scales``: :attr:`Run.scales`. :meth:`Run.to_si` and :meth:`Pair.to_si` fill in the run's."""
     def convert(unit, kind: str):
-        si = _si_of(str(unit), scales, V_s, sigma) if unit is not None and kind in "iuf" else None
+        si = _si_of(str(unit), scales, V_s, sigma, m_b) if unit is not None and kind in "iuf" else None
         return None if si is None or si[1] == "1" else si
 
     if isinstance(obj, pd.DataFrame):
@@ -150,7 +119,7 @@ def to_si(obj, scales: dict, V_s: float = _NAN, sigma: float = _NAN):
     if isinstance(obj, xr.DataArray):
         name = obj.name if obj.name is not None else "_value"
         out = to_si(obj.to_dataset(name=name) if name not in obj.coords else obj.coords.to_dataset(), scales, V_s,
-                    sigma)
+                    sigma, m_b)
         return out[name].rename(obj.name)
     if isinstance(obj, xr.Dataset):
         out = obj.copy()
@@ -247,7 +216,20 @@ class Run:
             >>> run.to_si(run.series["time"]).attrs["units"]
             's'
         """
-        return to_si(obj, self.scales, float(self.info.V_s), float(self.info.sigma))
+        return to_si(obj, self.scales, float(self.info.V_s), float(self.info.sigma), float(self.info.m_b))
+
+    def pint_definitions(self) -> str:
+        """pint definitions of this run's unit symbols (d, E, t0, ..., V_s, sigma, m_b; :mod:`gouge_cli.units`).
+
+        Example:
+            >>> print(run.pint_definitions().splitlines()[1])
+            d = 0.0005 * m  # mean grain diameter (not pint's day)
+        """
+        return pint_definitions(self.scales, float(self.info.V_s), float(self.info.sigma), float(self.info.m_b))
+
+    def pint_registry(self):
+        """A pint.UnitRegistry reading every ``units`` attribute of this run (needs pint: ``pip install pint``)."""
+        return pint_registry(self.scales, float(self.info.V_s), float(self.info.sigma), float(self.info.m_b))
 
     def __repr__(self) -> str:
         return (f"<gouge Run {self.info.describe()}: status {self.status}, {self.info.n_samples} samples, "
@@ -291,7 +273,7 @@ class Run:
         attrs = {"run": str(info.run_dir), "status": info.status, "k": info.k, "V_s": info.V_s,
                  "sigma": info.sigma, "m_b": info.m_b, "permeability": info.permeability or _NAN,
                  "seed": int(self._attributes.get("seed", -1)), "time_origin": TIME_DOC,
-                 "units": "dimensionless: length d, stress E, time t0, velocity v0 (SI sizes: scales, to_si)",
+                 "unit_system": "dimensionless: length d, stress E, time t0, velocity v0 (SI sizes: scales, to_si)",
                  "scales": dict(self.scales)}
         if info.branch is not None:
             attrs.update(branch=info.branch, fork_slip=int(info.fork_slip))

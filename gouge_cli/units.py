@@ -138,3 +138,92 @@ class ResultUnits:
         """One line for a figure: the SI size of each unit."""
         return (f"units: t0 = {self.t0_s:.3g} s, V_s = {self.V_s_m_s:.3g} m/s, σ = {self.sigma_MPa:.3g} MPa, "
                 f"d = {self.d_m * 1e3:.3g} mm")
+
+
+# --- unit strings in outputs ---------------------------------------------------------------
+# The one table of the non-SI unit symbols gouge writes into run files, analysis tables and the
+# Python API's attrs: symbol -> (key of its SI size in :func:`unit_sizes`, SI unit, meaning).
+# A unit string is a product of symbols with powers ('E d^2', 'rho_s d^2', '1/t0'); '1' is
+# dimensionless; a vector with mixed units lists one unit per element ('d, v0, E d^2').
+SCALE_UNITS: dict[str, tuple[str, str, str]] = {
+    "d": ("length_m", "m", "mean grain diameter (not pint's day)"),
+    "E": ("stress_pa", "Pa", "Young's modulus of the grains"),
+    "rho_s": ("density_kg_m3", "kg / m**3", "grain density"),
+    "t0": ("time_s", "s", "time unit d / sqrt(E / rho_s)"),
+    "v0": ("velocity_m_s", "m / s", "velocity unit d / t0"),
+    "V_s": ("V_s", "m / s", "the run's loading velocity"),
+    "sigma": ("sigma", "Pa", "the run's normal stress"),
+    "m_b": ("m_b", "kg / m", "the run's top-wall mass per unit length"),
+}
+#: SI symbols that outputs use as they are (pint knows them)
+SI_SYMBOLS: tuple[str, ...] = ("1", "m", "s", "kg", "Pa", "MPa")
+_BASE = {"m": {"m": 1}, "Pa": {"Pa": 1}, "s": {"s": 1}, "m / s": {"m": 1, "s": -1},
+         "kg / m**3": {"kg": 1, "m": -3}, "kg / m": {"kg": 1, "m": -1}}
+_NAN = float("nan")
+
+
+def pint_unit(unit: str) -> str:
+    """A unit as written into outputs: the dimensionless '-' (or '') is pint's '1', per element of a list."""
+    parts = [p.strip() for p in str(unit).split(",")]
+    return ", ".join("1" if p in ("-", "") else p for p in parts)
+
+
+def unit_factors(unit: str) -> list[tuple[str, float]] | None:
+    """(symbol, power) of each factor of one unit string ('E d^3/t0'); None if it is not one such product."""
+    unit = pint_unit(unit.strip())
+    if "," in unit:
+        return None
+    factors = []
+    for sign, part in ((1, unit.split("/")[0]), *((-1, q) for q in unit.split("/")[1:])):
+        for token in part.split():
+            name, _, power = token.partition("^")
+            try:
+                factors.append((name, sign * (float(power) if power else 1.0)))
+            except ValueError:
+                return None
+    return [(n, p) for n, p in factors if n != "1"]
+
+
+def unit_sizes(scales: "Scales | dict", V_s: float = _NAN, sigma: float = _NAN, m_b: float = _NAN) -> dict[str, float]:
+    """SI size of each SCALE_UNITS symbol for one run (``scales``: Scales or a run's ``scales`` dict)."""
+    s = scales.as_dict() if isinstance(scales, Scales) else dict(scales)
+    return {symbol: {"V_s": V_s * s["velocity_m_s"], "sigma": sigma * s["stress_pa"],
+                     "m_b": m_b * s["density_kg_m3"] * s["length_m"] ** 2}.get(key, s.get(key, _NAN))
+            for symbol, (key, _, _) in SCALE_UNITS.items()}
+
+
+def si_of(unit: str, sizes: dict[str, float]) -> tuple[float, str] | None:
+    """(factor, SI unit) of a unit made of SCALE_UNITS ('E d^3' -> (.., 'Pa * m**3')); None for any other."""
+    factors = unit_factors(unit)
+    if factors is None or any(name not in SCALE_UNITS for name, _ in factors):
+        return None
+    factor, dims = 1.0, {}
+    for name, power in factors:
+        factor *= sizes[name] ** power
+        for base, exponent in _BASE[SCALE_UNITS[name][1]].items():
+            dims[base] = dims.get(base, 0) + exponent * power
+    up = [f"{b}**{e:g}" if e != 1 else b for b, e in dims.items() if e > 0]
+    down = [f"{b}**{-e:g}" if e != -1 else b for b, e in dims.items() if e < 0]
+    return factor, (" * ".join(up) or "1") + "".join(f" / {d}" for d in down)
+
+
+def pint_definitions(scales: "Scales | dict", V_s: float = _NAN, sigma: float = _NAN, m_b: float = _NAN) -> str:
+    """pint definition lines of the SCALE_UNITS symbols of one run (unknown sizes left out; docs/physics/units.md)."""
+    # load into pint.UnitRegistry(on_redefinition="ignore"): gouge's d replaces pint's day symbol
+    sizes = unit_sizes(scales, V_s, sigma, m_b)
+    lines = ["# gouge's units for one run (gouge_cli.units.SCALE_UNITS; docs/physics/units.md)"]
+    for symbol, (_, si, meaning) in SCALE_UNITS.items():
+        if math.isfinite(sizes[symbol]):
+            lines.append(f"{symbol} = {sizes[symbol]!r} * {si.replace('**', ' ** ')}  # {meaning}")
+    return "\n".join(lines) + "\n"
+
+
+def pint_registry(scales: "Scales | dict", V_s: float = _NAN, sigma: float = _NAN, m_b: float = _NAN):
+    """A pint.UnitRegistry that reads every unit string gouge writes (needs pint, which gouge does not require)."""
+    try:
+        import pint
+    except ImportError as err:
+        raise ImportError("pint_registry needs pint (pip install pint); pint_definitions() gives the text") from err
+    registry = pint.UnitRegistry(on_redefinition="ignore")
+    registry.load_definitions(pint_definitions(scales, V_s, sigma, m_b).splitlines())
+    return registry

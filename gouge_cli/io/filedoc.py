@@ -2,9 +2,11 @@
 
 HDF5 datasets carry ``unit`` and ``description`` attributes. Attributes cannot carry
 attributes, so each group with attributes of its own also holds ``attribute_units``: JSON
-``{name: [unit, description]}``. Units are the dimensionless scales of docs/physics/units.md
-(length d, stress E, time t0 = d / sqrt(E / rho_s), velocity v0 = d / t0); the SI size of
-each is the run file's ``scales`` attribute.
+``{name: [unit, description]}``. Units are written as pint reads them with the run's
+definitions (gouge_cli.units.pint_definitions): the dimensionless '-' of the tables below is '1'.
+Units are the dimensionless scales of docs/physics/units.md (length d, stress E, time
+t0 = d / sqrt(E / rho_s), velocity v0 = d / t0); the SI size of each is the run file's ``scales``
+attribute.
 
 Time origin: the stored clock (``time`` series, snapshot and slip times) runs from the start
 of compaction. Every command and figure reports time since loading began,
@@ -19,6 +21,8 @@ import math
 from pathlib import Path
 
 import h5py
+
+from ..units import pint_unit
 
 TIME_ORIGIN = "t0 since loading began (the driver start); stored clocks run from the start of compaction"
 
@@ -193,15 +197,15 @@ def json_safe(obj):
 
 def describe(obj, unit: str, description: str) -> None:
     """Set the ``unit`` and ``description`` attributes of an HDF5 dataset or group."""
-    obj.attrs["unit"] = unit
+    obj.attrs["unit"] = pint_unit(unit)
     obj.attrs["description"] = description
 
 
 def describe_attributes(group, table: dict) -> None:
     """Write ``attribute_units`` (JSON {name: [unit, description]}) for the group's own attributes."""
-    known = {k: list(table.get(k, ("-", "undocumented"))) for k in group.attrs.keys()
+    known = {k: table.get(k, ("-", "undocumented")) for k in group.attrs.keys()
              if k not in ("attribute_units", "unit", "description", "attrs_sha256")}     # the seal: io.integrity
-    group.attrs["attribute_units"] = json.dumps(known)
+    group.attrs["attribute_units"] = json.dumps({k: [pint_unit(u), text] for k, (u, text) in known.items()})
 
 
 def grid_geometry(z_bottom: float, dx: float, dz: float) -> dict:

@@ -64,6 +64,7 @@ from .integrity import SEAL, STRUCTURE_ERRORS, check_seal, read, seal, seal_tree
 from .layout import RUN_FILE, RunLayout
 from .outputs import Reserve
 from .rundir import open_run_file
+from ..units import pint_unit
 
 # name -> (unit, description); units are the dimensionless scales of docs/physics/units.md
 SERIES = {
@@ -148,7 +149,7 @@ class RunFile:
                     unit, description = SERIES[name]
                     ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64,
                                               chunks=(4096,), fletcher32=True)
-                    ds.attrs["unit"] = unit
+                    ds.attrs["unit"] = pint_unit(unit)
                     ds.attrs["description"] = description
                     seal(ds)
                     if name != "time" and rows_before:

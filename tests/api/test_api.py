@@ -134,6 +134,75 @@ def test_si_view_of_series_and_slips(forked):
     assert api._si_of("1/t0", run.scales, 1.0, 1.0)[1] == "1 / s" and api._si_of("MPa", run.scales, 1, 1) is None
 
 
+def _written_units(out: Path, tmp_path: Path) -> dict[str, str]:
+    """Every unit string in the run's files (run.h5 after `gouge analyze`, fork branches, checkpoints)
+    and in the API's attrs (series, slips, snapshot, pair, study), by where it was found."""
+    import shutil
+
+    copy = tmp_path / "units_copy"
+    shutil.copytree(out, copy)
+    assert gouge_cli("analyze", copy).exit_code == 0
+    found: dict[str, str] = {}
+
+    def visit(path: Path, name: str, obj) -> None:
+        if "unit" in obj.attrs:
+            found[f"{path.name}:{name}:unit"] = str(obj.attrs["unit"])
+        if "attribute_units" in obj.attrs:
+            for key, (unit, _) in json.loads(obj.attrs["attribute_units"]).items():
+                found[f"{path.name}:{name}@{key}"] = unit
+
+    files = [copy / "run.h5", *copy.glob("checkpoints/*.h5"), *copy.glob("forks/*/*/run.h5")]
+    assert len(files) >= 4 and any("analysis" in h5py.File(f, "r") for f in files[:1])
+    for path in files:
+        with h5py.File(path, "r") as h5:
+            visit(path, "/", h5)
+            h5.visititems(lambda name, obj, path=path: visit(path, name, obj))
+    run = gouge.open_run(copy)
+    slip = min(run.forks)
+    for label, ds in (("series", run.series), ("snapshot", run.snapshot(-1)),
+                      ("pair", run.pair(slip, PERM).series), ("wet", run.pair(slip, PERM).undrained.snapshot(0))):
+        found.update({f"{label}:{k}": v.attrs["units"] for k, v in ds.variables.items() if "units" in v.attrs})
+        assert "units" not in ds.attrs                 # a unit string, not the prose of the unit system
+    for label, df in (("slips", run.slips), ("study", gouge.open_study(copy))):
+        found.update({f"{label}:{k}": v for k, v in df.attrs["units"].items()})
+    return found
+
+
+def test_every_unit_written_is_made_of_the_units_table(forked, tmp_path):
+    """Without pint: every unit string a run's files and the API write is '1', an SI symbol or a
+    product of powers of gouge_cli.units.SCALE_UNITS (a list per element for mixed vectors)."""
+    from gouge_cli.units import SCALE_UNITS, SI_SYMBOLS, unit_factors
+
+    found = _written_units(forked[0], tmp_path)
+    assert len(found) > 100
+    for where, unit in found.items():
+        for part in unit.split(","):
+            factors = unit_factors(part)
+            assert factors is not None and part.strip() not in ("-", ""), (where, unit)
+            assert all(name in SCALE_UNITS or name in SI_SYMBOLS for name, _ in factors), (where, unit)
+
+
+def test_pint_reads_every_unit_written_with_the_runs_definitions(forked, tmp_path):
+    """With pint (optional): the run's registry parses every unit string written, and a quantity
+    converts to SI as to_si does."""
+    pint = pytest.importorskip("pint")
+    from gouge_cli.units import pint_definitions, unit_sizes
+
+    run = gouge.open_run(forked[0])
+    registry = run.pint_registry()
+    for where, unit in _written_units(forked[0], tmp_path).items():
+        for part in unit.split(","):
+            assert isinstance(registry.parse_units(part.strip()), pint.Unit), where
+    for unit in ("E d^3", "1/t0", "rho_s d^2", "V_s", "sigma", "m_b", "d^2"):
+        factor, si = api._si_of(unit, run.scales, run.info.V_s, run.info.sigma, run.info.m_b)
+        assert registry.Quantity(1.0, unit).to(si).magnitude == pytest.approx(factor, rel=1e-12), unit
+    assert registry.Quantity(1.0, "d").to("mm").magnitude == pytest.approx(run.scales["length_m"] * 1e3)
+    own = pint.UnitRegistry(on_redefinition="ignore")           # the text alone, in a registry of one's own
+    own.load_definitions(pint_definitions(run.scales).splitlines())
+    assert own.Quantity(2.0, "E d^2").to("N").magnitude == pytest.approx(2 * run.scales["stress_pa"] * run.scales["length_m"] ** 2)
+    assert "V_s" not in pint_definitions(run.scales) and math.isnan(unit_sizes(run.scales)["sigma"])
+
+
 def test_slips_equal_cli_json_and_analyze_csv(forked, tmp_path):
     out, _ = forked
     df = gouge.open_run(out).slips
