@@ -11,7 +11,8 @@ it is complete.
   SPACE_MARGIN (NoSpaceError, exit 3, naming how much to free and the command that continues).
 * :func:`temporary` yields a hidden temporary path in the destination folder; the caller writes
   it whole and it is renamed onto the output, or removed when anything fails (a full disk
-  included), so no partial output and no temporary file is left.
+  included), so no partial output and no temporary file is left, and an earlier output stays
+  whole until the new one replaces it (a fork branch's run.h5 too, workflows.fork).
 """
 
 from __future__ import annotations
@@ -106,6 +107,8 @@ def temporary(path: Path, next_step: str | None = None):
     tmp = temp_for(path)
     try:
         yield tmp
+        with open(tmp, "rb") as fh:         # on disk before it takes the name (a crash keeps either file)
+            os.fsync(fh.fileno())
         os.replace(tmp, path)
     except BaseException as exc:
         _remove(tmp)
@@ -113,6 +116,14 @@ def temporary(path: Path, next_step: str | None = None):
                                 and free_bytes(path.parent) < SPACE_MARGIN):
             raise NoSpaceError(str(path.parent), next_step) from None
         raise
+
+
+def remove_temps(path: Path) -> None:
+    """Remove the temporary files of output `path` (and their reserves) left by a killed writer;
+    called only while `path`'s folder is locked, when no live writer holds one."""
+    path = Path(path)
+    for stale in path.parent.glob(f"*.{path.stem}.*.tmp{path.suffix}*"):
+        _remove(stale)
 
 
 def write_bytes(path: Path, data: bytes, next_step: str | None = None) -> None:

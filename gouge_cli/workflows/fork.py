@@ -20,14 +20,14 @@ from pathlib import Path
 
 from ..io.layout import RunLayout, branch_name
 from ..io import provenance
-from ..io.checkpoint import read_checkpoint
+from ..io.checkpoint import Checkpoint, read_checkpoint
 from ..config import build_config, Config
 from ..errors import ConfigError, InputError, NoSpaceError, PhysicsFailure
 from ..driver.slips import lead_time
 from ..io.runfile import RunFile, RunReader, slip_catalog
 from ..model.preflight import check_config
 from ..errors import RunDirError
-from ..io.outputs import require_space
+from ..io.outputs import remove_temps, require_space, temporary
 from ..io.rundir import SPACE_MARGIN, check_run_dir, refuse_if_in_progress, restart_command, RunLock
 from ..driver.phases import load_phase
 from ..driver.simulation import Simulation
@@ -100,8 +100,9 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     ``stop_after_slip``: stop when the branch's first slip ends (default: when ``duration`` is None).
     ``command``: the `gouge restart` line that continues this work once stopped (named to a
     second process that finds the branch locked; default: this branch's own).
-    Overwrites an existing branch directory. The branch directory is locked while it runs (so
-    branches of one run may run in parallel), and the run itself must not be in progress. Dense
+    Replaces an existing branch's run.h5 only once the new one is closed (:func:`_run_branch`).
+    The branch directory is locked while it runs (so branches of one run may run in parallel),
+    and the run itself must not be in progress. Dense
     snapshots while the branch slips: output.slip_frames, FORK_SLIP_FRAMES unless overridden.
     ``checkpoint``: the slip's checkpoint read already with these overrides (its arrays are copied
     into the branch's scene, never changed), so that a fork reads it once.
@@ -127,26 +128,39 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     out_dir.mkdir(parents=True, exist_ok=True)
     then = command or restart_command(run_dir, slip, [perm] if perm is not None else [], overrides, duration_given)
     with RunLock(out_dir, f"gouge restart --slip {slip} ({name})", then=then):
+        remove_temps(RunLayout(out_dir).run_file)       # of a killed earlier try (locked: none is live)
         return _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet)
 
 
-def _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet):
+def _run_branch(run_dir: Path, slip: int, entry: dict, ck: Checkpoint, config: Config, name: str, out_dir: Path,
+                duration: float, stop_after_slip: bool, live, quiet: bool) -> BranchResult:
+    """Drive the branch into a temporary file that becomes ``run.h5`` only once closed (finished,
+    interrupted, or failed physically: 'failed: ...', the branch's record); a crash or a full disk
+    (the error raised) leaves ``run.h5`` as it was, an earlier finished one whole (io.outputs.temporary)."""
     t0 = time.perf_counter()
     sim = Simulation(config, arrays=ck.state)
-    writer = RunFile(RunLayout(out_dir).run_file, config, sim.dt, extra_attrs={
-        "parent_run": os.path.relpath(run_dir, out_dir), "parent_checkpoint": str(entry["checkpoint"]),
-        "fork_slip": slip, "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
-        "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
-        "end_time": ck.time + duration}, threads=sim.threads)
     step0 = sim.state.step
-    try:
-        writer.append(sim.observe())
-        status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
-                                      label=f"slip {slip} {name}", checkpoints=False,
-                                      stop_after_slip=stop_after_slip)
-    except (OSError, RuntimeError) as err:      # e.g. a full disk: the branch is left 'failed: ...'
-        raise stopped_by_os_error(writer, err) from None
-    writer.close(status, provenance.sim_hash(sim))
+    failure = None
+    with temporary(RunLayout(out_dir).run_file) as tmp:
+        writer = RunFile(tmp, config, sim.dt, extra_attrs={
+            "parent_run": os.path.relpath(run_dir, out_dir), "parent_checkpoint": str(entry["checkpoint"]),
+            "fork_slip": slip, "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
+            "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
+            "end_time": ck.time + duration}, threads=sim.threads)
+        try:
+            writer.append(sim.observe())
+            status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
+                                          label=f"slip {slip} {name}", checkpoints=False,
+                                          stop_after_slip=stop_after_slip)
+        except PhysicsFailure as err:           # closed 'failed: ...' (load_phase): kept, then raised
+            writer.close(f"failed: {err}", provenance.sim_hash(sim))
+            failure = err
+        except (OSError, RuntimeError) as err:  # e.g. a full disk: closed, then removed by temporary
+            raise stopped_by_os_error(writer, err) from None
+        else:
+            writer.close(status, provenance.sim_hash(sim))
+    if failure is not None:
+        raise failure
     first = recorder.slips[0] if recorder.slips else None
     return BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first)
 
@@ -193,8 +207,9 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
         except OSError as exc:
             if exc.errno != errno.ENOSPC:
                 raise
-            raise NoSpaceError(exc.filename or str(run_dir), f"run `{command}` again: the fork's branches are "
-                               "run again (no --force needed)", need=getattr(exc, "need", None),
+            again = (f"`{command} --force` again: the finished branches it reruns are kept until replaced" if force
+                     else f"`{command}` again: the fork's branches are run again (no --force needed)")
+            raise NoSpaceError(exc.filename or str(run_dir), f"run {again}", need=getattr(exc, "need", None),
                                detail=getattr(exc, "detail", "")) from None
         if r.status == "interrupted":
             raise KeyboardInterrupt(f"interrupted: branch {r.name} of slip {slip} stopped; no pair was classified. "

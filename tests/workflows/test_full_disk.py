@@ -178,6 +178,34 @@ def test_restart_on_a_full_disk(forked, small_fs):
     assert (target / "forks" / f"slip_{slip:03d}" / "pair.json").is_file()
 
 
+def test_rerun_of_a_finished_branch_onto_a_full_disk_keeps_it(forked, small_fs):
+    """A finished branch run again (`gouge restart --force`) onto a disk that fills while the new
+    run.h5 is written (regular snapshots every 10 t0, beyond the branch's size estimate): exit 3,
+    the finished run.h5 kept bit for bit, nothing half-written under its name, no temporary file;
+    the named command, once space is freed, runs the branch again."""
+    from gouge_cli.io.checkpoint import read_checkpoint
+    from gouge_cli.io.outputs import SPACE_MARGIN
+    from gouge_cli.workflows.fork import branch_bytes, branch_config, fork_entry
+
+    run, slip, _ = forked
+    target = _copy(run, small_fs)
+    branch = target / "forks" / f"slip_{slip:03d}" / "drained" / "run.h5"
+    before = digest(branch)
+    dense = ["output.slip_frames=0", "output.snapshot_interval=10"]
+    ck = read_checkpoint(target / fork_entry(target, slip)["checkpoint"], dense)
+    filler = fill(small_fs, int(branch_bytes(branch_config(ck.config, None)) + SPACE_MARGIN) + 100_000)
+    sets = [a for o in dense for a in ("--set", o)]
+    message = full_disk_message(gouge("restart", target, "--slip", slip, *sets, "--force", "--quiet"))
+    assert digest(branch) == before and readable(branch) == "finished"
+    assert {p.name for p in branch.parent.iterdir()} <= {".gouge.lock", "run.h5"}
+    assert not temp_files(small_fs) and readable(target / "run.h5") == "finished"
+    assert "--force" in advised(message)
+    filler.unlink()
+    done = gouge(*advised(message), "--quiet")
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert readable(branch) == "finished" and digest(branch) != before and not temp_files(small_fs)
+
+
 def test_export_on_a_full_disk(forked, small_fs):
     run, _, _ = forked
     target = _copy(run, small_fs)

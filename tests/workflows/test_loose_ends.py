@@ -103,7 +103,8 @@ def test_full_disk_in_restart_names_the_command_that_continues(loaded, monkeypat
     assert "no space left on device" in text and f"gouge restart {run_dir} --slip {slip} --perm 0.001" in text
     assert "no --force needed" in text and "gouge resume" not in text
     assert branch_status(fork / "drained") == "finished"
-    assert branch_status(fork / "perm_1e-03").startswith("failed: No space left on device")
+    assert branch_status(fork / "perm_1e-03") == "missing"      # nothing half-written under run.h5
+    assert not [p for p in (fork / "perm_1e-03").iterdir() if ".tmp" in p.name]
     assert not (fork / "pair.json").exists()
     monkeypatch.undo()
     again = _restart(run_dir, slip)           # the named command, no --force
