@@ -132,6 +132,17 @@ class RunLayout:
     def figures(self) -> Path:
         return self.root / FIGURES
 
+    def fork_branch(self) -> tuple[Path, int, float | None] | None:
+        """(parent run dir, slip, kappa_c or None for drained) when this directory is a fork
+        branch, RUN/forks/slip_NNN/drained or perm_K, read off its place in the layout; else None."""
+        fork = ForkLayout(self.root.parent)
+        if fork.root.parent.name != FORKS or fork.slip < 0:
+            return None
+        if self.root.name == DRAINED:
+            return fork.root.parent.parent, fork.slip, None
+        perm = branch_perm(self.root) if self.root.name.startswith(_PERM) else math.inf
+        return (fork.root.parent.parent, fork.slip, perm) if math.isfinite(perm) else None
+
     def fork(self, slip: int) -> ForkLayout:
         return ForkLayout(self.forks / slip_name(slip))
 

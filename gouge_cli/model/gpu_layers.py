@@ -27,7 +27,7 @@ PAIR_SLOTS = ("index", "shear", "rev_slot", "new_index", "new_shear", "pair_fx",
 RECORDS = ("wall", "clock", "counters")
 THREADS = 256       # threads per layer's block on a GPU
 SIM_THREADS = 4     # under numba-cuda's simulator (each simulated thread is a Python thread)
-PARALLEL = False    # the rebuild's bookkeeping on the whole block (kernels.gpu.parallel) by default
+PARALLEL = True     # the rebuild's bookkeeping on the whole block (kernels.gpu.parallel): 1.9x at B = 1 (H200)
 
 
 class Layers:

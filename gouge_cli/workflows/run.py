@@ -15,7 +15,7 @@ from ..io.checkpoint import read_checkpoint, remove_stale_temps
 from ..config import Config, dump_config, load_config
 from ..errors import ConfigError, DamagedFileError, hdf5_os_error
 from ..kernels import layout as L
-from ..io.layout import DRAINED, RunLayout, branch_perm
+from ..io.layout import RunLayout
 from ..io.runfile import RunFile
 from ..io.verify import continued_problems
 from ..model.params import choose_threads
@@ -183,16 +183,12 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
 
 def _refuse_branch(run_dir: Path) -> None:
     """RunDirError naming the `gouge restart` that finishes a fork branch (branches are run again,
-    not resumed: they keep no checkpoints)."""
-    try:
-        with open_run_file(RunLayout(run_dir).run_file) as h5:
-            slip, branch, parent = (h5.attrs.get(k) for k in ("fork_slip", "branch", "parent_run"))
-    except (OSError, RuntimeError):
+    not resumed: they keep no checkpoints, and an interrupted one may have no run.h5 yet)."""
+    branch = RunLayout(run_dir.resolve()).fork_branch()
+    if branch is None:
         return
-    if slip is None or parent is None:
-        return
-    perm = branch_perm(str(branch)) if str(branch) != DRAINED else None
-    command = restart_command((run_dir / str(parent)).resolve(), int(slip), [perm] if perm is not None else [])
+    parent, slip, perm = branch
+    command = restart_command(parent, slip, [perm] if perm is not None else [])
     raise RunDirError(f"{run_dir} is a fork branch, which is run again rather than resumed: run `{command}` "
                       "(it runs the fork's unfinished branches; no --force needed)")
 

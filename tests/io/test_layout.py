@@ -74,3 +74,16 @@ def test_branches_found(tmp_path):
     assert [branch_perm(p) for p in wet] == [1e-5, 1e-3]
     assert RunLayout(tmp_path).fork_dirs() == [fork.root]
     assert len(RunLayout(tmp_path).branch_run_files()) == 3
+
+
+def test_a_branch_is_known_by_its_place_in_the_layout(tmp_path):
+    """RunLayout.fork_branch reads (parent run, slip, kappa_c) off RUN/forks/slip_NNN/<branch>,
+    with or without a run file (an interrupted branch may have none yet)."""
+    from gouge_cli.io.layout import RunLayout
+
+    fork = RunLayout(tmp_path / "run").fork(7)
+    assert fork.branch(None).fork_branch() == (tmp_path / "run", 7, None)
+    assert fork.branch(3e-6).fork_branch() == (tmp_path / "run", 7, 3e-6)
+    assert RunLayout(tmp_path / "run").fork_branch() is None
+    assert RunLayout(tmp_path / "run" / "forks" / "slip_x" / "drained").fork_branch() is None
+    assert RunLayout(fork.root / "notes").fork_branch() is None

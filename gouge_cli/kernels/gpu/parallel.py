@@ -36,6 +36,38 @@ if config.ENABLE_CUDASIM:
     def clock64():
         """[ns] host clock (the simulator has no cycle counter)."""
         return time.perf_counter_ns()
+
+    def _shared_array_once():
+        """numba-cuda's simulator makes a block's shared array on the first thread to ask, with no
+        lock: two threads asking at once get two arrays, and the block no longer shares it (seen
+        as an intermittent lockstep failure). The same allocation, keyed as the simulator keys
+        it (the caller's file and line), under a lock."""
+        import sys
+        import threading
+        import traceback
+
+        from numba.cuda.simulator import kernelapi
+
+        lock = threading.Lock()
+        original = kernelapi.FakeCUDAShared.array
+
+        def array(self, shape, dtype, alignment=None):
+            if shape == 0 or alignment is not None:
+                return original(self, shape, dtype, alignment)
+            dtype = numpy_support.as_dtype(dtype) if isinstance(dtype, types.Type) else dtype
+            caller = tuple(traceback.extract_stack(sys._getframe())[-2][0:2])
+            with lock:
+                if caller not in self._allocations:
+                    self._allocations[caller] = np.empty(shape, dtype)
+                return self._allocations[caller]
+
+        kernelapi.FakeCUDAShared.array = array
+
+    import numpy as np
+    from numba.core import types
+    from numba.np import numpy_support
+
+    _shared_array_once()
 else:
     from llvmlite import ir
     from numba.cuda import types as _types
