@@ -35,6 +35,7 @@ from gouge_cli.studies import gpu_check
 from gouge_cli.studies.bench import bench_config, prepare
 
 OUT = Path(sys.argv[1])
+OUT.mkdir(parents=True, exist_ok=True)
 QUICK = "--quick" in sys.argv
 # under numba-cuda's simulator (NUMBA_ENABLE_CUDASIM=1: the rehearsal, every stage at toy size)
 SIM = bool(numba.config.ENABLE_CUDASIM)
@@ -77,6 +78,20 @@ def _device():
             "compute_capability": getattr(d, "compute_capability", None),
             "sms": getattr(d, "MULTIPROCESSOR_COUNT", None), "clock_khz": getattr(d, "CLOCK_RATE", None),
             "numba": numba.__version__, "cpu_threads": numba.config.NUMBA_NUM_THREADS}
+
+
+@stage("law_probe")
+def _law_probe():
+    """The contact law alone, GPU against CPU, bit for bit (where do the bits part, if they do)."""
+    return gpu_check.law_probe(64 if SIM else 4096)
+
+
+@stage("lockstep_one_thread")
+def _lockstep_one_thread():
+    """The lockstep with one thread per block (no thread can race another)."""
+    sim = gpu_check.scene(*LOCK_SCENE, seed=2, kick=0.02)
+    rows = gpu_check.lockstep(sim, (1, 1, 8), threads=1, parallel=False)
+    return {"bitwise": all(not r["diff"] for r in rows), "rows": rows}
 
 
 @stage("lockstep300")

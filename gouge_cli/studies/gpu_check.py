@@ -136,3 +136,42 @@ def provenance_hash(state: State) -> str:
     from ..io.provenance import state_hash
 
     return state_hash(state.arrays())
+
+
+def law_probe(n: int = 4096, seed: int = 1, params: np.ndarray | None = None) -> dict:
+    """The contact law and pair constants (kernels.contact) on the GPU, one thread per pair, for n
+    random touching pairs, against the CPU kernels' results: per output, how many pairs differ
+    in any bit, and the first such pair's inputs (where the GPU's arithmetic departs from the
+    CPU's, if it does). params: a scene's params (default: the demo scene's)."""
+    from numba import cuda
+
+    from ..kernels.contact import hertz_mindlin, pair_constants
+    from ..kernels.gpu.device import probe_law
+
+    if params is None:
+        params = Simulation(build_config({"packing": {"n_grains": 40, "width": 6}})).params
+    rng = np.random.default_rng(seed)
+    ri, rj = rng.uniform(0.35, 0.65, n), rng.uniform(0.35, 0.65, n)
+    angle = rng.uniform(0.0, 2.0 * np.pi, n)
+    dist = (ri + rj) * (1.0 - rng.uniform(0.0, 0.02, n))
+    inp = np.stack([ri, rj, np.pi * ri ** 2, np.pi * rj ** 2, dist * np.cos(angle), dist * np.sin(angle),
+                    rng.normal(0, 1e-3, n), rng.normal(0, 1e-3, n), rng.normal(0, 1e-2, n), rng.normal(0, 1e-2, n),
+                    rng.normal(0, 1e-4, n)], axis=1)
+    consts = np.array([params[L.DT], params[L.C_NORMAL], params[L.C_TANGENTIAL], params[L.DAMPING],
+                       params[L.FRICTION]])
+
+    out = cuda.device_array((n, 9))
+    probe_law[(n + 127) // 128, 128](cuda.to_device(inp), cuda.to_device(consts), out)
+    gpu = out.copy_to_host()
+    cpu = np.empty_like(gpu)
+    for k in range(n):
+        a = inp[k]
+        r_ij, m_ij = pair_constants(a[0], a[1], a[2], a[3])
+        cpu[k, :2] = r_ij, m_ij
+        cpu[k, 2:] = hertz_mindlin(a[4], a[5], a[6], a[7], a[8], a[9], a[0], a[1], r_ij, m_ij, a[10], *consts)
+    names = ("r_ij", "m_ij", "fx", "fz", "torque_i", "torque_j", "shear", "overlap", "normal_force")
+    differ = gpu.view(np.int64) != cpu.view(np.int64)
+    first = int(np.argmax(differ.any(axis=1))) if differ.any() else None
+    return {"pairs": n, "touching": int((cpu[:, 8] > 0.0).sum()), "differ": {name: int(differ[:, c].sum()) for c, name in enumerate(names)},
+            "first": None if first is None else {"inputs": inp[first].tolist(), "gpu": gpu[first].tolist(),
+                                                  "cpu": cpu[first].tolist()}}

@@ -3,7 +3,7 @@ test_gpu_sim.py in a fresh process: NUMBA_ENABLE_CUDASIM must be set before numb
 imported, and only in this process). GOUGE_GPU_DEVICE=1: on the real device instead
 (scripts/gpu_check.sh).
 
-    python tests/gpu/sim_check.py lockstep|parallel|ensemble|planted|planted_parallel [seed]
+    python tests/gpu/sim_check.py lockstep|parallel|ensemble|law|planted|planted_parallel [seed]
 
 parallel: the lockstep comparison with the rebuild's bookkeeping on the whole block
 (kernels.gpu.parallel) and the per-phase timers on; planted_parallel: the same with the
@@ -91,6 +91,8 @@ def main(mode: str, seed: int):
         sim.start_loading()                          # spring and drive on, no background damping
         rows += gpu_check.lockstep(sim, (50, 80), THREADS, parallel=par, timed=par)
         return {"rows": rows, "loading": sim.phase == L.LOADING}
+    if mode == "law":
+        return gpu_check.law_probe(200, seed)
     if mode == "ensemble":
         sims = [gpu_check.scene(30, 5.0, seed + b, kick=0.03 * (b + 1), compact=False) for b in range(3)]
         sims[2].start_loading()                      # a layer with other parameters (drive on)

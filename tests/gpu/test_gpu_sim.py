@@ -85,6 +85,15 @@ def test_unstable_block_sort_is_caught():
     assert any(r["diff"] for r in rows)
 
 
+def test_law_probe_compares_every_output_bit():
+    """The probe that finds where GPU arithmetic parts from the CPU's (studies.gpu_check.law_probe):
+    under the simulator the law is the CPU's Python, so every output of 200 random touching pairs
+    agrees bit for bit, and the probe saw touching pairs (non-zero normal forces)."""
+    probe = _run("law")
+    assert probe["pairs"] == 200 and probe["differ"] == dict.fromkeys(probe["differ"], 0)
+    assert probe["first"] is None and probe["touching"] > 150
+
+
 def test_ensemble_equals_single_layers():
     layers = _run("ensemble")["layers"]
     assert layers == [{}, {}, {}]

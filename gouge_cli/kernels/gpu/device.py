@@ -89,3 +89,19 @@ d_sum_range = device(_sum_range)
 d_move_one = device(_move_one, _half_kick=d_half_kick, minimum_image=d_minimum_image)
 d_reverse_list = device(reverse_list, bucket_order=d_bucket_order)
 d_spatial_order = device(spatial_order, strip_width=d_strip_width, bucket_order=d_bucket_order)
+
+
+@cuda.jit
+def probe_law(inp, consts, out):
+    """The pair constants and contact law of pair k = inp[k] (r_i, r_j, m_i, m_j, dx, dz, dvx, dvz,
+    spin_i, spin_j, shear) with consts (dt, c_normal, c_tangential, damping, friction): out[k] =
+    (R_ij, m_ij, then hertz_mindlin's 7 results); one thread per pair (studies.gpu_check.law_probe)."""
+    k = cuda.grid(1)
+    if k < inp.shape[0]:
+        r_ij, m_ij = d_pair_constants(inp[k, 0], inp[k, 1], inp[k, 2], inp[k, 3])
+        res = d_hertz_mindlin(inp[k, 4], inp[k, 5], inp[k, 6], inp[k, 7], inp[k, 8], inp[k, 9], inp[k, 0], inp[k, 1],
+                              r_ij, m_ij, inp[k, 10], consts[0], consts[1], consts[2], consts[3], consts[4])
+        out[k, 0] = r_ij
+        out[k, 1] = m_ij
+        for c in range(7):
+            out[k, 2 + c] = res[c]
