@@ -146,7 +146,8 @@ class NumericsConfig(_Section):
     device: Literal["cpu", "gpu"] = Field(
         "cpu",
         description="where the dry steps run: cpu (numba threads) or gpu (numba-cuda, one CUDA device; pip install "
-                    "'gouge[gpu]'), same bits; steps with a pore fluid and forks run on the cpu")
+                    "'gouge[gpu]'); the GPU's own runs repeat bit for bit, but its trajectory parts from the cpu's "
+                    "at round-off (docs: performance); steps with a pore fluid and forks run on the cpu")
     sort_every: Optional[int] = Field(
         None, ge=0, le=1_000_000,
         description="re-number the grains by position every this many neighbour-list rebuilds, so that "
