@@ -85,6 +85,23 @@ def bucket_order(key, nbins, count, order):
 
 
 @njit(inline="always", cache=NUMBA_CACHE)
+def cell_grid(rmax, zmin, zmax, width, skin, capacity):
+    """The list build's cell grid over grains of largest radius rmax [d] between heights zmin and
+    zmax [d]: (cell height, cell width, ncx, ncz), cells at least 2 rmax + skin [d], made 1.25 times
+    larger until ncx * ncz < capacity."""
+    cell = 2.0 * rmax + skin
+    while True:
+        ncx = int(width / cell)
+        if ncx < 3:
+            ncx = 1
+        ncz = int((zmax - zmin) / cell) + 1
+        if ncx * ncz < capacity:
+            break
+        cell *= 1.25
+    return cell, width / ncx, ncx, ncz
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
 def bin_cells(x, z, radius, width, skin, cell_of, order, count):
     """The cell grid of a list build: cells at least 2 R_max + skin [d] wide (larger if count,
     len > cells, is too short), cell_of (N,) each grain's cell, order/count the grains by cell
@@ -97,16 +114,7 @@ def bin_cells(x, z, radius, width, skin, cell_of, order, count):
         rmax = max(rmax, radius[i])
         zmin = min(zmin, z[i])
         zmax = max(zmax, z[i])
-    cell = 2.0 * rmax + skin
-    while True:
-        ncx = int(width / cell)
-        if ncx < 3:
-            ncx = 1
-        ncz = int((zmax - zmin) / cell) + 1
-        if ncx * ncz < count.shape[0]:
-            break
-        cell *= 1.25
-    cw = width / ncx
+    cell, cw, ncx, ncz = cell_grid(rmax, zmin, zmax, width, skin, count.shape[0])
     for i in range(n):
         cx = min(int(x[i] / cw), ncx - 1)
         cz = min(int((z[i] - zmin) / cell), ncz - 1)

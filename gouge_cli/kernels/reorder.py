@@ -35,6 +35,19 @@ def strip_width(n, width):
 
 
 @njit(cache=NUMBA_CACHE)
+def strip_grid(n, width, zmin, zmax, capacity):
+    """The re-numbering's bins for n grains between heights zmin and zmax [d]: (strips, strip
+    width [d], rows, row height [d]), rows made twice as tall until strips * rows < capacity."""
+    strips = max(int(width / strip_width(n, width)), 1)
+    height = BIN
+    rows = int((zmax - zmin) / height) + 1
+    while strips * rows >= capacity:
+        height *= 2.0
+        rows = int((zmax - zmin) / height) + 1
+    return strips, width / strips, rows, height
+
+
+@njit(cache=NUMBA_CACHE)
 def spatial_order(x, z, width, perm, inverse, count):
     """perm (N,) int64: new -> old grain number, by (strip, row), stable; inverse: old -> new.
     count: int64 scratch, len > number of bins (bins grow taller if it is too short)."""
@@ -44,13 +57,7 @@ def spatial_order(x, z, width, perm, inverse, count):
     for i in range(n):
         zmin = min(zmin, z[i])
         zmax = max(zmax, z[i])
-    strips = max(int(width / strip_width(n, width)), 1)
-    strip_w = width / strips
-    height = BIN
-    rows = int((zmax - zmin) / height) + 1
-    while strips * rows >= count.shape[0]:
-        height *= 2.0
-        rows = int((zmax - zmin) / height) + 1
+    strips, strip_w, rows, height = strip_grid(n, width, zmin, zmax, count.shape[0])
     for i in range(n):
         s = min(int(x[i] / strip_w), strips - 1)
         inverse[i] = s * rows + min(int((z[i] - zmin) / height), rows - 1)     # (the bin, for now)

@@ -110,7 +110,9 @@ def check_low_permeability(sim, s):
 def check_high_velocity(sim, s):
     v_load = sim.config.loading.velocity
     quarter = s["wall_vx"].size // 4
-    assert s["wall_vx"][quarter:].min() > 0.25 * v_load           # never sticks: steady sliding
+    # never sticks: steady sliding (a stick phase holds the wall near 0; the slowest dip of a
+    # sliding wall is packing-dependent: 0.23 V_s at seed offset 33, above 0.25 V_s at 0 and 17)
+    assert s["wall_vx"][quarter:].min() > 0.1 * v_load
     tau = second_half(s, "tau_over_sigma")
     # sliding friction: positive but for brief dips, mean in the range of sheared gouge (the dips
     # follow the scene's rearrangements: minimum 0.08-0.15 over seeds 3 and 10, -0.03 for seed 7,

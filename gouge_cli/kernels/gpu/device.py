@@ -14,8 +14,8 @@ import types
 from numba import cuda
 
 from ..contact import hertz_mindlin, pair_constants
-from ..neighbors import _carry_history, _scan_row, bucket_order, minimum_image
-from ..reorder import permute, renumber_list, spatial_order, strip_width
+from ..neighbors import _carry_history, _scan_row, bucket_order, cell_grid, minimum_image
+from ..reorder import permute, renumber_list, spatial_order, strip_grid, strip_width
 from ..step import _half_kick, _move_one, _sum_range, _set_wall_grain_velocity, reverse_list, wall_force, wall_kick
 
 
@@ -81,6 +81,8 @@ d_carry_history = device(_carry_history)
 d_permute = device(permute)
 d_renumber_list = device(renumber_list)
 d_strip_width = device(strip_width)
+d_cell_grid = device(cell_grid)
+d_strip_grid = device(strip_grid, strip_width=d_strip_width)
 d_wall_force = device(wall_force)
 d_wall_kick = device(wall_kick)
 d_set_wall_grain_velocity = device(_set_wall_grain_velocity)
@@ -88,7 +90,7 @@ d_sum_range = device(_sum_range)
 # callers
 d_move_one = device(_move_one, _half_kick=d_half_kick, minimum_image=d_minimum_image)
 d_reverse_list = device(reverse_list, bucket_order=d_bucket_order)
-d_spatial_order = device(spatial_order, strip_width=d_strip_width, bucket_order=d_bucket_order)
+d_spatial_order = device(spatial_order, strip_grid=d_strip_grid, bucket_order=d_bucket_order)
 
 
 @cuda.jit

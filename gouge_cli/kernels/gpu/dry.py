@@ -36,14 +36,14 @@ from ..layout import (BG_DAMPING, C_NORMAL, C_TANGENTIAL, DAMPING, DT, FRICTION,
                       WIDTH, Grains, Lists)
 from ..neighbors import bin_cells
 from ..step import open_step, renumber
-from .device import (d_bucket_order, d_carry_history, d_half_kick, d_hertz_mindlin, d_minimum_image, d_move_one,
-                     d_pair_constants, d_permute, d_renumber_list, d_reverse_list, d_scan_row, d_set_wall_grain_velocity,
-                     d_spatial_order, d_sum_range, d_wall_force, d_wall_kick, device)
+from .device import (d_bucket_order, d_carry_history, d_cell_grid, d_half_kick, d_hertz_mindlin, d_minimum_image,
+                     d_move_one, d_pair_constants, d_permute, d_renumber_list, d_reverse_list, d_scan_row,
+                     d_set_wall_grain_velocity, d_spatial_order, d_sum_range, d_wall_force, d_wall_kick, device)
 from .parallel import SHARED_FLOATS, SHARED_INTS, clock64, p_bin_cells, p_renumber, p_reverse_list, p_scan
 
 d_open_step = device(open_step, wall_kick=d_wall_kick, _set_wall_grain_velocity=d_set_wall_grain_velocity)
 d_renumber = device(renumber, spatial_order=d_spatial_order, renumber_list=d_renumber_list, permute=d_permute)
-d_bin_cells = device(bin_cells, bucket_order=d_bucket_order)
+d_bin_cells = device(bin_cells, bucket_order=d_bucket_order, cell_grid=d_cell_grid)
 
 # layout[L_SCRATCH:] of each layer (the CPU build's per-block counters) carries the build's
 # cell grid and pair count from thread 0 to the block

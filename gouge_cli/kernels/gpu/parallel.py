@@ -25,8 +25,7 @@ import time
 from numba import config, cuda
 
 from ..layout import L_BUILT, TOP
-from ..reorder import BIN
-from .device import d_strip_width
+from .device import d_cell_grid, d_strip_grid
 
 MAX_THREADS = 1024      # threads per block at most (the shared scratch is sized for it)
 SHARED_INTS = 1025      # (MAX_THREADS + 1,) int64 block scratch `sh`
@@ -84,6 +83,21 @@ else:
 
 
 @cuda.jit(device=True)
+def _chunk_offsets(t, nt, sh):
+    """sh[:nt] (each thread's chunk total) -> the exclusive prefix sums, by thread 0 between two
+    barriers; returns this thread's offset."""
+    cuda.syncthreads()
+    if t == 0:
+        run = 0
+        for u in range(nt):
+            v = sh[u]
+            sh[u] = run
+            run += v
+    cuda.syncthreads()
+    return sh[t]
+
+
+@cuda.jit(device=True)
 def p_scan(t, nt, a, lo, hi, sh):
     """a[lo:hi] = its inclusive prefix sums (integers), by the block: each thread sums its
     contiguous chunk, thread 0 offsets the nt chunk totals, each thread then runs its chunk."""
@@ -94,15 +108,7 @@ def p_scan(t, nt, a, lo, hi, sh):
     for i in range(c0, c1):
         s += a[i]
     sh[t] = s
-    cuda.syncthreads()
-    if t == 0:
-        run = 0
-        for u in range(nt):
-            v = sh[u]
-            sh[u] = run
-            run += v
-    cuda.syncthreads()
-    run = sh[t]
+    run = _chunk_offsets(t, nt, sh)
     for i in range(c0, c1):
         run += a[i]
         a[i] = run
@@ -198,16 +204,7 @@ def p_bin_cells(t, nt, x, z, radius, width, skin, cell_of, order, count, sh, shf
     """kernels.neighbors.bin_cells by the block; (ncx, ncz) known to every thread."""
     n = x.shape[0]
     rmax, zmin, zmax = _extent(t, nt, z, radius, shf)
-    cell = 2.0 * rmax + skin
-    while True:
-        ncx = int(width / cell)
-        if ncx < 3:
-            ncx = 1
-        ncz = int((zmax - zmin) / cell) + 1
-        if ncx * ncz < count.shape[0]:
-            break
-        cell *= 1.25
-    cw = width / ncx
+    cell, cw, ncx, ncz = d_cell_grid(rmax, zmin, zmax, width, skin, count.shape[0])
     for i in range(t, n, nt):
         cx = min(int(x[i] / cw), ncx - 1)
         cz = min(int((z[i] - zmin) / cell), ncz - 1)
@@ -222,13 +219,7 @@ def p_spatial_order(t, nt, x, z, width, perm, inverse, count, sh, shf):
     """kernels.reorder.spatial_order by the block."""
     n = x.shape[0]
     _, zmin, zmax = _extent(t, nt, z, z[:0], shf)
-    strips = max(int(width / d_strip_width(n, width)), 1)
-    strip_w = width / strips
-    height = BIN
-    rows = int((zmax - zmin) / height) + 1
-    while strips * rows >= count.shape[0]:
-        height *= 2.0
-        rows = int((zmax - zmin) / height) + 1
+    strips, strip_w, rows, height = d_strip_grid(n, width, zmin, zmax, count.shape[0])
     for i in range(t, n, nt):
         s = min(int(x[i] / strip_w), strips - 1)
         inverse[i] = s * rows + min(int((z[i] - zmin) / height), rows - 1)
@@ -301,15 +292,7 @@ def p_top_list(t, nt, body, top, sh):
         if body[i] == TOP:
             m += 1
     sh[t] = m
-    cuda.syncthreads()
-    if t == 0:
-        run = 0
-        for u in range(nt):
-            v = sh[u]
-            sh[u] = run
-            run += v
-    cuda.syncthreads()
-    m = sh[t]
+    m = _chunk_offsets(t, nt, sh)
     for i in range(c0, c1):
         if body[i] == TOP:
             top[m] = i
