@@ -82,18 +82,8 @@ class _SeriesArray(BackendArray):
         return np.asarray(read_series_items(self.h5_path, self.name, key), dtype=np.float64)
 
 
-def _unit(unit: str) -> str:
-    """A run file's unit as pint spells it (:func:`gouge_cli.units.pint_unit`: '-' is '1')."""
-    return pint_unit(unit)
-
-
 def _attrs(unit: str, description: str) -> dict:
-    return {"units": _unit(unit), "long_name": description, "description": description}
-
-
-def _si_of(unit: str, scales: dict, V_s: float, sigma: float, m_b: float = _NAN) -> tuple[float, str] | None:
-    """(factor, SI unit) of ``unit`` for a run's scales (:func:`gouge_cli.units.si_of`)."""
-    return si_of(unit, unit_sizes(scales, V_s, sigma, m_b))
+    return {"units": pint_unit(unit), "long_name": description, "description": description}
 
 
 def to_si(obj, scales: dict, V_s: float = _NAN, sigma: float = _NAN, m_b: float = _NAN):
@@ -102,8 +92,10 @@ def to_si(obj, scales: dict, V_s: float = _NAN, sigma: float = _NAN, m_b: float 
     units made of the scales (d, E, t0, v0, rho_s; V_s, sigma and m_b of the run) are multiplied by their
     SI size and their unit becomes the SI one ('E d^3' -> 'Pa * m**3'); the rest is left as it is.
     ``scales``: :attr:`Run.scales`. :meth:`Run.to_si` and :meth:`Pair.to_si` fill in the run's."""
+    sizes = unit_sizes(scales, V_s, sigma, m_b)
+
     def convert(unit, kind: str):
-        si = _si_of(str(unit), scales, V_s, sigma, m_b) if unit is not None and kind in "iuf" else None
+        si = si_of(str(unit), sizes) if unit is not None and kind in "iuf" else None
         return None if si is None or si[1] == "1" else si
 
     if isinstance(obj, pd.DataFrame):
@@ -316,7 +308,7 @@ class Run:
         columns = list(CATALOG_COLUMNS) + ["fit_amplitude", "fit_half_period", "fit_r2", "fit_ok", "fit_verdict",
                                            "fit_reason", "m_eff", "m_eff_over_m_b", "checkpoint_path"]
         df = pd.DataFrame(rows, columns=columns).set_index("number")
-        df.attrs["units"] = {c: _unit(SLIP_UNITS.get(c, "-")) for c in df.columns}
+        df.attrs["units"] = {c: pint_unit(SLIP_UNITS.get(c, "-")) for c in df.columns}
         return df
 
     # snapshots ------------------------------------------------------------
@@ -599,7 +591,7 @@ class Pair:
             fields[key.replace("_time", "_clock")] = fields[key]
             fields[key] = fields[key] - self.time_offset
         event = pd.Series(fields, name=self.branch)
-        event.attrs["units"] = {k: _unit(SLIP_UNITS.get(k, "-")) for k in fields}
+        event.attrs["units"] = {k: pint_unit(SLIP_UNITS.get(k, "-")) for k in fields}
         return event
 
     @property
@@ -659,7 +651,7 @@ class Pair:
 
 def _pair_frame(rows: list[dict], extra: tuple = ()) -> pd.DataFrame:
     df = pd.DataFrame(rows, columns=list(extra) + list(PAIR_COLUMNS))
-    df.attrs["units"] = {c: _unit(ANALYSIS_UNITS.get(c, "-")) for c in df.columns}
+    df.attrs["units"] = {c: pint_unit(ANALYSIS_UNITS.get(c, "-")) for c in df.columns}
     df.attrs["units"].update(permeability="d^2", drained_onset="t0", drained_end="t0", undrained_onset="t0",
                              undrained_end="t0", k="E/d", V_s="v0", sigma="E")
     return df

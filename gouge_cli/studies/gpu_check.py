@@ -115,6 +115,7 @@ def throughput(state: State, params: np.ndarray, layers: int, steps: int, thread
 
     cuda.synchronize()
     before = ens.phase_cycles()
+    rebuilds = int(ens.d["counters"].copy_to_host()[0, L.K_REBUILDS])
     t0 = time.perf_counter()
     ens.run(steps, launch_steps)
     cuda.synchronize()
@@ -123,7 +124,7 @@ def throughput(state: State, params: np.ndarray, layers: int, steps: int, thread
     ens.download()
     out = {"layers": layers, "grains": state.n, "steps": steps, "launch_steps": launch_steps, "threads": threads,
            "parallel": ens.parallel, "seconds": seconds, "grain_steps_per_s": layers * state.n * steps / seconds,
-           "rebuilds": int(copies[0].counters[L.K_REBUILDS]),
+           "rebuilds": int(copies[0].counters[L.K_REBUILDS]) - rebuilds,      # layer 0's, in the timed steps
            "hashes_equal": len({provenance_hash(c) for c in copies}) == 1}
     if timed:
         total = max(sum(cycles.values()), 1)
@@ -172,6 +173,7 @@ def law_probe(n: int = 4096, seed: int = 1, params: np.ndarray | None = None) ->
     names = ("r_ij", "m_ij", "fx", "fz", "torque_i", "torque_j", "shear", "overlap", "normal_force")
     differ = gpu.view(np.int64) != cpu.view(np.int64)
     first = int(np.argmax(differ.any(axis=1))) if differ.any() else None
-    return {"pairs": n, "touching": int((cpu[:, 8] > 0.0).sum()), "differ": {name: int(differ[:, c].sum()) for c, name in enumerate(names)},
+    return {"pairs": n, "touching": int((cpu[:, 8] > 0.0).sum()),
+            "differ": {name: int(differ[:, c].sum()) for c, name in enumerate(names)},
             "first": None if first is None else {"inputs": inp[first].tolist(), "gpu": gpu[first].tolist(),
                                                   "cpu": cpu[first].tolist()}}

@@ -30,6 +30,7 @@ from gouge_cli.analysis.catalog import CATALOG_COLUMNS  # noqa: E402
 from gouge_cli.analysis.forkpairs import PAIR_COLUMNS  # noqa: E402
 from gouge_cli.cli.main import app  # noqa: E402
 from gouge_cli.errors import EXIT_BAD_INPUT, AnalysisError, NotARunError  # noqa: E402
+from gouge_cli.units import pint_unit, si_of, unit_sizes  # noqa: E402
 from slipping import slipping_run  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -90,7 +91,7 @@ def test_series_equals_the_file_with_units_and_lazy(forked):
         assert set(ds.data_vars) == set(g) - {"time"}
         for name, var in ds.data_vars.items():
             assert not var.variable._in_memory, f"{name} was read on opening"
-            assert var.attrs["units"] == api._unit(g[name].attrs["unit"])          # '-' as pint's '1'
+            assert var.attrs["units"] == pint_unit(g[name].attrs["unit"])          # '-' as pint's '1'
             assert var.attrs["description"] == var.attrs["long_name"] == g[name].attrs["description"]
             assert var.attrs["description"]
             np.testing.assert_array_equal(var.values, g[name][...])
@@ -129,9 +130,9 @@ def test_si_view_of_series_and_slips(forked):
     np.testing.assert_allclose(series["time"], run.series["time_s"], rtol=1e-12)
     one = run.to_si(run.series["tau_over_sigma"])
     assert one.attrs["units"] == "1" and one.name == "tau_over_sigma"
-    factor, unit = api._si_of("E d^3", run.scales, 1.0, 1.0)
+    factor, unit = si_of("E d^3", unit_sizes(run.scales, 1.0, 1.0))
     assert unit == "Pa * m**3" and factor == pytest.approx(run.scales["stress_pa"] * run.scales["length_m"] ** 3)
-    assert api._si_of("1/t0", run.scales, 1.0, 1.0)[1] == "1 / s" and api._si_of("MPa", run.scales, 1, 1) is None
+    assert si_of("1/t0", unit_sizes(run.scales, 1.0, 1.0))[1] == "1 / s" and si_of("MPa", unit_sizes(run.scales)) is None
 
 
 def _written_units(out: Path, tmp_path: Path) -> dict[str, str]:
@@ -186,7 +187,7 @@ def test_pint_reads_every_unit_written_with_the_runs_definitions(forked, tmp_pat
     """With pint (optional): the run's registry parses every unit string written, and a quantity
     converts to SI as to_si does."""
     pint = pytest.importorskip("pint")
-    from gouge_cli.units import pint_definitions, unit_sizes
+    from gouge_cli.units import pint_definitions
 
     run = gouge.open_run(forked[0])
     registry = run.pint_registry()
@@ -194,7 +195,7 @@ def test_pint_reads_every_unit_written_with_the_runs_definitions(forked, tmp_pat
         for part in unit.split(","):
             assert isinstance(registry.parse_units(part.strip()), pint.Unit), where
     for unit in ("E d^3", "1/t0", "rho_s d^2", "V_s", "sigma", "m_b", "d^2"):
-        factor, si = api._si_of(unit, run.scales, run.info.V_s, run.info.sigma, run.info.m_b)
+        factor, si = si_of(unit, unit_sizes(run.scales, run.info.V_s, run.info.sigma, run.info.m_b))
         assert registry.Quantity(1.0, unit).to(si).magnitude == pytest.approx(factor, rel=1e-12), unit
     assert registry.Quantity(1.0, "d").to("mm").magnitude == pytest.approx(run.scales["length_m"] * 1e3)
     own = pint.UnitRegistry(on_redefinition="ignore")           # the text alone, in a registry of one's own
@@ -294,7 +295,7 @@ def test_snapshots_equal_the_file(forked):
         g = h5["snapshots"][name]
         for key, var in snap.data_vars.items():
             np.testing.assert_array_equal(var.values, g[key][...])
-            assert var.attrs["units"] == api._unit(g[key].attrs["unit"]) and var.attrs["description"]
+            assert var.attrs["units"] == pint_unit(g[key].attrs["unit"]) and var.attrs["description"]
         assert snap.attrs["step"] == g.attrs["step"]
         assert snap.attrs["time"] == pytest.approx(g.attrs["time"] - run.time_offset)
     wet = run.pair(slip, PERM).undrained

@@ -113,6 +113,7 @@ def check_high_velocity(sim, s):
     # never sticks: steady sliding (a stick phase holds the wall near 0; the slowest dip of a
     # sliding wall is packing-dependent: 0.23 V_s at seed offset 33, above 0.25 V_s at 0 and 17)
     assert s["wall_vx"][quarter:].min() > 0.1 * v_load
+    assert abs(second_half(s, "wall_vx").mean() / v_load - 1.0) < 0.1   # and it follows the drive on average
     tau = second_half(s, "tau_over_sigma")
     # sliding friction: positive but for brief dips, mean in the range of sheared gouge (the dips
     # follow the scene's rearrangements: minimum 0.08-0.15 over seeds 3 and 10, -0.03 for seed 7,

@@ -46,8 +46,8 @@ d_renumber = device(renumber, spatial_order=d_spatial_order, renumber_list=d_ren
 d_bin_cells = device(bin_cells, bucket_order=d_bucket_order, cell_grid=d_cell_grid)
 
 # layout[L_SCRATCH:] of each layer (the CPU build's per-block counters) carries the build's
-# cell grid and pair count from thread 0 to the block
-_NCX, _NCZ, _TOTAL = L_SCRATCH, L_SCRATCH + 1, L_SCRATCH + 2
+# cell grid from thread 0 to the block (thread-0 binning)
+_NCX, _NCZ = L_SCRATCH, L_SCRATCH + 1
 
 # per-phase timers (timers[b, phase] in clock64 cycles of layer b's SM, thread 0's view after the
 # phase's barrier; slot N_PHASES holds the last reading)
