@@ -125,18 +125,27 @@ def _smooth_x(field, tmp, taps_x, mx):
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
 def _smooth_z(source, target, bands, mz):
     """target = the band matrix of diagonals bands[mz + d, j] (d = -mz..mz) times source, along z:
-    target[i, j] = sum_d bands[mz + d, j] source[i, j + d] (S_z with bands_z[0], S_z^T with [1])."""
+    target[i, j] = sum_d bands[mz + d, j] source[i, j + d] (S_z with bands_z[0], S_z^T with [1]),
+    summed d = 0, +1, -1, +2, -2, ... per cell. Flat unsigned indices (no negative-index checks:
+    the short column loops then vectorise)."""
     nx, nz = source.shape
-    for i in range(nx):
-        for j in range(nz):
-            target[i, j] = bands[mz, j] * source[i, j]
-        for d in range(1, mz + 1):
-            up = bands[mz + d]
-            down = bands[mz - d]
-            for j in range(nz - d):
-                target[i, j] += up[j] * source[i, j + d]
-            for j in range(d, nz):
-                target[i, j] += down[j] * source[i, j - d]
+    f = source.reshape(source.size)
+    out = target.reshape(target.size)
+    unz = np.uint64(nz)
+    zero = np.uint64(0)
+    centre = bands[mz]
+    for i in range(np.uint64(nx)):
+        base = i * unz
+        for j in range(zero, unz):
+            out[base + j] = centre[j] * f[base + j]
+        for m in range(1, mz + 1):
+            d = np.uint64(m)
+            up = bands[mz + m]
+            down = bands[mz - m]
+            for j in range(zero, unz - d):
+                out[base + j] += up[j] * f[base + j + d]
+            for j in range(d, unz):
+                out[base + j] += down[j] * f[base + j - d]
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -172,22 +181,21 @@ def filter_deposit(s, ux, uz, grad_s_x, grad_s_z, tmp, taps_x, bands_z, mx, mz):
     velocities as S(s u) / S(s) (0 where S(s) = 0). All float64[nx, nz]."""
     if mx == 0 and mz == 0:
         return
-    nx, nz = s.shape
-    for i in range(nx):
-        for j in range(nz):
-            ux[i, j] *= s[i, j]
-            uz[i, j] *= s[i, j]
+    sf, xf, zf = s.reshape(s.size), ux.reshape(ux.size), uz.reshape(uz.size)
+    size = np.uint64(sf.size)
+    for c in range(size):
+        xf[c] *= sf[c]
+        zf[c] *= sf[c]
     apply_filter(s, tmp, taps_x, bands_z, mx, mz)
     apply_filter(ux, tmp, taps_x, bands_z, mx, mz)
     apply_filter(uz, tmp, taps_x, bands_z, mx, mz)
     apply_filter(grad_s_x, tmp, taps_x, bands_z, mx, mz)
     apply_filter(grad_s_z, tmp, taps_x, bands_z, mx, mz)
-    for i in range(nx):
-        for j in range(nz):
-            if s[i, j] > 0.0:
-                inv = 1.0 / s[i, j]
-                ux[i, j] *= inv
-                uz[i, j] *= inv
-            else:
-                ux[i, j] = 0.0
-                uz[i, j] = 0.0
+    for c in range(size):
+        if sf[c] > 0.0:
+            inv = 1.0 / sf[c]
+            xf[c] *= inv
+            zf[c] *= inv
+        else:
+            xf[c] = 0.0
+            zf[c] = 0.0
