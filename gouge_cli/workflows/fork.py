@@ -201,9 +201,13 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     command = restart_command(run_dir, slip, perms, overrides, duration)
     results = []
     for perm in branches:
+        stopped = (f"interrupted: branch {branch_name(perm)} of slip {slip} stopped; no pair was classified. "
+                   f"Run `{command}` again to finish the fork (no --force needed)")
         try:
             r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet, checkpoint=ck,
                            command=command)
+        except KeyboardInterrupt:       # Ctrl-C outside the step loop (set-up, compilation, closing)
+            raise KeyboardInterrupt(stopped) from None
         except OSError as exc:
             if exc.errno != errno.ENOSPC:
                 raise
@@ -212,8 +216,7 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
             raise NoSpaceError(exc.filename or str(run_dir), f"run {again}", need=getattr(exc, "need", None),
                                detail=getattr(exc, "detail", "")) from None
         if r.status == "interrupted":
-            raise KeyboardInterrupt(f"interrupted: branch {r.name} of slip {slip} stopped; no pair was classified. "
-                                    f"Run `{command}` again to finish the fork (no --force needed)")
+            raise KeyboardInterrupt(stopped)
         results.append(r)
     with RunReader(run_dir, allow_running=True) as reader:
         origin = reader.time_offset()
