@@ -8,7 +8,7 @@ from typing import List, Optional
 
 import typer
 
-from ..config import build_config, dump_config, load_config
+from ..config import build_config, dump_config, load_config, parse_overrides
 from .common import fail, guarded, out
 from ..errors import EXIT_INTERRUPTED
 
@@ -48,7 +48,7 @@ def run(
     from ..workflows.run import default_run_dir, run_scene
     from .common import confirm_long
 
-    cfg = load_config(config, set_)
+    cfg = load_config(config, parse_overrides(set_))
     target = out_dir or default_run_dir(cfg)
     result = run_scene(cfg, target, force=force, quiet=quiet, confirm=confirm_long(yes))
     out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s, "
@@ -85,16 +85,13 @@ def restart(
     import json
 
     from ..io.filedoc import json_safe
-    from ..workflows.fork import restart as run_restart
+    from ..workflows.fork import ForkRequest, restart as run_restart
 
     target = _run_dir(run_dir)
     if duration is None and not until_slip_ends:
         fail("--full needs --duration")
-    if duration is not None and not (duration > 0 and duration < float("inf")):
-        fail(f"--duration = {duration:g}: give a positive, finite time [t0]")
-    if main not in ("first", "largest"):
-        fail(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
-    summary = run_restart(target, slip, perm, set_, duration, force=force, main=main, quiet=quiet)
+    request = ForkRequest(target, slip, tuple(perm), parse_overrides(set_), duration, force=force, main=main)
+    summary = run_restart(request, quiet=quiet)
     out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
 
 
@@ -171,8 +168,7 @@ def show_config(
                                           "('-' for stdout), for editors"),
 ):
     """Validate a config and print it fully resolved (dimensionless), or print the defaults."""
-    from ..model.preflight import check_config
-    from ..model.params import choose_threads
+    from ..model.scene import Scene
     from ..model.timestep import stability_bound
 
     if schema is not None or (defaults and config is None and not set_):
@@ -180,9 +176,10 @@ def show_config(
 
         print_config_doc(schema)
         return
-    cfg = build_config({}, set_) if (defaults or config is None) else load_config(config, set_)
+    sets = parse_overrides(set_)
+    cfg = build_config({}, sets) if (defaults or config is None) else load_config(config, sets)
     bound = stability_bound(cfg)
-    pre = check_config(cfg, choose_threads(cfg.numerics.threads, cfg.packing.n_grains))
+    pre = Scene(cfg).preflight
     out.print(dump_config(cfg), highlight=False, end="")
     out.print(f"# time step {pre.dt:.6g} t0 (stability bound {bound.bound:.6g} t0, {bound.mode} mode)",
               highlight=False)

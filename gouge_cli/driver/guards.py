@@ -299,19 +299,3 @@ def check(sim: Scene):
     scan = Scan.of(sim)
     NonFiniteGuard()(sim, scan)
     OverlapGuard()(sim, scan)
-
-
-def guarded_run(sim: Scene, duration: float, interval: float | None = None, compact: bool = True,
-                **limits) -> list[dict]:
-    """Compact (if still compacting and `compact`; the fluid starts with loading), then load for `duration`
-    [t0] with all guards every `interval` [t0] (default output.series_interval); returns the
-    time-series rows (Simulation.measure, shared with the guards) taken at the same cadence:
-    Simulation.run with the callbacks "guards", "series". Raises PhysicsError."""
-    guards = Guards(**limits)
-    if compact and sim.phase == L.COMPACTION:
-        sim.compact(on_chunk=lambda s, elapsed: guards(s))
-    rows = [sim.measure()]
-    interval = sim.config.output.series_interval if interval is None else interval
-    sim.run(duration, [Every.t0(sim, interval, guards, "guards"),
-                       Every.t0(sim, interval, lambda s: rows.append(s.measure()), "series")])
-    return rows

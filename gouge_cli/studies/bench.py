@@ -41,6 +41,7 @@ from ..kernels import layout as L
 from ..kernels import step as K
 from ..kernels.probe import stream_probe
 from ..driver.guards import check
+from ..driver.compaction import compact
 from ..driver.simulation import Simulation
 from ..model.timestep import choose_dt, slip_duration
 
@@ -101,7 +102,7 @@ def prepare(n_grains: int, dt: float, skin: float, cache: Path | None = None) ->
             sim = Simulation(bench_config(n_grains, dt, skin), arrays=arrays)
             return sim, sim.state.arrays()
     sim = Simulation(bench_config(n_grains, dt, skin))
-    sim.compact()
+    compact(sim)
     sim.advance(int(80 * sim.state.width))
     check(sim)
     start = sim.state.arrays()
