@@ -65,6 +65,47 @@ class BenchRow:
     identical_to_1_thread: bool | None = None
 
 
+@dataclass
+class BenchResult:
+    """What `gouge bench` measured (rates in grain-steps/s, times in microseconds per call);
+    :func:`write_results` writes it as bench.json, :func:`gouge_cli.studies.bench_report.bench_report`
+    renders it. The parts' records are the dicts named in :func:`run_benchmark`'s helpers.
+
+    machine            cpus, numba_threads, threads timed, NUMBA_CPU_NAME / _FEATURES
+    provenance         io.provenance.collect of the process
+    dt, skin           the bench scene's step [t0] and Verlet skin [d]
+    peak_rss_mb        the process's peak resident memory [MB]
+    rows               one BenchRow per code, size and thread count
+    lammps             timed, requested, max_grains, missing (why a row is absent), install
+    fluid              fluid_share records (undrained against dry rates)
+    fluid_profile_us   profile_fluid records (one fluid update's parts)
+    profile_us         profile_step records (one step's parts) with n_grains and threads
+    allocations        numba runtime allocations per step, by size and thread count
+    footprint          footprint_profile records (contact pass on the first m grains)
+    scaling            paired thread scaling and the machine probe's, by size
+    run24              run24_projection (None: not projected)
+    """
+
+    machine: dict
+    provenance: dict
+    dt: float
+    skin: float
+    peak_rss_mb: float
+    rows: list[BenchRow]
+    lammps: dict
+    fluid: list[dict]
+    fluid_profile_us: list[dict]
+    profile_us: list[dict]
+    allocations: list[dict]
+    footprint: list[dict]
+    scaling: list[dict]
+    run24: dict | None
+
+    def to_dict(self) -> dict:
+        """The JSON record (bench.json)."""
+        return asdict(self)
+
+
 def bench_config(n_grains: int, dt: float, skin: float, permeability: float | None = None, solver: str = "auto"):
     fluid = {"permeability": permeability, "solver": solver} if permeability else None
     return build_config({
@@ -462,7 +503,7 @@ def run24_projection(rates: dict) -> dict:
 def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int = 3, dt: float = 0.89,
                   skin: float = 0.2, lammps: bool = True, lammps_styles=("granular", "hh"),
                   permeability: float | None = 1e-5, lammps_max: int = 40000, cache: Path | None = None,
-                  profile: bool = True, projection: bool = True) -> dict:
+                  profile: bool = True, projection: bool = True) -> BenchResult:
     all_threads = numba.config.NUMBA_NUM_THREADS
     threads = sorted({min(max(int(t), 1), all_threads) for t in threads}) if threads else sorted({1, all_threads})
     rows: list[BenchRow] = []
@@ -518,27 +559,28 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
                     else:
                         lammps_notes.append({"code": f"lammps-{style}", "n_grains": n, "threads": t,
                                              "reason": reason})
-    return {
-        "machine": {"cpus": os.cpu_count(), "numba_threads": all_threads, "threads": threads,
-                    "numba_cpu_name": os.environ.get("NUMBA_CPU_NAME") or "host",
-                    "numba_cpu_features": os.environ.get("NUMBA_CPU_FEATURES") or "host"},
-        "provenance": provenance.collect(all_threads),
-        "dt": dt, "skin": skin,
-        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-        "rows": [asdict(r) for r in rows],
-        "lammps": {"timed": lammps and any(r.code.startswith("lammps") for r in rows),
-                   "requested": lammps, "max_grains": lammps_max, "missing": lammps_notes,
-                   "install": LAMMPS_INSTALL},
-        "fluid": fluid,
-        "fluid_profile_us": fluid_parts,
-        "profile_us": profiles,
-        "allocations": allocations,
-        "footprint": footprint,
-        "scaling": scaling,
-        "run24": run24,
-    }
+    return BenchResult(
+        machine={"cpus": os.cpu_count(), "numba_threads": all_threads, "threads": threads,
+                 "numba_cpu_name": os.environ.get("NUMBA_CPU_NAME") or "host",
+                 "numba_cpu_features": os.environ.get("NUMBA_CPU_FEATURES") or "host"},
+        provenance=provenance.collect(all_threads),
+        dt=dt, skin=skin,
+        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        rows=rows,
+        lammps={"timed": lammps and any(r.code.startswith("lammps") for r in rows),
+                "requested": lammps, "max_grains": lammps_max, "missing": lammps_notes,
+                "install": LAMMPS_INSTALL},
+        fluid=fluid,
+        fluid_profile_us=fluid_parts,
+        profile_us=profiles,
+        allocations=allocations,
+        footprint=footprint,
+        scaling=scaling,
+        run24=run24,
+    )
 
 
-def write_results(results: dict, path: Path):
+def write_results(results: BenchResult, path: Path):
+    """bench.json: the result's JSON record."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(results, indent=2))
+    path.write_text(json.dumps(results.to_dict(), indent=2))
