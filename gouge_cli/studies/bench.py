@@ -481,7 +481,7 @@ def run24_projection(rates: dict) -> dict:
     (pi sqrt(m_b / k)), from grain-steps/s measured at that scene's size and time step."""
     config = run24_config()
     sim = Simulation(config)
-    dt = choose_dt(config)
+    dt = sim.scene.dt
     slip = slip_duration(config, sim.wall_mass_per_length)
     n = sim.state.n
     out = {"n_grains": n, "dt": dt, "cycle_t0": RUN24_CYCLE, "slip_t0": slip, "by_threads": {}}
