@@ -7,6 +7,7 @@ accuracy study alike."""
 from __future__ import annotations
 
 import json
+from functools import partial
 import signal
 import sys
 import threading
@@ -65,9 +66,7 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     keeper = CheckpointKeeper(writer, layout, callbacks)
     callbacks.insert(callbacks.index(recorder), keeper)
 
-    def build() -> list[Every]:
-        """The schedules; their periods are step counts, so stick scaling rebuilds them when dt changes."""
-        return schedules(sim, callbacks)
+    build = partial(schedules, sim, callbacks)     # step counts: stick scaling rebuilds them when dt changes
     status = "finished"
     try:
         with deferred_interrupt() as interrupted:
