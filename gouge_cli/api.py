@@ -40,14 +40,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import xarray as xr
-import yaml
 from xarray.backends import BackendArray
 from xarray.core import indexing
 
 from .analysis.catalog import CATALOG_COLUMNS, catalog_table, fit_slip, read_catalog
 from .analysis.forkpairs import PAIR_COLUMNS, classify_fork, fork_branches, fork_dirs, run_pairs
 from .analysis.study import transient_slips
-from .config import Config, build_config, load_config
+from .config import Config, build_config, load_config, parse_overrides
 from .errors import AnalysisError, ConfigError, SlipNotFoundError
 from .io.filedoc import ANALYSIS_UNITS, SLIP_ATTRS, TIME_ORIGIN
 from .io.layout import RunLayout
@@ -777,14 +776,11 @@ def figures(run_dir: Run | Path | str, slip: int | None = None, out_dir: Path | 
 # --------------------------------------------------------------------------- launching
 
 
-def _sets(overrides) -> list[str]:
-    """{"loading.velocity": 2e-5} or ["loading.velocity=2e-5"] -> --set strings (values as YAML)."""
+def _overrides(overrides) -> dict:
+    """{"loading.velocity": 2e-5} (as it is) or ["loading.velocity=2e-5"] (parsed as ``--set``) -> {dotted key: value}."""
     if not overrides:
-        return []
-    if isinstance(overrides, dict):
-        return [f"{k}={yaml.safe_dump(v, default_flow_style=True).strip().removesuffix('...').strip()}"
-                for k, v in overrides.items()]
-    return list(overrides)
+        return {}
+    return dict(overrides) if isinstance(overrides, dict) else parse_overrides(list(overrides))
 
 
 def run(config: Config | Path | str, out: Path | str | None = None, overrides=None, force: bool = False,
@@ -809,9 +805,9 @@ def run(config: Config | Path | str, out: Path | str | None = None, overrides=No
     from .workflows.run import default_run_dir, run_scene
 
     if isinstance(config, Config):
-        cfg = build_config(config.to_dict(), _sets(overrides))
+        cfg = build_config(config.to_dict(), _overrides(overrides))
     else:
-        cfg = load_config(config, _sets(overrides))
+        cfg = load_config(config, _overrides(overrides))
     target = Path(out) if out is not None else default_run_dir(cfg)
     result = run_scene(cfg, target, force=force, quiet=quiet)
     return open_run(result.out_dir)
@@ -829,11 +825,12 @@ def restart(run: Run | Path | str, slip: int, perm=(), overrides=None, duration:
         >>> fork.pair(1e-5).type  # doctest: +SKIP
         'II'
     """
-    from .workflows.fork import restart as run_restart
+    from .workflows.fork import ForkRequest, restart as run_restart
 
     run_dir = _run_dir(run)
-    perms = [perm] if isinstance(perm, (int, float)) else list(perm)
-    run_restart(run_dir, slip, perms, _sets(overrides), duration, force=force, main=main, quiet=quiet)
+    perms = (perm,) if isinstance(perm, (int, float)) else tuple(perm)
+    run_restart(ForkRequest(run_dir, slip, perms, _overrides(overrides), duration, force=force, main=main),
+                quiet=quiet)
     return Fork(RunLayout(run_dir).fork(slip).root)
 
 
@@ -853,6 +850,6 @@ def study(target: Path | str, perm, slips=None, main: str = "first", jobs: int |
     perms = [perm] if isinstance(perm, (int, float)) else list(perm)
     wanted = parse_slips(slips) if isinstance(slips, str) else (sorted(slips) if slips is not None else None)
     result = run_study(Path(target), perms, wanted, main=main, jobs=jobs,
-                       out=Path(out) if out is not None else None, overrides=_sets(overrides), quiet=quiet,
+                       out=Path(out) if out is not None else None, overrides=_overrides(overrides), quiet=quiet,
                        figures=figures)
     return open_study(result.run_dir, main)

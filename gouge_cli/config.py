@@ -376,22 +376,33 @@ def _override_key(key: str, item: str) -> list[str]:
     return parts
 
 
-def apply_overrides(data: dict, overrides: list[str] | dict) -> dict:
-    """Apply ``key.sub=value`` overrides (values parsed as YAML) to a raw config dict."""
+def parse_overrides(items: list[str] | tuple[str, ...]) -> dict[str, Any]:
+    """``--set`` strings ``key.sub=value`` -> {dotted key: value parsed as YAML} (a later key wins);
+    ConfigError naming a malformed one. The CLI parses here once; workflows take the dict."""
+    parsed = {}
+    for item in items:
+        if "=" not in item:
+            raise ConfigError(f"override {clip(repr(item), 80)} is not of the form key.sub=value")
+        key, value = item.split("=", 1)
+        key = key.strip()
+        _override_key(key, item)
+        parsed[key] = _parse_value(value.strip())
+    return parsed
+
+
+def format_override(key: str, value: Any) -> str:
+    """The ``--set`` string of one parsed override (parse_overrides' inverse), for a command line."""
+    return f"{key}={yaml.safe_dump(value, default_flow_style=True).strip().removesuffix('...').strip()}"
+
+
+def apply_overrides(data: dict, overrides: dict[str, Any] | list[str]) -> dict:
+    """Apply {dotted key: value} overrides (``--set`` strings are parsed first: parse_overrides)
+    to a raw config dict."""
     data = copy.deepcopy(data)
-    items = overrides.items() if isinstance(overrides, dict) else []
     if not isinstance(overrides, dict):
-        parsed = []
-        for item in overrides:
-            if "=" not in item:
-                raise ConfigError(f"override {clip(repr(item), 80)} is not of the form key.sub=value")
-            key, value = item.split("=", 1)
-            parsed.append((key.strip(), _parse_value(value.strip()), item))
-        items = parsed
-    else:
-        items = [(k, v, f"{k}={v}") for k, v in items]
-    for key, value, item in items:
-        parts = _override_key(key, item)
+        overrides = parse_overrides(overrides)
+    for key, value in overrides.items():
+        parts = _override_key(key, f"{key}={value}")
         node = data
         for depth, part in enumerate(parts[:-1]):
             child = node.get(part)

@@ -7,7 +7,7 @@ slip). Everything that compares the two branches -- ``gouge restart`` (pair.json
 ``gouge study`` -- calls :func:`classify_pair` with a :class:`PairDefinition`; nothing else
 decides which events are compared or what type a pair is.
 
-Rule (all thresholds are fields of :class:`PairDefinition`, velocities in units of V_s):
+Rule (all thresholds are fields of :class:`PairDefinition` or of its slip rule, velocities in units of V_s):
 
 * Events: slips found by the run's own :class:`~gouge_cli.model.slip_rule.SlipRule` (its
   thresholds (trigger ``start_factor``, extent ``end_factor``). The *compared* event of each
@@ -51,7 +51,8 @@ class PairDefinition:
 
     main: "first" (the forked slip) or "largest" (largest slip distance) event of each branch.
     strength_tol: |S_u - S_d| <= strength_tol is a tie.
-    start_factor, end_factor, min_duration, min_slip, merge_gap: the run's slip detector.
+    slips: the run's slip rule at V_s = 1 (its factors are the thresholds in V_s; :meth:`rule` puts
+    in a branch's V_s); :meth:`with_` and :meth:`for_run` take its keys (start_factor, ...) flat.
     slow_factor: lowered trigger for a slow undrained slip (None: min(2 end, (start+end)/2)).
     max_subevents, restart_factor, creep_low_factor, creep_fraction, creep_smooth, min_fit_r2:
     the '-C' criteria of :func:`complexity_criteria`.
@@ -59,11 +60,7 @@ class PairDefinition:
 
     main: str = "first"
     strength_tol: float = 1e-3
-    start_factor: float = SlipRule.start_factor
-    end_factor: float = SlipRule.end_factor
-    min_duration: float = SlipRule.min_duration
-    min_slip: float = SlipRule.min_slip
-    merge_gap: float = SlipRule.merge_gap
+    slips: SlipRule = field(default_factory=lambda: SlipRule(1.0))
     slow_factor: float | None = None
     max_subevents: int = 1
     restart_factor: float | None = None
@@ -79,29 +76,36 @@ class PairDefinition:
     @classmethod
     def for_run(cls, rule: SlipRule | dict, **overrides) -> "PairDefinition":
         """The definition with a run's slip rule (``RunInfo.slip_rule``, or its config values as a
-        dict) and overrides."""
-        names = {f.name for f in fields(cls)}
-        values = rule.config_values() if isinstance(rule, SlipRule) else rule
-        return cls(**{k: v for k, v in {**values, **overrides}.items() if k in names and v is not None})
+        dict) and overrides (None: kept; unknown keys ignored)."""
+        values = {**(rule.config_values() if isinstance(rule, SlipRule) else rule), **overrides}
+        known = {f.name for f in fields(cls)} | set(SlipRule.CONFIG_KEYS)
+        return cls().with_(**{k: v for k, v in values.items() if k in known and v is not None})
+
+    def with_(self, **changes) -> "PairDefinition":
+        """A copy with fields changed; the slip rule's keys (SlipRule.CONFIG_KEYS) change ``slips``
+        (None: kept)."""
+        rule = {k: changes.pop(k) for k in SlipRule.CONFIG_KEYS if k in changes}
+        return replace(self, slips=self.slips.with_(**rule), **changes)
 
     def rule(self, V_s: float, start_factor: float | None = None) -> SlipRule:
         """The slip rule of this definition at V_s (``start_factor``: another trigger, e.g. the slow one)."""
-        return SlipRule(V_s, start_factor or self.start_factor, self.end_factor, self.min_duration,
-                        self.min_slip, self.merge_gap)
+        return self.slips.with_(V_s=V_s, start_factor=start_factor)
 
     @property
     def slow_trigger(self) -> float:
         """Trigger for a slow slip [V_s]."""
         if self.slow_factor is not None:
             return self.slow_factor
-        return min(2.0 * self.end_factor, 0.5 * (self.start_factor + self.end_factor))
+        return min(2.0 * self.slips.end_factor, 0.5 * (self.slips.start_factor + self.slips.end_factor))
 
     def detect(self, s: WallSeries, V_s: float, start_factor: float | None = None) -> list[Slip]:
         return self.rule(V_s, start_factor).detect(s.t, s.v_wall, x_wall=s.x_wall,
                                                    tau_over_sigma=s.tau_over_sigma, porosity=s.porosity)
 
     def to_dict(self) -> dict:
-        return dict(asdict(self), slow_trigger=self.slow_trigger)
+        """Flat: the definition's fields with the slip rule's keys in place of ``slips`` (pair.json)."""
+        own = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "slips"}
+        return {**own, **self.slips.config_values(), "slow_trigger": self.slow_trigger}
 
 
 @dataclass
@@ -265,7 +269,7 @@ def classify_pair(
     ``overrides`` replace fields of the definition (e.g. ``strength_tol=1e-3``, ``main="largest"``,
     or a run's ``start_factor``). See the module docstring for the rule.
     """
-    d = replace(definition or PairDefinition(), **overrides)
+    d = (definition or PairDefinition()).with_(**overrides)
     none_criteria = {c: False for c in CRITERIA}
     d_slips = d.detect(drained, V_s)
     u_slips = d.detect(undrained, V_s)
@@ -280,7 +284,7 @@ def classify_pair(
             note = f"drained branch did not slip in its window (peak {d_peak:.3g} V_s)"
         else:
             note = (f"undrained branch did not move in its window: peak {u_peak:.3g} V_s, below the "
-                    f"slow-slip trigger {d.slow_trigger:g} V_s (slip trigger {d.start_factor:g} V_s)")
+                    f"slow-slip trigger {d.slow_trigger:g} V_s (slip trigger {d.slips.start_factor:g} V_s)")
         return PairResult("none", "none", False, none_criteria, {}, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN,
                           d_main, u_main, u_slips, undrained_event="none" if u_main is None else event,
                           drained_peak_over_Vs=d_main.peak_velocity / V_s if d_main else d_peak,
@@ -301,7 +305,7 @@ def classify_pair(
     u_fit = fit_block_slider(undrained.t, undrained.v_wall, u_main, k, m_b, sigma)
     fired, measures = complexity_criteria(
         undrained.t, undrained.v_wall, u_slips, u_main, u_fit, V_s,
-        start_factor=d.slow_trigger if event == SLOW else d.start_factor,
+        start_factor=d.slow_trigger if event == SLOW else d.slips.start_factor,
         max_subevents=d.max_subevents, restart_factor=d.restart_factor,
         creep_low_factor=d.creep_low_factor, creep_fraction=d.creep_fraction,
         creep_smooth=d.creep_smooth, min_fit_r2=d.min_fit_r2,
@@ -311,7 +315,7 @@ def classify_pair(
     note = ""
     if event == SLOW:
         note = (f"undrained: {SLOW} (peak {u_main.peak_velocity / V_s:.3g} V_s < trigger "
-                f"{d.start_factor:g} V_s)")
+                f"{d.slips.start_factor:g} V_s)")
     return PairResult(
         type=base + ("-C" if is_complex else ""),
         base_type=base,

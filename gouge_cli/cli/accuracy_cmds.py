@@ -8,7 +8,7 @@ from typing import List, Optional
 
 import typer
 
-from ..config import load_config
+from ..config import load_config, parse_overrides
 from ..errors import EXIT_PHYSICS
 from .common import err, fail, guarded, out
 
@@ -92,6 +92,7 @@ def accuracy(
 
     if config is None and slip_checkpoint is None:
         fail("give a CONFIG, a --slip-checkpoint, or both")
+    set_ = parse_overrides(set_)        # {dotted key: value}, parsed here once
     if stick_scaling is not None:           # stick scaling: its own ladder
         return _stick_ladder(config, set_, stick_scaling, seeds, transient, out_dir, keep)
     try:

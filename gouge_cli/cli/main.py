@@ -8,7 +8,7 @@ from typing import List, Optional
 
 import typer
 
-from ..config import build_config, dump_config, load_config
+from ..config import build_config, dump_config, load_config, parse_overrides
 from .common import fail, guarded, out
 from ..errors import EXIT_INTERRUPTED
 
@@ -48,7 +48,7 @@ def run(
     from ..workflows.run import default_run_dir, run_scene
     from .common import confirm_long
 
-    cfg = load_config(config, set_)
+    cfg = load_config(config, parse_overrides(set_))
     target = out_dir or default_run_dir(cfg)
     result = run_scene(cfg, target, force=force, quiet=quiet, confirm=confirm_long(yes))
     out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s, "
@@ -85,16 +85,13 @@ def restart(
     import json
 
     from ..io.filedoc import json_safe
-    from ..workflows.fork import restart as run_restart
+    from ..workflows.fork import ForkRequest, restart as run_restart
 
     target = _run_dir(run_dir)
     if duration is None and not until_slip_ends:
         fail("--full needs --duration")
-    if duration is not None and not (duration > 0 and duration < float("inf")):
-        fail(f"--duration = {duration:g}: give a positive, finite time [t0]")
-    if main not in ("first", "largest"):
-        fail(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
-    summary = run_restart(target, slip, perm, set_, duration, force=force, main=main, quiet=quiet)
+    request = ForkRequest(target, slip, tuple(perm), parse_overrides(set_), duration, force=force, main=main)
+    summary = run_restart(request, quiet=quiet)
     out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
 
 
@@ -171,8 +168,7 @@ def show_config(
                                           "('-' for stdout), for editors"),
 ):
     """Validate a config and print it fully resolved (dimensionless), or print the defaults."""
-    from ..model.preflight import check_config
-    from ..model.params import choose_threads
+    from ..model.scene import Scene
     from ..model.timestep import stability_bound
 
     if schema is not None or (defaults and config is None and not set_):
@@ -180,9 +176,10 @@ def show_config(
 
         print_config_doc(schema)
         return
-    cfg = build_config({}, set_) if (defaults or config is None) else load_config(config, set_)
+    sets = parse_overrides(set_)
+    cfg = build_config({}, sets) if (defaults or config is None) else load_config(config, sets)
     bound = stability_bound(cfg)
-    pre = check_config(cfg, choose_threads(cfg.numerics.threads, cfg.packing.n_grains))
+    pre = Scene(cfg).preflight
     out.print(dump_config(cfg), highlight=False, end="")
     out.print(f"# time step {pre.dt:.6g} t0 (stability bound {bound.bound:.6g} t0, {bound.mode} mode)",
               highlight=False)
@@ -212,117 +209,16 @@ def bench(
 ):
     """Grain-steps per second on the sheared layer (steady shear only), 1 and all cores, vs LAMMPS;
     per-part profile, allocations per step, fluid share, projected thesis Run 24 wall times."""
-    from rich.table import Table
-
     from ..studies.bench import run_benchmark, write_results
+    from ..studies.bench_report import bench_report
 
     size_list = [int(v) for v in sizes.split(",") if v]
     thread_list = [int(v) for v in threads.split(",") if v] or None
-    results = run_benchmark(size_list, thread_list, steps, repeats, dt, skin, lammps, permeability=perm or None,
-                            lammps_max=lammps_max, cache=cache if str(cache) else None, profile=profile)
-    write_results(results, json_out)
-    prov = results["provenance"]
-    out.print(f"measured on: {prov['cpu']['model']} ({prov['cpu']['vector_width_bits']}-bit vectors: "
-              f"{' '.join(prov['cpu']['vector_features'])}; numba target {prov['cpu']['numba_target']}), "
-              f"{results['machine']['cpus']} cores; numpy {prov['libraries']['numpy']}, numba "
-              f"{prov['libraries']['numba']}, llvmlite {prov['libraries']['llvmlite']}", highlight=False)
-    table = Table(title=f"grain-steps per second (dt {dt}, skin {skin}; steady shear)")
-    for col in ("code", "N", "threads", "steps", "min", "median", "max", "bytes/grain", "bitwise = 1 thread",
-                "gouge / this"):
-        table.add_column(col, justify="right")
-    ours = {(r["n_grains"], r["threads"]): r["rate_median"] for r in results["rows"] if r["code"] == "gouge"}
-    for r in results["rows"]:
-        mine = ours.get((r["n_grains"], r["threads"]))
-        ratio = f"{mine / r['rate_median']:.2f}" if mine and r["code"] != "gouge" else ""
-        table.add_row(r["code"], str(r["n_grains"]), str(r["threads"]), str(r["steps"]), f"{r['rate_min']:.3g}",
-                      f"{r['rate_median']:.3g}", f"{r['rate_max']:.3g}",
-                      f"{r['bytes_per_grain']:.0f}" if r["bytes_per_grain"] else "",
-                      {None: "", True: "yes", False: "NO"}[r["identical_to_1_thread"]], ratio)
-    out.print(table)
-    lam = results.get("lammps", {})
-    if lam.get("missing"):
-        reasons = sorted({m["reason"] for m in lam["missing"]})
-        sizes_missing = sorted({m["n_grains"] for m in lam["missing"]})
-        out.print(f"LAMMPS rows missing (N {', '.join(map(str, sizes_missing))}): {'; '.join(reasons)}",
-                  highlight=False)
-    elif not lam.get("requested", True):
-        out.print("LAMMPS not timed (--no-lammps)", highlight=False)
-    for s in results.get("scaling", []):
-        for t, ratio in s["paired_ratio"].items():
-            out.print(f"N {s['n_grains']}: {t} threads / fewest, median of the per-repeat ratios (thread counts take "
-                      f"turns within each repeat): {ratio:.2f}x", highlight=False)
-            machine = s.get("machine_stream_ratio", {}).get(t)
-            if machine:
-                out.print(f"  the machine's own ratio in the same repeats, for a loop streaming the same "
-                          f"{s['probe_bytes'] / 1e6:.1f} MB on {t} threads with nothing shared (kernels.probe): "
-                          f"{machine:.2f}x; gouge reaches {ratio / machine:.0%} of it", highlight=False)
-    for t in sorted({r["threads"] for r in results["rows"] if r["code"] == "gouge"}):
-        rates = [r["rate_median"] for r in results["rows"] if r["code"] == "gouge" and r["threads"] == t]
-        if len(rates) > 1:
-            out.print(f"{t} thread(s): fastest / slowest size {max(rates) / min(rates):.2f}", highlight=False)
-    if results["profile_us"]:
-        prof = Table(title="microseconds per step, by part (best of 3 x 50 calls)")
-        for col in ("N", "threads", "contact pass", "(law", "sum)", "kick pass", "rebuild (each)", "steps/rebuild",
-                    "rebuild/step", "renumber (each)", "renumber/step", "whole step"):
-            prof.add_column(col, justify="right")
-        for r in results["profile_us"]:
-            prof.add_row(str(r["n_grains"]), str(r["threads"]), f"{r['contact_forces']:.0f}", f"{r['law_pass']:.0f}",
-                         f"{r['sum_pass']:.0f}", f"{r['kick_drift']:.0f}",
-                         f"{r['rebuild_each']:.0f}", f"{r['steps_per_rebuild']:.0f}",
-                         f"{r['rebuild_per_step']:.0f}", f"{r['renumber_each']:.0f}", f"{r['renumber_per_step']:.1f}",
-                         f"{r['whole_step']:.0f}")
-        out.print(prof)
-    if results["footprint"]:
-        own = {r["n_grains"]: r["contact_forces"] * 1e3 / r["n_grains"] for r in results["profile_us"]
-               if r["threads"] == 1}
-        big = results["footprint"][0]["of_n_grains"]
-        foot = Table(title=f"contact pass, 1 thread, ns per grain: the first m grains of the {big:,}-grain "
-                     "packing (same rows, smaller working set) and the m-grain packing itself")
-        for col in ("m", "pairs/grain", "working set MB", f"first m of {big:,}", "own packing"):
-            foot.add_column(col, justify="right")
-        for r in results["footprint"]:
-            m = r["first_grains"]
-            foot.add_row(f"{m:,}", f"{r['pairs_per_grain']:.2f}", f"{r['working_set_mb']:.2f}",
-                         f"{r['ns_per_grain']:.1f}", f"{own[m]:.1f}" if m in own else "")
-        out.print(foot)
-    for a in results["allocations"]:
-        per = "unavailable" if a["per_step"] is None else f"{a['per_step']:g}"
-        out.print(f"numba runtime allocations per step, N {a['n_grains']}, {a['threads']} thread(s): {per}",
-                  highlight=False)
-
-    def solve_kind(f):
-        return "one explicit step" if f["explicit"] else f"{f['cg_iterations']:.0f} CG iterations"
-
-    for f in results.get("fluid_profile_us", []):
-        out.print(f"one fluid update (N {f['n_grains']}, grid {f['grid'][0]}x{f['grid'][1]}, dt {f['dt']:.3g}), "
-                  f"{f['threads']} thread(s), best of 3 x 30 calls: deposit {f['deposit']:.0f} us, grid solve "
-                  f"{f['solve']:.0f} us (solver {f['solver']}: {solve_kind(f)}; serial), drag {f['drag']:.0f} us, "
-                  f"together {f['update']:.0f} us", highlight=False)
-    for f in results["fluid"]:
-        out.print(f"undrained (kappa_c {f['permeability']:g}, solver {f['solver']}, "
-                  f"{100 * f['explicit_fraction']:.0f} % explicit steps, grid {f['grid'][0]}x{f['grid'][1]}, "
-                  f"dt {f['dt']:.3g}, "
-                  f"fluid update every {f['fluid_interval_steps']} steps), N {f['n_grains']}, {f['threads']} "
-                  f"thread(s): {f['rate_undrained']:.3g} vs dry {f['rate_dry']:.3g} grain-steps/s, fluid share of a "
-                  f"step {100 * f['fluid_share_paired']:.1f} % (median of the shares within each repeat, the two runs "
-                  f"back to back; {100 * f['fluid_share']:.1f} % from the medians, {100 * f['fluid_share_best']:.1f} % "
-                  "from the fastest repeats)", highlight=False)
-    r24 = results["run24"]
-    if r24:
-        for t, v in r24["by_threads"].items():
-            out.print(f"thesis Run 24 ({r24['n_grains']} grains, dt {r24['dt']:.3g} t0), {t} thread(s) at "
-                      f"{v['rate']:.3g} grain-steps/s: one loading cycle ({r24['cycle_t0']:.2g} t0) "
-                      f"{v['cycle_hours']:.1f} h, one slip ({r24['slip_t0']:.3g} t0) {v['slip_minutes']:.1f} min",
-                      highlight=False)
-        for lam, v in r24.get("stick_scaling", {}).items():      # stick scaling: projected cycle
-            hours = ", ".join(f"{h:.1f} h on {t} thread(s)" for t, h in v["cycle_hours"].items())
-            out.print(f"  with numerics.stick_scaling {float(lam):g}{' (chosen by the ladder)' if v['default'] else ''}: "
-                      f"{v['step_ratio']:.2f}x fewer steps per cycle (stick_scaling.cycle_steps): {hours}",
-                      highlight=False)
-        if "stick_scaling_cap" in r24:
-            out.print(f"  stick scaling's cap (lead, slip and quiet window at true inertia): "
-                      f"{r24['stick_scaling_cap']:.1f}x", highlight=False)
-    out.print(f"peak RSS {results['peak_rss_mb']:.0f} MB; results in {json_out}")
+    result = run_benchmark(size_list, thread_list, steps, repeats, dt, skin, lammps, permeability=perm or None,
+                           lammps_max=lammps_max, cache=cache if str(cache) else None, profile=profile)
+    write_results(result, json_out)
+    for item in bench_report(result, json_out):
+        out.print(item, highlight=False)
 
 
 from .analysis_cmds import register as _register_analysis

@@ -43,6 +43,7 @@ def register(app: typer.Typer) -> None:
         from ..io.layout import perm_text
         from ..analysis.study import summary_lines
         from ..errors import StudyInterrupted
+        from ..config import parse_overrides
         from ..workflows.study import parse_slips, run_study
         from .analysis_cmds import _table
         from ..errors import EXIT_INTERRUPTED
@@ -56,7 +57,7 @@ def register(app: typer.Typer) -> None:
             fail("give at least one --perm K (kappa_c in d^2, e.g. --perm 1e-5)")
         say = (lambda m: None) if quiet else (lambda m: out.print(m, highlight=False))
         try:
-            result = run_study(target, perm, wanted, main=main, jobs=jobs, out=out_dir, overrides=set_,
+            result = run_study(target, perm, wanted, main=main, jobs=jobs, out=out_dir, overrides=parse_overrides(set_),
                                quiet=quiet, figures=figures, on_progress=say, confirm=confirm_long(yes))
         except StudyInterrupted as e:
             fail(str(e), EXIT_INTERRUPTED)

@@ -57,9 +57,9 @@ from ..errors import PhysicsError
 from .callbacks import Callback
 from .schedules import Every
 
-# the scene a guard checks: a driver.simulation.Simulation, not imported here (the loop imports the
-# guards' check, never the reverse)
-Scene = Any
+# what a guard checks: a driver.simulation.Simulation, not imported here (the guards sit below the
+# loop and the phases, which import them)
+Sim = Any
 
 
 @dataclass
@@ -74,7 +74,7 @@ class Scan:
     contact_energy: float
 
     @classmethod
-    def of(cls, sim: Scene) -> "Scan":
+    def of(cls, sim: Sim) -> "Scan":
         """From Simulation.measure (kernels.measure; shared with the series row of the same step),
         plus the top wall's kinetic energy."""
         s = sim.state
@@ -87,7 +87,7 @@ class Scan:
                    float(row["contact_energy"]))
 
 
-def _suspects(sim: Scene) -> str:
+def _suspects(sim: Sim) -> str:
     """Parameters near their own stability limit at this step (preflight), named first."""
     from ..model.preflight import damped_step_bound, min_wall_mass
 
@@ -104,13 +104,13 @@ def _suspects(sim: Scene) -> str:
     return f"{'; '.join(out)}; or " if out else ""
 
 
-def _dt_hint(sim: Scene) -> str:
+def _dt_hint(sim: Sim) -> str:
     n = sim.config.numerics
     knob = f"numerics.dt (now {n.dt:g} t0)" if n.dt is not None else f"numerics.dt_safety (now {n.dt_safety:g})"
     return f"{_suspects(sim)}lower {knob}; the step is {sim.params[L.DT]:.4g} t0"
 
 
-def _fluid_hint(sim: Scene) -> str:
+def _fluid_hint(sim: Sim) -> str:
     if sim.fluid is None:
         return ""
     f = sim.config.fluid
@@ -122,7 +122,7 @@ def _fluid_hint(sim: Scene) -> str:
 class NonFiniteGuard:
     """Stop on NaN/inf in the grains, the top wall or the pore pressure."""
 
-    def __call__(self, sim: Scene, scan: Scan | None = None):
+    def __call__(self, sim: Sim, scan: Scan | None = None):
         s = sim.state
         bad = (scan or Scan.of(sim)).nonfinite
         wall_bad = not all(math.isfinite(v) for v in s.wall[:L.W_VZ + 1])
@@ -141,7 +141,7 @@ class OverlapGuard:
     def __init__(self, limit: float = 0.5):
         self.limit = float(limit)
 
-    def __call__(self, sim: Scene, scan: Scan | None = None):
+    def __call__(self, sim: Sim, scan: Scan | None = None):
         scan = scan or Scan.of(sim)
         if scan.overlap > self.limit:
             i, j = scan.pair
@@ -190,7 +190,7 @@ class KineticEnergyGuard:
             level.extend(tuple(r) for r in saved)
 
     @staticmethod
-    def _load(sim: Scene) -> tuple[float, float, float]:
+    def _load(sim: Sim) -> tuple[float, float, float]:
         """(|spring stretch| [d], top-wall height [d], spring energy [E d^3]); zeros without a wall."""
         s, p = sim.state, sim.params
         if not s.top.size:
@@ -198,7 +198,7 @@ class KineticEnergyGuard:
         stretch = sim.spring_stretch()
         return abs(float(stretch)), float(s.wall[L.W_Z]), 0.5 * p[L.SPRING] * s.width * float(stretch) ** 2
 
-    def budget(self, sim: Scene, wall_z: float) -> float:
+    def budget(self, sim: Sim, wall_z: float) -> float:
         """min_j B_j(t) over the kept references (inf before the first)."""
         sigma_l = sim.params[L.SIGMA] * sim.state.width if sim.state.top.size else 0.0
         best = math.inf
@@ -207,7 +207,7 @@ class KineticEnergyGuard:
                 best = min(best, stored + sigma_l * (z_ref - wall_z) + (self.work - work_ref))
         return best
 
-    def __call__(self, sim: Scene, scan: Scan | None = None):
+    def __call__(self, sim: Sim, scan: Scan | None = None):
         scan = scan or Scan.of(sim)
         s, p = sim.state, sim.params
         stretch, wall_z, spring = self._load(sim)
@@ -238,7 +238,7 @@ class FluidSubstepGuard:
     def __init__(self, limit: int = 10_000):
         self.limit = int(limit)
 
-    def __call__(self, sim: Scene, scan: Scan | None = None):
+    def __call__(self, sim: Sim, scan: Scan | None = None):
         grid = sim.fluid
         if grid is None or grid.solver != "explicit" or grid.state[L.S_UPDATES] < 1:
             return
@@ -268,14 +268,14 @@ class Guards(Callback):
         self.overlap = OverlapGuard(overlap_limit)
         self.fluid = FluidSubstepGuard(substep_limit)
 
-    def __call__(self, sim: Scene):
+    def __call__(self, sim: Sim):
         scan = Scan.of(sim)
         for guard in (self.nonfinite, self.energy, self.overlap, self.fluid):
             guard(sim, scan)
 
     act = __call__
 
-    def every(self, sim: Scene) -> Every:
+    def every(self, sim: Sim) -> Every:
         interval = sim.config.output.series_interval if self.interval is None else self.interval
         return Every.t0(sim, interval, self, self.name)
 
@@ -288,30 +288,14 @@ class Guards(Callback):
             self.energy.load_state_dict(state["energy"])
 
 
-def guard_callbacks(sim: Scene, interval: float | None = None, **limits) -> list[Every]:
+def guard_callbacks(sim: Sim, interval: float | None = None, **limits) -> list[Every]:
     """[Every(steps, Guards(**limits))] at `interval` [t0] (default: output.series_interval)."""
     return [Guards(interval=interval, **limits).every(sim)]
 
 
-def check(sim: Scene):
+def check(sim: Sim):
     """Stop with a PhysicsError on NaN/inf or a runaway overlap (the non-finite and overlap
     guards, run once; compaction's check, the benchmark)."""
     scan = Scan.of(sim)
     NonFiniteGuard()(sim, scan)
     OverlapGuard()(sim, scan)
-
-
-def guarded_run(sim: Scene, duration: float, interval: float | None = None, compact: bool = True,
-                **limits) -> list[dict]:
-    """Compact (if still compacting and `compact`; the fluid starts with loading), then load for `duration`
-    [t0] with all guards every `interval` [t0] (default output.series_interval); returns the
-    time-series rows (Simulation.measure, shared with the guards) taken at the same cadence:
-    Simulation.run with the callbacks "guards", "series". Raises PhysicsError."""
-    guards = Guards(**limits)
-    if compact and sim.phase == L.COMPACTION:
-        sim.compact(on_chunk=lambda s, elapsed: guards(s))
-    rows = [sim.measure()]
-    interval = sim.config.output.series_interval if interval is None else interval
-    sim.run(duration, [Every.t0(sim, interval, guards, "guards"),
-                       Every.t0(sim, interval, lambda s: rows.append(s.measure()), "series")])
-    return rows

@@ -1,5 +1,5 @@
 """The two phases of a run as the driver runs them, each with its callbacks and checkpoints:
-compaction (Simulation.compact, latest.h5 on its checks) and loading (Simulation.run with the
+compaction (driver.compaction: the settling check, progress and latest.h5 on its checks) and loading (Simulation.run with the
 guards, series and snapshot writers, slip recorder, dense slip frames and the latest.h5
 checkpointer, whose states travel in the checkpoint). Used by `gouge run/resume`, forks and the
 accuracy study alike."""
@@ -7,6 +7,7 @@ accuracy study alike."""
 from __future__ import annotations
 
 import json
+from functools import partial
 import signal
 import sys
 import threading
@@ -14,15 +15,16 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..io import provenance
-from ..io.checkpoint import snapshot_of, write_checkpoint
+from ..io.checkpoint import snapshot_of, state_bytes, write_checkpoint
 from ..io.layout import RunLayout
 from ..io.rundir import ensure_space
 from ..io.runfile import RunFile
 from ..kernels import layout as L
 from ..model.timestep import slip_duration
 from .callbacks import Callback, restore, schedules, states
+from . import compaction
 from .guards import Guards
-from .progress import ProgressReport, SettleReport
+from .progress import ProgressReport
 from ..errors import ConfigError, PhysicsError
 from .schedules import Every
 from .simulation import Simulation
@@ -64,9 +66,7 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     keeper = CheckpointKeeper(writer, layout, callbacks)
     callbacks.insert(callbacks.index(recorder), keeper)
 
-    def build() -> list[Every]:
-        """The schedules; their periods are step counts, so stick scaling rebuilds them when dt changes."""
-        return schedules(sim, callbacks)
+    build = partial(schedules, sim, callbacks)     # step counts: stick scaling rebuilds them when dt changes
     status = "finished"
     try:
         with deferred_interrupt() as interrupted:
@@ -230,48 +230,34 @@ def deferred_interrupt():
         signal.signal(signal.SIGINT, previous)
 
 
+def guarded_run(sim: Simulation, duration: float, interval: float | None = None, compact: bool = True,
+                **limits) -> list[dict]:
+    """Compact (if still compacting and `compact`, with the guards on its checks; the fluid starts
+    with loading), then load for `duration` [t0] with all guards every `interval` [t0] (default
+    output.series_interval); returns the time-series rows (Simulation.measure, shared with the
+    guards) taken at the same cadence: Simulation.run with the callbacks "guards", "series".
+    Raises PhysicsError."""
+    interval = sim.config.output.series_interval if interval is None else interval
+    guards = Guards(interval=interval, **limits)
+    if compact and sim.phase == L.COMPACTION:
+        compaction.compact(sim, [guards])
+    rows = Rows(interval)
+    rows.rows.append(sim.measure())
+    sim.run(duration, schedules(sim, [guards, rows]))
+    return rows.rows
 
-def state_bytes(sim: Simulation) -> int:
-    """Bytes of one checkpointed state (grains, contacts, fluid grid)."""
-    fluid = sim.fluid.arrays() if sim.fluid is not None else {}
-    return sum(a.nbytes for a in sim.state.arrays().values()) + sum(a.nbytes for a in fluid.values())
 
+class Rows(Callback):
+    """The observation row (Simulation.measure) every `interval` [t0], kept in ``rows``."""
 
+    name = "series"
 
-def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False, resume_from=None):
-    """Simulation.compact with checkpoints/latest.h5 written every output.checkpoint_interval of
-    compaction (on its 100 t0 checks) and on Ctrl-C, so that `gouge resume` continues a
-    compaction too (`resume_from`: that checkpoint, whose compaction start it goes on from).
-    Progress is shown toward the settling criterion (progress.SettleReport)."""
-    config = sim.config
-    start = None
-    if resume_from is not None and "compaction_start" in resume_from.extra:
-        t0, step0 = resume_from.extra["compaction_start"]
-        start = (float(t0), int(step0))
-    latest = RunLayout(out_dir).latest
-    chunk = sim.steps_for(100.0)
-    every = max(1, int(round(config.output.checkpoint_interval / 100.0)))
+    def __init__(self, interval: float):
+        self.interval = interval
+        self.rows: list[dict] = []
 
-    need = 2.0 * state_bytes(sim)
+    def every(self, sim):
+        return Every.t0(sim, self.interval, self.act, self.name)
 
-    def save(s: Simulation):
-        ensure_space(out_dir, need)
-        write_checkpoint(latest, snapshot_of(s, {"phase": "compaction", "compaction_start": list(s.compaction_start)}))
-
-    progress = None if quiet else SettleReport(config.compaction.max_time, sim.state.n, live=live)
-
-    def on_chunk(s: Simulation, elapsed: float):
-        if progress:
-            progress.update(s.settling, s.state.step)
-        if ((s.state.step - s.compaction_start[1]) // chunk) % every == 0:
-            save(s)
-
-    try:
-        sim.compact(on_chunk=on_chunk, start=start)
-    except KeyboardInterrupt:
-        if sim.compaction_start is not None:
-            save(sim)
-        raise
-    finally:
-        if progress:
-            progress.close()
+    def act(self, sim):
+        self.rows.append(sim.measure())

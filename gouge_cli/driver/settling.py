@@ -1,6 +1,6 @@
 """Compaction's settling criterion, and how far a compaction is from meeting it.
 
-Compaction (Simulation.compact) ends, on one of its checks every 100 t0, when
+Compaction (driver.compaction) ends, on one of its checks every 100 t0, when
 
     elapsed >= compaction.min_time  and  |v_wall,z| < v_tol  and  v_rms < v_tol,
 

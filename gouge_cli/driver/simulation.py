@@ -18,42 +18,39 @@ from ..kernels import layout as L
 from ..kernels import measure as M
 from ..kernels import step as K
 from ..model.packing import build_packing
-from .guards import check
 from .schedules import Every
-from .settling import SettleCheck, settle_check
 from ..model.state import State
-from ..model.params import build_params, choose_threads, numba_threads
-from ..model.timestep import choose_dt
+from ..model.params import numba_threads
+from ..model.scene import Scene
 
 _EMPTY = np.zeros(0)
 
 
 class Simulation:
-    """A scene: config, arrays and the kernels' parameters. Dry unless ``config.fluid`` is set."""
+    """A scene's arrays and the loop that advances them. Dry unless ``config.fluid`` is set."""
 
-    def __init__(self, config: Config, arrays: dict | None = None, state: State | None = None,
+    def __init__(self, scene: Scene | Config, arrays: dict | None = None, state: State | None = None,
                  fluid_arrays: dict | None = None):
-        """Build the scene from `config` (packing from its seed), or around a given `state`
-        (e.g. a few free grains in a test); `arrays` restores a checkpoint bit for bit and
+        """Build the simulation of `scene` (a Config is checked into its Scene here: ConfigError
+        naming the key, so no unchecked config runs), its packing from the seed, or around a given
+        `state` (e.g. a few free grains in a test); `arrays` restores a checkpoint bit for bit and
         `fluid_arrays` its pressure grid (without them a fluid scene starts at P = 0 from the
         restored packing: a fork from a dry checkpoint)."""
-        self.config = config
-        self.dt = choose_dt(config)
+        if not isinstance(scene, Scene):
+            scene = Scene(scene, None if state is None else state.n)
+        self.scene = scene
+        self.config = config = scene.config
+        self.dt = scene.dt           # the step in force [t0] (stick scaling changes it; scene.dt is the true one)
         self.inertia_scale = 1.0     # lambda of driver.stick_scaling in force (1: true inertia)
         self.state = state if state is not None else build_packing(config)
         s = self.state
         top_mass = float(s.mass[s.top].sum()) / s.width
         self.wall_mass_per_length = (config.loading.wall_mass or top_mass) if s.top.size else 0.0
-        p = build_params(config, self.dt, s.width, self.wall_mass_per_length * s.width, s.n)
+        p = scene.params(s.width, self.wall_mass_per_length * s.width, s.n)
         self.params = p
-        self.threads = choose_threads(config.numerics.threads, s.n)     # every kernel of this scene runs on these
-        self.compaction_settled: bool | None = None
-        self.compaction_start: tuple[float, int] | None = None     # (time, step) where compaction began
-        self.settling: SettleCheck | None = None                    # the last check of compaction's criterion
+        self.threads = scene.threads     # every kernel of this simulation runs on these (a benchmark may set them)
         self.fluid = None
-        # numerics.device, resolved once: the GPU engine runs dry steps only (a wet scene's loading, with
-        # its pressure grid, runs on the cpu: gpu_fallback says so); made on the first dry advance
-        self.gpu = config.numerics.device == "gpu"
+        self.gpu = scene.device == "gpu"     # the GPU engine runs dry steps only (Scene.engine); made on the first dry advance
         self._layers = None
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(L.N_OBSERVABLES)
@@ -101,9 +98,7 @@ class Simulation:
     @property
     def gpu_fallback(self) -> str:
         """Why numerics.device = gpu does not run this scene's steps now ('' if it does or was not asked)."""
-        if self.gpu and self.fluid is not None:
-            return "numerics.device = gpu runs dry steps only: this wet scene loads on the cpu"
-        return ""
+        return self.scene.fallback if self.fluid is not None else ""
 
     # ---- phase -------------------------------------------------------------------------
     @property
@@ -204,7 +199,7 @@ class Simulation:
                     #  after one that changed dt the others wait and the list is rebuilt)
                 if should_stop(): break
 
-        The compaction's callbacks: compact; the loading phase's and their order:
+        The compaction phase's callbacks: driver.compaction; the loading phase's and their order:
         driver.phases.load_phase."""
         s = self.state
         first = s.step
@@ -307,44 +302,3 @@ class Simulation:
         if self._measured.get("step") != self.state.step:
             self._measured = {"step": self.state.step, "row": self.observe()}
         return dict(self._measured["row"])
-
-    # ---- compaction --------------------------------------------------------------------
-    def compact(self, on_chunk: Callable = None, start: tuple[float, int] | None = None) -> dict:
-        """Settle under the normal stress alone until the top wall and grains are still, then
-        start loading (and the fluid). Simulation.run with a stop condition and the callbacks,
-        every 100 t0 of steps counted from `start` = (time, step) where compaction began
-        (default: now), so a compaction resumed from any step ends where it would have:
-
-            "settling": guards.check (non-finite and overlap guards), observe, settle_check -> self.settling;
-                        stop when settled (min_time passed, wall and grains still) or at max_time
-            "on_chunk": on_chunk(sim, elapsed), if given
-
-        A compaction resumed on a check step runs that check first. Returns the last check's row."""
-        cfg = self.config.compaction
-        v_tol = cfg.wall_velocity_tol * self.config.loading.normal_stress
-        chunk = self.steps_for(100.0)
-        t0, step0 = start if start is not None else (self.state.time, self.state.step)
-        self.compaction_start = (t0, step0)
-        last = {"row": None, "elapsed": 0.0}
-
-        def settling(sim: Simulation):
-            check(sim)
-            row = last["row"] = sim.measure()
-            elapsed = last["elapsed"] = sim.state.time - t0
-            sim.settling = settle_check(sim.state, row["kinetic_energy"], row["wall_vz"], elapsed, v_tol, cfg.min_time)
-            if sim.settling.settled:
-                sim.compaction_settled = True
-            elif elapsed >= cfg.max_time:
-                sim.compaction_settled = False
-
-        callbacks = [Every(chunk, settling, "settling", offset=step0)]
-        if on_chunk is not None:
-            callbacks.append(Every(chunk, lambda sim: on_chunk(sim, last["elapsed"]), "on_chunk", offset=step0))
-        self.compaction_settled = None
-        if self.state.step > step0 and callbacks[0].due(self.state.step):     # resumed on a check
-            for cb in callbacks:
-                cb.action(self)
-        if self.compaction_settled is None:
-            self.run(None, callbacks, should_stop=lambda: self.compaction_settled is not None)
-        self.start_loading()
-        return last["row"]

@@ -124,7 +124,7 @@ class StickScaling(Callback):
         n = config.numerics
         self.config = config
         self.target = float(n.stick_scaling)
-        self.dt_true = choose_dt(config)
+        self.dt_true = sim.scene.dt          # the true step [t0] (config is sim.config)
         self.quiet = quiet
         p = config.packing
         self.d_mean = 0.5 * (p.diameter_min + p.diameter_max)

@@ -69,6 +69,12 @@ def snapshot_of(sim, extra: dict | None = None, attached: dict | None = None) ->
                       provenance=provenance.collect(sim.threads), attached=dict(attached or {}))
 
 
+def state_bytes(sim) -> int:
+    """Bytes of one checkpointed state of the simulation (grains, contacts, fluid grid)."""
+    fluid = sim.fluid.arrays() if sim.fluid is not None else {}
+    return sum(a.nbytes for a in sim.state.arrays().values()) + sum(a.nbytes for a in fluid.values())
+
+
 def _groups(checkpoint: Checkpoint) -> dict[str, dict[str, np.ndarray]]:
     """HDF5 group path -> arrays, the attached states included."""
     groups = {"state": checkpoint.state, "fluid": checkpoint.fluid}

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import h5py
 
+from ..config import format_override
 from ..errors import RunDirError
 from .layout import OWNED, RUN_FILE, RunLayout, runs_under
 
@@ -215,14 +216,15 @@ def latest_run(runs_root: Path = Path("runs")) -> Path:
     return max(candidates, key=lambda p: RunLayout(p).run_file.stat().st_mtime)
 
 
-def restart_command(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
+def restart_command(run_dir: Path, slip: int, perms: list[float], overrides: dict | None = None,
                     duration: float | None = None) -> str:
-    """The `gouge restart` command line that runs this fork (named in the messages of a stopped one)."""
+    """The `gouge restart` command line that runs this fork (named in the messages of a stopped one);
+    ``overrides``: {dotted key: value} (config.parse_overrides), written back as ``--set`` strings."""
     args = ["gouge", "restart", str(run_dir), "--slip", str(slip)]
     for perm in perms:
         args += ["--perm", f"{perm:g}"]
-    for o in overrides or []:
-        args += ["--set", o]
+    for key, value in (overrides or {}).items():
+        args += ["--set", format_override(key, value)]
     if duration is not None:
         args += ["--duration", f"{duration:g}"]
     return shlex.join(args)

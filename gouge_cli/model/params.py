@@ -22,11 +22,13 @@ AUTO_PARALLEL_MIN_GRAINS = 2000
 AUTO_SORT_EVERY = 20        # rebuilds between re-numberings (~900 steps at the bench scene; LAMMPS: 1000)
 
 
-def build_params(config: Config, dt: float, width: float, wall_mass: float, n_grains: int) -> np.ndarray:
+def build_params(config: Config, dt: float, width: float, wall_mass: float, n_grains: int,
+                 constants: tuple[float, float] | None = None) -> np.ndarray:
     """Kernel parameter vector (N_PARAMS,) for a scene of n_grains grains, width [d], time step
-    dt [t0] and top body mass wall_mass = m_b L_x (0: no top wall). DRIVE and BG_DAMPING are the
-    phase's (driver.simulation sets them); THREADS is set by whoever runs the kernels."""
-    c_normal, c_tangential = contact_constants(config)
+    dt [t0] and top body mass wall_mass = m_b L_x (0: no top wall); `constants` = (c_n, c_t) [E]
+    when derived already (model.scene), else timestep.contact_constants. DRIVE and BG_DAMPING are
+    the phase's (driver.simulation sets them); THREADS is set by whoever runs the kernels."""
+    c_normal, c_tangential = constants if constants is not None else contact_constants(config)
     p = np.zeros(L.N_PARAMS)
     p[L.DT] = dt
     p[L.WIDTH] = width

@@ -1,5 +1,6 @@
-"""Checks of a whole config that need more than one section: run by `gouge config`, `run` and
-`restart` before anything is written, so that a config that cannot run is exit 2 naming the key.
+"""Checks of a whole config that need more than one section: run by model.scene.Scene, which every
+Simulation is built from (`gouge config`, `run`, `restart` and a campaign's points build one before
+anything is written), so that a config that cannot run is exit 2 naming the key.
 
 * numerics.dt within the stability bound (timestep.choose_dt);
 * the packing fits its width (packing.packing_layout);

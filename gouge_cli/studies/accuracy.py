@@ -60,6 +60,7 @@ from ..errors import ConfigError
 from ..driver.guards import Guards
 from ..driver.schedules import Every
 from ..kernels import layout as L
+from ..driver.compaction import compact
 from ..driver.simulation import Simulation
 from ..errors import PhysicsError
 from ..model.timestep import slip_duration
@@ -178,7 +179,7 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
     sim = Simulation(config)
     writer = RunFile(RunLayout(work_dir).run_file, config, sim.dt)
     try:
-        sim.compact()
+        compact(sim)
         writer.append(sim.observe())
         _, recorder = load_phase(sim, writer, work_dir, sim.state.time + config.run.duration, quiet=quiet,
                                  stop_after_slip=True)

@@ -41,6 +41,7 @@ from ..kernels import layout as L
 from ..kernels import step as K
 from ..kernels.probe import stream_probe
 from ..driver.guards import check
+from ..driver.compaction import compact
 from ..driver.simulation import Simulation
 from ..model.timestep import choose_dt, slip_duration
 
@@ -62,6 +63,47 @@ class BenchRow:
     rate_max: float
     bytes_per_grain: float | None = None
     identical_to_1_thread: bool | None = None
+
+
+@dataclass
+class BenchResult:
+    """What `gouge bench` measured (rates in grain-steps/s, times in microseconds per call);
+    :func:`write_results` writes it as bench.json, :func:`gouge_cli.studies.bench_report.bench_report`
+    renders it. The parts' records are the dicts named in :func:`run_benchmark`'s helpers.
+
+    machine            cpus, numba_threads, threads timed, NUMBA_CPU_NAME / _FEATURES
+    provenance         io.provenance.collect of the process
+    dt, skin           the bench scene's step [t0] and Verlet skin [d]
+    peak_rss_mb        the process's peak resident memory [MB]
+    rows               one BenchRow per code, size and thread count
+    lammps             timed, requested, max_grains, missing (why a row is absent), install
+    fluid              fluid_share records (undrained against dry rates)
+    fluid_profile_us   profile_fluid records (one fluid update's parts)
+    profile_us         profile_step records (one step's parts) with n_grains and threads
+    allocations        numba runtime allocations per step, by size and thread count
+    footprint          footprint_profile records (contact pass on the first m grains)
+    scaling            paired thread scaling and the machine probe's, by size
+    run24              run24_projection (None: not projected)
+    """
+
+    machine: dict
+    provenance: dict
+    dt: float
+    skin: float
+    peak_rss_mb: float
+    rows: list[BenchRow]
+    lammps: dict
+    fluid: list[dict]
+    fluid_profile_us: list[dict]
+    profile_us: list[dict]
+    allocations: list[dict]
+    footprint: list[dict]
+    scaling: list[dict]
+    run24: dict | None
+
+    def to_dict(self) -> dict:
+        """The JSON record (bench.json)."""
+        return asdict(self)
 
 
 def bench_config(n_grains: int, dt: float, skin: float, permeability: float | None = None, solver: str = "auto"):
@@ -101,7 +143,7 @@ def prepare(n_grains: int, dt: float, skin: float, cache: Path | None = None) ->
             sim = Simulation(bench_config(n_grains, dt, skin), arrays=arrays)
             return sim, sim.state.arrays()
     sim = Simulation(bench_config(n_grains, dt, skin))
-    sim.compact()
+    compact(sim)
     sim.advance(int(80 * sim.state.width))
     check(sim)
     start = sim.state.arrays()
@@ -439,7 +481,7 @@ def run24_projection(rates: dict) -> dict:
     (pi sqrt(m_b / k)), from grain-steps/s measured at that scene's size and time step."""
     config = run24_config()
     sim = Simulation(config)
-    dt = choose_dt(config)
+    dt = sim.scene.dt
     slip = slip_duration(config, sim.wall_mass_per_length)
     n = sim.state.n
     out = {"n_grains": n, "dt": dt, "cycle_t0": RUN24_CYCLE, "slip_t0": slip, "by_threads": {}}
@@ -461,7 +503,7 @@ def run24_projection(rates: dict) -> dict:
 def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int = 3, dt: float = 0.89,
                   skin: float = 0.2, lammps: bool = True, lammps_styles=("granular", "hh"),
                   permeability: float | None = 1e-5, lammps_max: int = 40000, cache: Path | None = None,
-                  profile: bool = True, projection: bool = True) -> dict:
+                  profile: bool = True, projection: bool = True) -> BenchResult:
     all_threads = numba.config.NUMBA_NUM_THREADS
     threads = sorted({min(max(int(t), 1), all_threads) for t in threads}) if threads else sorted({1, all_threads})
     rows: list[BenchRow] = []
@@ -517,27 +559,28 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
                     else:
                         lammps_notes.append({"code": f"lammps-{style}", "n_grains": n, "threads": t,
                                              "reason": reason})
-    return {
-        "machine": {"cpus": os.cpu_count(), "numba_threads": all_threads, "threads": threads,
-                    "numba_cpu_name": os.environ.get("NUMBA_CPU_NAME") or "host",
-                    "numba_cpu_features": os.environ.get("NUMBA_CPU_FEATURES") or "host"},
-        "provenance": provenance.collect(all_threads),
-        "dt": dt, "skin": skin,
-        "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
-        "rows": [asdict(r) for r in rows],
-        "lammps": {"timed": lammps and any(r.code.startswith("lammps") for r in rows),
-                   "requested": lammps, "max_grains": lammps_max, "missing": lammps_notes,
-                   "install": LAMMPS_INSTALL},
-        "fluid": fluid,
-        "fluid_profile_us": fluid_parts,
-        "profile_us": profiles,
-        "allocations": allocations,
-        "footprint": footprint,
-        "scaling": scaling,
-        "run24": run24,
-    }
+    return BenchResult(
+        machine={"cpus": os.cpu_count(), "numba_threads": all_threads, "threads": threads,
+                 "numba_cpu_name": os.environ.get("NUMBA_CPU_NAME") or "host",
+                 "numba_cpu_features": os.environ.get("NUMBA_CPU_FEATURES") or "host"},
+        provenance=provenance.collect(all_threads),
+        dt=dt, skin=skin,
+        peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+        rows=rows,
+        lammps={"timed": lammps and any(r.code.startswith("lammps") for r in rows),
+                "requested": lammps, "max_grains": lammps_max, "missing": lammps_notes,
+                "install": LAMMPS_INSTALL},
+        fluid=fluid,
+        fluid_profile_us=fluid_parts,
+        profile_us=profiles,
+        allocations=allocations,
+        footprint=footprint,
+        scaling=scaling,
+        run24=run24,
+    )
 
 
-def write_results(results: dict, path: Path):
+def write_results(results: BenchResult, path: Path):
+    """bench.json: the result's JSON record."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(results, indent=2))
+    path.write_text(json.dumps(results.to_dict(), indent=2))

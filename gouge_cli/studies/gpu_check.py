@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 from ..config import build_config
+from ..driver import compaction
 from ..driver.simulation import Simulation
 from ..kernels import layout as L
 from ..model.gpu_layers import Layers
@@ -35,7 +36,7 @@ def scene(n_grains: int, width: float, seed: int = 1, kick: float = 0.05, sort_e
                                    "compaction": {"min_time": 100.0, "max_time": 400.0},
                                    "loading": {"spring_constant": 2e-4, "velocity": 4e-3}}))
     if compact:
-        sim.compact()
+        compaction.compact(sim)
     s = sim.state
     free = s.body == L.FREE
     rng = np.random.default_rng(seed)

@@ -19,6 +19,7 @@ import argparse
 import json
 
 from ..config import build_config
+from ..driver.compaction import compact
 from ..driver.simulation import Simulation
 from ..io.provenance import sim_hash
 from ..kernels.layout import S_EXPLICIT_UPDATES, S_UPDATES
@@ -43,7 +44,7 @@ def reference_run(kind: str, threads: int = 1) -> dict:
     threads and return {"scene", "hash", "updates", "explicit_updates"} (fluid update counts, 0 dry)."""
     sim = Simulation(reference_config(kind))
     sim.threads = threads
-    sim.compact()                 # (ends with start_loading, which starts the fluid)
+    compact(sim)                 # (ends with start_loading, which starts the fluid)
     sim.advance(LOADING_STEPS)
     updates = explicit = 0
     if sim.fluid is not None:

@@ -66,6 +66,7 @@ def _run_rung(config: Config, packing, lam: float, out_dir: Path) -> dict:
     from ..io.layout import RunLayout
     from ..io.runfile import RunFile, RunReader, attr_value
     from ..driver.phases import load_phase
+    from ..driver.compaction import compact
     from ..driver.simulation import Simulation
 
     cfg = build_config(config.to_dict(), {"numerics.stick_scaling": float(lam), "numerics.stick_inertial_max": 0.1,
@@ -165,6 +166,7 @@ def run_ladder(config: Config, lambdas: list[float], seeds: int, out_dir: Path, 
     scaling_ladder.csv and scaling_ladder.png; returns summarize()'s dict plus the runs (those
     summarized). `keep`: reuse the runs of out_dir/scaling_runs.json (module docstring)."""
     from ..io.checkpoint import snapshot_of
+    from ..driver.compaction import compact
     from ..driver.simulation import Simulation
 
     out_dir = Path(out_dir)
@@ -179,7 +181,7 @@ def run_ladder(config: Config, lambdas: list[float], seeds: int, out_dir: Path, 
             continue
         cfg = build_config(config.to_dict(), {"seed": seed, "numerics.threads": 1, "numerics.stick_scaling": 1.0})
         sim = Simulation(cfg)
-        sim.compact()
+        compact(sim)
         packing = snapshot_of(sim)
         for lam in todo:
             r = _run_rung(cfg, packing, lam, out_dir / f"lam_{lam:g}" / f"seed_{seed}")

@@ -153,13 +153,14 @@ def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration:
     """Dask task: drained + undrained branches of one slip (:func:`gouge_cli.workflows.fork.run_fork`),
     started afresh from the slip checkpoint (any partial branches of a lost attempt are replaced),
     then the fork's pair.json (the one pair definition, :mod:`gouge_cli.workflows.pairs`)."""
-    from .fork import run_fork
+    from .fork import ForkRequest, run_fork
     from .pairs import write_pair_json
 
     run_dir = Path(run_dir)
 
     def body():
-        summary = run_fork(run_dir, slip, list(permeabilities), None, duration, force=True, quiet=True)
+        summary = run_fork(ForkRequest(run_dir, slip, tuple(permeabilities), duration=duration, force=True),
+                           quiet=True)
         write_pair_json(RunLayout(run_dir).fork(slip).root)
         return {"branches": {k: b["status"] for k, b in summary["branches"].items()}}
 

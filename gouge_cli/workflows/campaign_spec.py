@@ -20,7 +20,7 @@ Validated by pydantic models with ``extra="forbid"`` (unknown keys are refused, 
 an empty ``sweep``, ``sweep.grid`` or ``sweep.points`` is refused, naming it. The sweep is counted
 before it is expanded, (grid product + listed points) x seeds, and refused above ``max_points``
 (top-level key, default MAX_POINTS; ``gouge campaign --max-points N`` overrides it). Every point's
-config is validated and pre-flighted (:func:`~gouge_cli.model.preflight.check_config`) too, so a
+config is validated and pre-flighted (:class:`~gouge_cli.model.scene.Scene`) too, so a
 bad override stops the campaign before anything runs. A point's directory name is derived from
 its overrides but never read back: what a point contains is in its state-point file (see
 :mod:`gouge_cli.workflows.campaign`).
@@ -43,7 +43,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from ..config import MAX_FILE_BYTES, Config, find_config, load_config, not_a_file
 from ..errors import ConfigError, SpecError
-from ..model.preflight import check_config
+from ..model.scene import Scene
 
 
 #: Most sweep points a campaign expands unless its spec's ``max_points`` (or --max-points) says otherwise.
@@ -291,7 +291,7 @@ def expand(spec: CampaignSpec, spec_path: Path) -> list[Point]:
             seen.add(name)
             try:
                 config = load_config(base, {**spec.set, **overrides, "name": name})
-                check_config(config)
+                Scene(config)       # the preflight checks
             except ConfigError as exc:
                 raise SpecError(f"sweep point {overrides} (base {base}): {exc}") from None
             points.append(Point(name, overrides, config, base, dict(spec.set)))

@@ -15,8 +15,9 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from ..io.layout import RunLayout, branch_name
 from ..io import provenance
@@ -25,7 +26,7 @@ from ..config import build_config, Config
 from ..errors import ConfigError, InputError, NoSpaceError, PhysicsFailure
 from ..driver.slips import lead_time
 from ..io.runfile import RunFile, RunReader, slip_catalog
-from ..model.preflight import check_config
+from ..model.scene import Scene
 from ..errors import RunDirError
 from ..io.outputs import remove_temps, require_space, temporary
 from ..io.rundir import SPACE_MARGIN, check_run_dir, refuse_if_in_progress, restart_command, RunLock
@@ -91,8 +92,50 @@ def check_perms(perms) -> None:
             raise ConfigError(f"--perm = {perm:g}: the permeability prefactor kappa_c must be a positive number [d^2]")
 
 
+def check_main(main: str) -> None:
+    """ConfigError unless `main` names a compared event: 'first' (the forked slip) or 'largest'."""
+    if main not in ("first", "largest"):
+        raise ConfigError(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
+
+
+@dataclass(frozen=True)
+class ForkRequest:
+    """One fork (`gouge restart` and :func:`gouge_cli.api.restart` both build it), checked when built
+    (ConfigError naming the option).
+
+    run_dir    the parent run directory
+    slip       the slip whose pre-slip checkpoint the branches start from
+    perms      kappa_c [d^2] of the undrained branches (none: the drained branch alone)
+    overrides  {dotted key: value} for every branch (config.parse_overrides of the ``--set`` strings)
+    duration   [t0] each branch runs from the checkpoint; None: until its first slip ends
+    force      run finished branches again
+    main       the event pair.json compares: 'first' (the forked slip) or 'largest'
+    """
+
+    run_dir: Path
+    slip: int
+    perms: tuple[float, ...] = ()
+    overrides: dict[str, Any] = field(default_factory=dict)
+    duration: float | None = None
+    force: bool = False
+    main: str = "first"
+
+    def __post_init__(self):
+        object.__setattr__(self, "run_dir", Path(self.run_dir))
+        object.__setattr__(self, "perms", tuple(float(p) for p in self.perms))
+        object.__setattr__(self, "overrides", dict(self.overrides or {}))
+        check_perms(self.perms)
+        if self.duration is not None and not (self.duration > 0 and math.isfinite(self.duration)):
+            raise ConfigError(f"--duration = {self.duration:g}: give a positive, finite time [t0]")
+        check_main(self.main)
+
+    def command(self) -> str:
+        """The `gouge restart` line that runs this fork (named when one stops)."""
+        return restart_command(self.run_dir, self.slip, list(self.perms), self.overrides, self.duration)
+
+
 def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | None = None,
-               overrides: list[str] | None = None, live=None, quiet: bool = False,
+               overrides: dict[str, Any] | None = None, live=None, quiet: bool = False,
                stop_after_slip: bool | None = None, checkpoint=None, command: str | None = None) -> BranchResult:
     """Run one branch (drained: ``perm=None``) of slip ``slip`` into ``RUN/forks/slip_NNN/<branch>``.
 
@@ -104,6 +147,7 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     The branch directory is locked while it runs (so branches of one run may run in parallel),
     and the run itself must not be in progress. Dense
     snapshots while the branch slips: output.slip_frames, FORK_SLIP_FRAMES unless overridden.
+    ``overrides``: {dotted key: value} (config.parse_overrides).
     ``checkpoint``: the slip's checkpoint read already with these overrides (its arrays are copied
     into the branch's scene, never changed), so that a fork reads it once.
     """
@@ -111,10 +155,10 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     refuse_if_in_progress(run_dir, f"restart --slip {slip}")
     entry = fork_entry(run_dir, slip)
     ck = checkpoint if checkpoint is not None else read_checkpoint(run_dir / entry["checkpoint"], overrides)
-    frames = {} if any(o.split("=")[0].strip() == "output.slip_frames" for o in overrides or []) \
+    frames = {} if "output.slip_frames" in (overrides or {}) \
         else {"output": {"slip_frames": ck.config.output.slip_frames or FORK_SLIP_FRAMES}}
-    config = branch_config(ck.config, perm, frames)
-    check_config(config)
+    scene = Scene(branch_config(ck.config, perm, frames))
+    config = scene.config
     name = branch_name(perm)
     duration_given = duration
     if stop_after_slip is None:
@@ -129,16 +173,17 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     then = command or restart_command(run_dir, slip, [perm] if perm is not None else [], overrides, duration_given)
     with RunLock(out_dir, f"gouge restart --slip {slip} ({name})", then=then):
         remove_temps(RunLayout(out_dir).run_file)       # of a killed earlier try (locked: none is live)
-        return _run_branch(run_dir, slip, entry, ck, config, name, out_dir, duration, stop_after_slip, live, quiet)
+        return _run_branch(run_dir, slip, entry, ck, scene, name, out_dir, duration, stop_after_slip, live, quiet)
 
 
-def _run_branch(run_dir: Path, slip: int, entry: dict, ck: Checkpoint, config: Config, name: str, out_dir: Path,
+def _run_branch(run_dir: Path, slip: int, entry: dict, ck: Checkpoint, scene: Scene, name: str, out_dir: Path,
                 duration: float, stop_after_slip: bool, live, quiet: bool) -> BranchResult:
     """Drive the branch into a temporary file that becomes ``run.h5`` only once closed (finished,
     interrupted, or failed physically: 'failed: ...', the branch's record); a crash or a full disk
     (the error raised) leaves ``run.h5`` as it was, an earlier finished one whole (io.outputs.temporary)."""
     t0 = time.perf_counter()
-    sim = Simulation(config, arrays=ck.state)
+    sim = Simulation(scene, arrays=ck.state)
+    config = scene.config
     step0 = sim.state.step
     failure = None
     with temporary(RunLayout(out_dir).run_file) as tmp:
@@ -165,11 +210,11 @@ def _run_branch(run_dir: Path, slip: int, entry: dict, ck: Checkpoint, config: C
     return BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first)
 
 
-def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
-             duration: float | None = None, force: bool = False, live=None, quiet=False) -> dict:
-    """Fork the drained branch and one undrained branch per permeability from slip `slip`.
+def run_fork(request: ForkRequest, live=None, quiet=False) -> dict:
+    """Fork the drained branch and one undrained branch per permeability from slip ``request.slip``,
+    reading its checkpoint once.
 
-    Without ``force`` only the branches not finished yet are run (new permeabilities added to an
+    Without ``request.force`` only the branches not finished yet are run (new permeabilities added to an
     existing fork, or a branch interrupted, stopped by a full disk or killed); the finished ones are
     kept, and a fork whose requested branches have all finished is refused.
     A branch stopped by Ctrl-C stops the fork (KeyboardInterrupt, naming the command that finishes
@@ -178,11 +223,11 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     Returns ``{"run", "slip", "start_time", "branches": {name: {status, dir, wall_seconds, steps,
     first_slip}}, "library_differences_from_parent"}`` (first_slip: the detector's record of the
     branch's first slip; paths relative to the fork directory)."""
-    run_dir = check_run_dir(run_dir)
+    slip, perms, force = request.slip, list(request.perms), request.force
+    run_dir = check_run_dir(request.run_dir)
     refuse_if_in_progress(run_dir, f"restart --slip {slip}")
     entry = fork_entry(run_dir, slip)
-    check_perms(perms)
-    ck = read_checkpoint(run_dir / entry["checkpoint"], overrides)
+    ck = read_checkpoint(run_dir / entry["checkpoint"], request.overrides)
     note = provenance.risk_line(ck.provenance, f"the checkpoint of slip {slip}")
     if note:
         print(note, file=sys.stderr, flush=True)
@@ -191,21 +236,21 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
               file=sys.stderr, flush=True)
     fork = RunLayout(run_dir).fork(slip)
     fork_dir = fork.root
-    names = [None] + list(perms)
+    names = [None] + perms
     finished = {p: branch_status(fork.branch(p).root) == "finished" for p in names}
     if all(finished.values()) and not force:
         last = fork.branch(names[-1]).run_file
         raise RunDirError(f"{last} exists (finished); pass --force to run this branch again")
     kept = [] if force else [_finished_branch(fork_dir, p) for p in names if finished[p]]
     branches = names if force else [p for p in names if not finished[p]]
-    command = restart_command(run_dir, slip, perms, overrides, duration)
+    command = request.command()
     results = []
     for perm in branches:
         stopped = (f"interrupted: branch {branch_name(perm)} of slip {slip} stopped; no pair was classified. "
                    f"Run `{command}` again to finish the fork (no --force needed)")
         try:
-            r = run_branch(run_dir, slip, perm, duration, overrides, live=live, quiet=quiet, checkpoint=ck,
-                           command=command)
+            r = run_branch(run_dir, slip, perm, request.duration, request.overrides, live=live, quiet=quiet,
+                           checkpoint=ck, command=command)
         except KeyboardInterrupt:       # Ctrl-C outside the step loop (set-up, compilation, closing)
             raise KeyboardInterrupt(stopped) from None
         except OSError as exc:
@@ -227,25 +272,23 @@ def run_fork(run_dir: Path, slip: int, perms: list[float], overrides: list[str] 
     return summary
 
 
-def restart(run_dir: Path, slip: int, perms: list[float], overrides: list[str] | None = None,
-            duration: float | None = None, force: bool = False, main: str = "first", live=None,
-            quiet: bool = False) -> dict:
+def restart(request: ForkRequest, live=None, quiet: bool = False) -> dict:
     """`gouge restart` and :func:`gouge_cli.api.restart`: :func:`run_fork`, then, with
     permeabilities, the fork's pair.json (its record also under "pair" in the returned summary)."""
     from .pairs import write_pair_json
 
-    fork_dir = RunLayout(run_dir).fork(slip).root
+    fork_dir = RunLayout(request.run_dir).fork(request.slip).root
     try:
-        summary = run_fork(run_dir, slip, perms, overrides, duration, force=force, live=live, quiet=quiet)
+        summary = run_fork(request, live=live, quiet=quiet)
     except PhysicsFailure:
-        if perms:        # the failed branch is reported as failed in pair.json, with its message
+        if request.perms:        # the failed branch is reported as failed in pair.json, with its message
             try:
-                write_pair_json(fork_dir, main)
+                write_pair_json(fork_dir, request.main)
             except (InputError, OSError):
                 pass
         raise
-    if perms:
-        summary["pair"] = write_pair_json(fork_dir, main)
+    if request.perms:
+        summary["pair"] = write_pair_json(fork_dir, request.main)
     return summary
 
 

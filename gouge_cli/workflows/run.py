@@ -18,9 +18,9 @@ from ..kernels import layout as L
 from ..io.layout import RunLayout
 from ..io.runfile import RunFile
 from ..io.verify import continued_problems
-from ..model.params import choose_threads
-from ..model.preflight import check_config
-from ..driver.phases import compaction_phase, load_phase
+from ..model.scene import Scene
+from ..driver.compaction import compaction_phase
+from ..driver.phases import load_phase
 from ..errors import RunDirError
 from ..io.outputs import require_space
 from ..io.rundir import SPACE_MARGIN, check_run_dir, open_run_file, prepare_run_dir, restart_command, RunLock
@@ -54,9 +54,9 @@ def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=
     recorder = None
     try:
         if sim.phase == L.COMPACTION:
-            compaction_phase(sim, out_dir, live, quiet, resume_from)        # (ends with the fluid started)
-            writer.set_attr("compaction_settled", bool(sim.compaction_settled))
-            if not sim.compaction_settled:
+            settling = compaction_phase(sim, out_dir, live, quiet, resume_from)     # (ends with the fluid started)
+            writer.set_attr("compaction_settled", bool(settling.settled))
+            if not settling.settled:
                 print(f"warning: compaction did not settle within compaction.max_time = "
                       f"{config.compaction.max_time:g} t0 (top wall or grains still moving); loading starts "
                       "anyway. Raise compaction.max_time, or compaction.damping, for a settled start.",
@@ -99,10 +99,12 @@ def stopped_by_os_error(writer: RunFile, err: BaseException) -> BaseException:
     return cause
 
 
-def _new_run(config: Config, out_dir: Path, live, quiet, label) -> RunResult:
-    """Write config.yaml and a fresh run.h5 into out_dir (locked by the caller) and drive it."""
-    RunLayout(out_dir).config_file.write_text(dump_config(config))
-    sim = Simulation(config)
+def _new_run(scene: Scene | Config, out_dir: Path, live, quiet, label) -> RunResult:
+    """Write config.yaml and a fresh run.h5 into out_dir (locked by the caller) and drive it
+    (a Config is checked into its Scene first: nothing is written for one that cannot run)."""
+    scene = scene if isinstance(scene, Scene) else Scene(scene)
+    RunLayout(out_dir).config_file.write_text(dump_config(scene.config))
+    sim = Simulation(scene)
     return _drive(sim, _fresh_run_file(sim, out_dir), out_dir, live=live, quiet=quiet, label=label)
 
 
@@ -123,7 +125,8 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
     ``confirm(note)``: asked before a long run (preflight's note) starts; False refuses it
     (ConfigError) with nothing written."""
     out_dir = Path(out_dir)
-    pre = check_config(config, choose_threads(config.numerics.threads, config.packing.n_grains))
+    scene = Scene(config)
+    pre = scene.preflight
     if pre.note and confirm is not None and not confirm(pre.note):
         raise ConfigError(f"not started (nothing was written): {pre.note.removeprefix('note: ')}")
     for line in (pre.note, pre.warning):
@@ -132,7 +135,7 @@ def run_scene(config: Config, out_dir: Path, force: bool = False, live: bool | N
     require_space(out_dir, start_bytes(config), f"the start of run {config.name}",
                   "run the same `gouge run` again (nothing was written)")
     with prepare_run_dir(out_dir, force):
-        return _new_run(config, out_dir, live, quiet, f"loading {config.name}")
+        return _new_run(scene, out_dir, live, quiet, f"loading {config.name}")
 
 
 def start_bytes(config: Config) -> float:

@@ -38,7 +38,7 @@ from ..io.checkpoint import read_checkpoint
 from ..config import load_config
 from ..errors import ConfigError, NoSpaceError, StudyInterrupted
 from ..io.runfile import slip_catalog
-from .fork import check_perms, run_branch
+from .fork import check_main, check_perms, run_branch
 from ..errors import RunDirError
 from ..io.layout import RunLayout, branch_name, perm_text
 from ..io.rundir import check_run_dir
@@ -124,7 +124,7 @@ class StudyResult:
     loading: str = ""
 
 
-def _loading_run(target: Path, out: Path | None, overrides: list[str] | None, quiet: bool,
+def _loading_run(target: Path, out: Path | None, overrides: dict | None, quiet: bool,
                  confirm=None) -> tuple[Path, str]:
     """Step 1: the run directory, running or resuming the loading run when needed."""
     target = Path(target)
@@ -185,15 +185,14 @@ def _select(run_dir: Path, wanted: list[int] | None) -> tuple[list[int], set[int
 
 
 def run_study(target: Path, perms: list[float], slips: list[int] | None = None, main: str = "first",
-              jobs: int | None = None, out: Path | None = None, overrides: list[str] | None = None,
+              jobs: int | None = None, out: Path | None = None, overrides: dict | None = None,
               quiet: bool = False, figures: bool = True, on_progress=None, confirm=None) -> StudyResult:
     """Run steps 1-4 (see the module docstring); returns what was run, skipped and found.
     ``confirm``: asked before a long loading run starts (:func:`~gouge_cli.workflows.run.run_scene`)."""
     if not perms:
         raise ConfigError("give at least one --perm K (kappa_c in d^2, e.g. --perm 1e-5)")
     check_perms(perms)
-    if main not in ("first", "largest"):
-        raise ConfigError(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
+    check_main(main)
     say = on_progress or (lambda msg: None)
     run_dir, how = _loading_run(target, out, overrides, quiet, confirm)
     say(f"loading run {run_dir}: {how}")

@@ -48,7 +48,7 @@ def test_type_thresholds(diff, expected):
 
 def test_slow_slip_below_trigger_is_reported_with_its_peak():
     # run thresholds of the demo: trigger 5 V_s, extent 1.5 V_s -> slow trigger 3 V_s
-    d = PairDefinition(start_factor=5.0, end_factor=1.5)
+    d = PairDefinition().with_(start_factor=5.0, end_factor=1.5)
     assert d.slow_trigger == 3.0
     r = classify(0.22, 0.23, bump(25.0, DUR * 2, 3.3 * V), definition=d)
     assert r.undrained_event == SLOW and r.criteria["slow"] and r.type == "II-C"
@@ -63,7 +63,11 @@ def test_slow_slip_below_trigger_is_reported_with_its_peak():
 
 def test_definition_reads_run_thresholds_and_refuses_bad_main():
     d = PairDefinition.for_run({"start_factor": 5.0, "end_factor": 1.5, "merge_gap": 300.0}, main="largest")
-    assert (d.start_factor, d.end_factor, d.merge_gap, d.main) == (5.0, 1.5, 300.0, "largest")
+    assert (d.slips.start_factor, d.slips.end_factor, d.slips.merge_gap, d.main) == (5.0, 1.5, 300.0, "largest")
+    assert d.rule(2e-3) == d.slips.with_(V_s=2e-3) and d.rule(2e-3).hi == 5.0 * 2e-3
+    flat = d.to_dict()
+    assert (flat["start_factor"], flat["merge_gap"], flat["main"], flat["slow_trigger"]) == (5.0, 300.0, "largest", 3.0)
+    assert "slips" not in flat
     with pytest.raises(ValueError, match="main"):
         PairDefinition(main="biggest")
 

@@ -18,7 +18,7 @@ from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT, EXIT_PHYSICS
 from gouge_cli.config import load_config
 from gouge_cli.errors import ConfigError
-from gouge_cli.driver.guards import guarded_run
+from gouge_cli.driver.phases import guarded_run
 from gouge_cli.kernels import layout as L
 from gouge_cli.driver.simulation import Simulation
 from gouge_cli.errors import PhysicsError

@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from gouge_cli.config import build_config, load_config
+from gouge_cli.config import build_config, format_override, load_config, parse_overrides
 from gouge_cli.errors import ConfigError
 from gouge_cli.model.timestep import choose_dt, stability_bound
 
@@ -133,6 +133,17 @@ def test_dotted_overrides():
         build_config({}, ["material.friction"])
     with pytest.raises(ConfigError, match="not a section"):
         build_config({"seed": 1}, ["seed.value=3"])
+
+
+def test_set_strings_are_parsed_once_and_written_back_the_same():
+    sets = ["material.friction=0.3", "loading.normal_stress=24 MPa", "fluid.solver = auto", "output.slip_frames=12"]
+    parsed = parse_overrides(sets)
+    assert parsed == {"material.friction": 0.3, "loading.normal_stress": "24 MPa", "fluid.solver": "auto",
+                      "output.slip_frames": 12}
+    assert parse_overrides([format_override(k, v) for k, v in parsed.items()]) == parsed
+    assert build_config({}, parsed) == build_config({}, sets)
+    with pytest.raises(ConfigError, match="dotted name"):
+        parse_overrides(["material..friction=1"])
 
 
 def test_overrides_do_not_mutate_input():

@@ -10,9 +10,11 @@ import pytest
 
 from gouge_cli.config import build_config
 from gouge_cli.driver.guards import (FluidSubstepGuard, Guards, KineticEnergyGuard, NonFiniteGuard, OverlapGuard, Scan,
-                              guard_callbacks, guarded_run)
+                              guard_callbacks)
+from gouge_cli.driver.phases import guarded_run
 from gouge_cli.driver.schedules import Every
 from gouge_cli.kernels import layout as L
+from gouge_cli.driver.compaction import compact
 from gouge_cli.driver.simulation import Simulation
 from gouge_cli.errors import PhysicsError
 from gouge_cli.model.timestep import stability_bound
@@ -26,7 +28,7 @@ SCENE = {"packing": {"n_grains": 200, "width": 12}, "seed": 4,
 def loaded():
     """A compacted 200-grain layer loaded for 200 t0 (dry): config and state arrays."""
     sim = Simulation(build_config(SCENE))
-    sim.compact()
+    compact(sim)
     sim.run(200.0)
     return sim.config, sim.state.arrays()
 

@@ -29,13 +29,14 @@ SCRIPT = """
 import json, sys
 from gouge_cli.config import build_config
 from gouge_cli.io.provenance import sim_hash
+from gouge_cli.driver.compaction import compact
 from gouge_cli.driver.simulation import Simulation
 from gouge_cli.kernels.layout import S_EXPLICIT_UPDATES
 data = json.loads(sys.argv[1])
 threads = int(sys.argv[2])
 sim = Simulation(build_config(data))
 sim.threads = threads
-sim.compact()
+compact(sim)
 sim.start_fluid()
 sim.advance(1500)
 print(json.dumps({"hash": sim_hash(sim), "mass": sim.state.mass.tobytes().hex()[:64], "dt": sim.dt,

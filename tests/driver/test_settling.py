@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -14,6 +15,8 @@ from gouge_cli.config import build_config
 from gouge_cli.driver.progress import SettleReport, format_eta
 from gouge_cli.io.provenance import sim_hash
 from gouge_cli.driver.settling import SettleCheck, SettleTracker
+from gouge_cli.driver.callbacks import Callback
+from gouge_cli.driver.compaction import Settling, compact
 from gouge_cli.driver.simulation import Simulation
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}}     # default compaction: min_time 500, max_time 50,000 t0
@@ -71,19 +74,20 @@ def test_progress_and_eta_on_a_small_scene(single_thread):
     finite and its median within a factor 4 of the actual wall time left. Observing changes no bit."""
     config = build_config(SCENE)
     plain = Simulation(config)
-    plain.compact()
+    compact(plain)
     sim = Simulation(config)
     tracker = SettleTracker(config.compaction.max_time)
     rows = []
     t_wall = time.perf_counter()
 
-    def observe(s, elapsed):
-        assert s.settling.elapsed == elapsed
-        out = tracker.update(s.settling, time.perf_counter() - t_wall)
-        rows.append((elapsed, time.perf_counter() - t_wall, out))
+    def observe(s, settling):
+        assert settling.check.elapsed == s.state.time - settling.start[0]
+        out = tracker.update(settling.check, time.perf_counter() - t_wall)
+        rows.append((settling.check.elapsed, time.perf_counter() - t_wall, out))
 
-    sim.compact(on_chunk=observe)
-    assert sim.compaction_settled and sim_hash(sim) == sim_hash(plain)
+    settling = Settling(sim)
+    compact(sim, [OnCheck(settling, observe)], settling)
+    assert settling.settled and sim_hash(sim) == sim_hash(plain)
     end_t, end_wall = rows[-1][0], rows[-1][1]
     fractions = np.array([out["fraction"] for _, _, out in rows])
     assert fractions[-1] == 1.0 and (fractions[:-1] < 1.0).all()
@@ -108,20 +112,36 @@ def test_compaction_resumed_on_a_check_ends_where_it_would_have(single_thread):
     plain = Simulation(config)
     checks, saved = [], {}
 
-    def keep(s, elapsed):
-        checks.append((s.state.step, elapsed, s.settling.settled))
+    def keep(s, settling):
+        checks.append((s.state.step, settling.check.elapsed, settling.check.settled))
         if len(checks) == 2:
-            saved.update(arrays=s.state.arrays(), start=s.compaction_start)
+            saved.update(arrays=s.state.arrays(), state=settling.state_dict())
 
-    plain.compact(on_chunk=keep)
-    assert len(checks) > 3 and checks[-1][2] and plain.compaction_settled
+    settling = Settling(plain)
+    assert compact(plain, [OnCheck(settling, keep)], settling) is settling
+    assert len(checks) > 3 and checks[-1][2] and settling.settled
     assert [c[0] for c in checks] == [(k + 1) * plain.steps_for(100.0) for k in range(len(checks))]
     resumed = Simulation(config, arrays=saved["arrays"])
     again = []
-    resumed.compact(on_chunk=lambda s, elapsed: again.append((s.state.step, elapsed, s.settling.settled)),
-                    start=saved["start"])
-    assert again == checks[1:] and resumed.compaction_settled
+    restored = Settling(resumed)            # (a checkpoint before the callback model: its legacy key)
+    restored.restore(SimpleNamespace(extra={"phase": "compaction", "compaction_start": saved["state"]["start"]}))
+    assert restored.start == settling.start
+    compact(resumed, [OnCheck(restored, lambda s, st: again.append((s.state.step, st.check.elapsed,
+                                                                     st.check.settled)))], restored)
+    assert again == checks[1:] and restored.settled
     assert sim_hash(resumed) == sim_hash(plain)
+
+
+class OnCheck(Callback):
+    """fn(sim, settling) on each of compaction's checks."""
+
+    name = "observe"
+
+    def __init__(self, settling, fn):
+        self.settling, self.fn = settling, fn
+
+    def act(self, sim):
+        self.fn(sim, self.settling)
 
 
 def test_run_progress_eta_leaves_out_the_compile(monkeypatch, capsys):

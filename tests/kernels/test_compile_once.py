@@ -22,6 +22,7 @@ from gouge_cli.io.checkpoint import read_checkpoint, snapshot_of, write_checkpoi
 from gouge_cli.config import build_config
 from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K
+from gouge_cli.driver.compaction import compact
 from gouge_cli.driver.simulation import Simulation
 from gouge_cli.model.state import State
 
@@ -66,10 +67,10 @@ def reference():
     before = numba.get_num_threads()
     numba.set_num_threads(1)
     dry = Simulation(build_config(SCENE))
-    dry.compact()
+    compact(dry)
     step_and_observe(dry)
     wet = Simulation(build_config(WET))
-    wet.compact()
+    compact(wet)
     wet.start_fluid()
     step_and_observe(wet)
     start = dry.state.arrays()
@@ -99,7 +100,7 @@ def test_restarts_and_forks_reuse_the_compiled_kernels(reference, tmp_path):
     compacting = Simulation(build_config(SCENE))
     ck = via_hdf5(compacting, tmp_path / "compaction.h5", {"phase": "compaction"})
     resumed = Simulation(ck.config, arrays=ck.state)
-    resumed.compact()
+    compact(resumed)
     step_and_observe(resumed)
     assert_no_new(sigs, "a compaction resumed from its checkpoint")
 

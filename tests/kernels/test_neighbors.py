@@ -15,6 +15,7 @@ import pytest
 from gouge_cli.config import build_config
 from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K
+from gouge_cli.driver.compaction import compact
 from gouge_cli.driver.simulation import Simulation
 
 
@@ -62,7 +63,7 @@ def compacted():
     """A ~600-grain packing with rough walls after (shortened) compaction under sigma."""
     cfg = build_config({"packing": {"n_grains": 600}, "compaction": {"min_time": 500, "max_time": 1500}})
     sim = Simulation(cfg)
-    sim.compact()
+    compact(sim)
     return sim
 
 

@@ -15,6 +15,7 @@ from needs import skip_unless_two_threads
 from gouge_cli.workflows.fork import branch_config
 from gouge_cli.kernels.layout import K_REBUILDS, THREADS
 from gouge_cli.model.params import numba_threads
+from gouge_cli.driver.compaction import compact
 from gouge_cli.driver.simulation import Simulation
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}, "seed": 3,
@@ -26,7 +27,7 @@ SCENE = {"packing": {"n_grains": 300, "width": 15}, "seed": 3,
 def sheared():
     """A compacted packing sheared for 3000 t0 (dry); returns its config and state arrays."""
     sim = Simulation(build_config(SCENE))
-    sim.compact()
+    compact(sim)
     sim.advance(sim.steps_for(3000.0))
     return sim.config, sim.state.arrays()
 
@@ -153,9 +154,10 @@ def test_fluid_bits_do_not_depend_on_advance_calls(sheared):
 DRY_PROBE = """
 import sys
 from gouge_cli.config import build_config
+from gouge_cli.driver.compaction import compact
 from gouge_cli.driver.simulation import Simulation
 sim = Simulation(build_config({"packing": {"n_grains": 200, "width": 12}}))
-sim.compact()
+compact(sim)
 sim.advance(200)
 row = sim.observe()
 assert sim.fluid is None and sim.drag[0].size == 0

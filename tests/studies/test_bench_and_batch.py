@@ -10,8 +10,10 @@ from pathlib import Path
 
 import numba
 import numpy as np
+from rich.console import Console
 
 from gouge_cli.studies.bench import footprint_profile, paired_scaling, prepare, run_benchmark, sub_system
+from gouge_cli.studies.bench_report import bench_report
 from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K
 from gouge_cli.kernels.probe import stream_probe
@@ -26,18 +28,18 @@ def test_benchmark_runs_on_a_tiny_scene():
     """The bench on 1 and 2 threads: rows, the 2-thread state equal to the 1-thread state, the
     paired scaling, fluid shares and profiles (the comparisons need two threads: skipped on one)."""
     results = run_benchmark(sizes=(600,), threads=[1, 2], steps=60, repeats=1, lammps=False, permeability=1e-5)
-    rows = results["rows"]
+    rows = results.rows
     threads = [1, 2]
-    assert [r["threads"] for r in rows] == threads
+    assert [r.threads for r in rows] == threads
     for r in rows:
-        assert r["code"] == "gouge" and r["n_grains"] == 600 and r["steps"] == 60
-        assert r["rate_min"] > 0 and r["bytes_per_grain"] > 100
-        assert r["identical_to_1_thread"] is True
-    assert [sorted(s["paired_ratio"]) for s in results["scaling"]] == [threads[1:]]
-    for s in results["scaling"]:            # the machine probe ran beside gouge on the same thread counts
+        assert r.code == "gouge" and r.n_grains == 600 and r.steps == 60
+        assert r.rate_min > 0 and r.bytes_per_grain > 100
+        assert r.identical_to_1_thread is True
+    assert [sorted(s["paired_ratio"]) for s in results.scaling] == [threads[1:]]
+    for s in results.scaling:            # the machine probe ran beside gouge on the same thread counts
         assert sorted(s["machine_stream_ratio"]) == threads[1:] and all(v > 0 for v in s["machine_stream_ratio"].values())
-        assert abs(s["probe_bytes"] - 600 * rows[0]["bytes_per_grain"]) < 1e-6 * s["probe_bytes"]
-    shares = results["fluid"]
+        assert abs(s["probe_bytes"] - 600 * rows[0].bytes_per_grain) < 1e-6 * s["probe_bytes"]
+    shares = results.fluid
     assert len(shares) == 3 * len(threads)      # bench dt (auto) and Run 24 dt (auto, implicit), each thread count
     assert [s["solver"] for s in shares] == ["auto"] * 2 * len(threads) + ["implicit"] * len(threads)
     assert all(s["explicit_fraction"] == 0.0 for s in shares if s["solver"] == "implicit")
@@ -45,14 +47,20 @@ def test_benchmark_runs_on_a_tiny_scene():
     # one repeat: the paired share (median of 1 - undrained/dry within repeats) is the share of the medians
     assert all(abs(s["fluid_share_paired"] - s["fluid_share"]) < 1e-12 for s in shares)
     assert {s["fluid_interval_steps"] for s in shares} == {1, 6}     # fluid.step 0.5: 1 step at the bench dt, 6 at 0.09
-    parts = results["fluid_profile_us"]                       # one update's parts at the thesis dt
+    parts = results.fluid_profile_us                       # one update's parts at the thesis dt
     assert [f["threads"] for f in parts] == threads and all(f["explicit"] or f["cg_iterations"] >= 1 for f in parts)
     assert all(f["deposit"] > 0 and f["solve"] > 0 and f["drag"] > 0 for f in parts)
     assert all(abs(f["update"] - f["deposit"] - f["solve"] - f["drag"]) < 1e-9 for f in parts)
-    assert [a["per_step"] for a in results["allocations"]] == [0.0] * len(threads)   # none in the step loop
-    for prof in results["profile_us"]:
+    assert [a["per_step"] for a in results.allocations] == [0.0] * len(threads)   # none in the step loop
+    for prof in results.profile_us:
         assert all(prof[k] > 0 for k in ("contact_forces", "kick_drift", "rebuild_each", "whole_step"))
         assert prof["steps_per_rebuild"] > 5    # (no timing comparisons here: the machine is shared)
+    assert results.to_dict()["rows"][0]["code"] == "gouge"          # bench.json's record
+    console = Console(record=True, width=200)
+    for item in bench_report(results, Path("bench.json")):        # the CLI's report
+        console.print(item)
+    text = console.export_text()
+    assert "grain-steps per second" in text and "microseconds per step" in text and "undrained (kappa_c" in text
 
 
 def test_stream_probe_is_the_stated_update_for_any_part_count():

@@ -20,7 +20,7 @@ from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.cli.main import app
 from gouge_cli.driver import phases
 from gouge_cli.io.runfile import slip_catalog
-from gouge_cli.workflows.fork import run_fork
+from gouge_cli.workflows.fork import ForkRequest, run_fork
 from gouge_cli.driver.stick_scaling import StickScaling
 
 SCENE = {
@@ -90,7 +90,7 @@ def test_drained_fork_retraces_the_scaled_runs_slip(scaled_run):
     entry = next(e for e in slip_catalog(out) if e["checkpoint"])
     ck = read_checkpoint(out / entry["checkpoint"])
     assert ck.config.numerics.stick_scaling == 16.0
-    summary = run_fork(out, entry["number"], [], quiet=True)
+    summary = run_fork(ForkRequest(out, entry["number"]), quiet=True)
     drained = summary["branches"]["drained"]
     assert drained["first_slip"] is not None
     original = series(out / "run.h5")

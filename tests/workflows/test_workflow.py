@@ -15,13 +15,13 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from gouge_cli.errors import CheckpointError
+from gouge_cli.errors import CheckpointError, ConfigError
 from gouge_cli.io.checkpoint import DIGEST_PREFIX, read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.io.integrity import content_digest
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.io.runfile import slip_catalog
-from gouge_cli.workflows.fork import run_fork
+from gouge_cli.workflows.fork import ForkRequest, run_fork
 from gouge_cli.driver.simulation import Simulation
 from slipping import slipping_run
 
@@ -118,7 +118,7 @@ def test_checkpoint_restart_is_bitwise(tiny):
 def test_drained_fork_retraces_the_original(tiny):
     _, finished_run, kept = tiny
     n = kept[1]
-    summary = run_fork(finished_run, n, [], quiet=True)
+    summary = run_fork(ForkRequest(finished_run, n), quiet=True)
     drained = summary["branches"]["drained"]
     assert drained["status"] == "finished" and drained["first_slip"] is not None
     original = series(finished_run / "run.h5")
@@ -277,7 +277,7 @@ def test_moved_run_directory_still_forks(finished_run, tmp_path):
     moved = tmp_path / "elsewhere" / "tiny"
     shutil.copytree(finished_run, moved, ignore=shutil.ignore_patterns("forks"))
     slip = next(int(e["number"]) for e in slip_catalog(moved) if e["checkpoint"])
-    summary = run_fork(moved, slip, [], duration=100.0, quiet=True)
+    summary = run_fork(ForkRequest(moved, slip, duration=100.0), quiet=True)
     branch = moved / "forks" / f"slip_{slip:03d}" / "drained"
     with h5py.File(branch / "run.h5", "r") as h5:
         assert (branch / h5.attrs["parent_run"]).resolve() == moved.resolve()
@@ -305,3 +305,13 @@ def test_restart_names_library_differences_from_the_parent(finished_run, tmp_pat
     assert f"numpy 1.0.0 -> {np.__version__}" in result.output
     pair = json.loads((run / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())
     assert pair["library_differences_from_parent"] == [f"numpy 1.0.0 -> {np.__version__}"]
+
+
+def test_a_fork_request_is_checked_when_built(tmp_path):
+    request = ForkRequest(tmp_path, 3, [1e-5], {"output.slip_frames": 12}, 40.0)
+    assert request.perms == (1e-5,)
+    assert request.command().endswith("--slip 3 --perm 1e-05 --set output.slip_frames=12 --duration 40")
+    for bad, key in (({"perms": [-1.0]}, "--perm"), ({"duration": float("inf")}, "--duration"),
+                     ({"main": "last"}, "--main")):
+        with pytest.raises(ConfigError, match=key):
+            ForkRequest(tmp_path, 3, **bad)
