@@ -151,19 +151,20 @@ def corner_shares(area, i0, i1, j0, fx, fz, nz):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_rel, grad_s_x, grad_s_z,
-            corners=None, partial=None, grain_kick=None, serial=False, finish=True):
+def deposit(discs, n, Lx, planes, fields, corners=None, partial=None, grain_kick=None, serial=False, finish=True):
     """Solid fraction, its kernel-consistent gradient and the grid-relative solid velocity.
 
-    x, z, vx, vz, radius : float64[>= n] grain centres [d], velocities [v0], radii [d]
-    w_bot, w_top : plane velocities [v0] defining the grid velocity w(z)
-    s : float64[nx, nz] out, s_c = sum_k a_k G_kc / (dx dz) = 1 - phi [-]
-    ux, uz_rel : float64[nx, nz] out, a W weighted mean of vx and of vz - w(z_k)
-                 [v0] (0 in cells without solid)
-    grad_s_x, grad_s_z : float64[nx, nz] out, -sum_k a_k dW_kc/dx_k / (dx dz)
-                 [1/d]: the derivative of s_c with respect to the cell position,
-                 so that moving every grain by delta changes s by -delta . grad_s
-                 to first order (a rigid translation generates no source).
+    discs : kernels.layout.Discs, float64[>= n] grain centres x, z [d], velocities vx, vz [v0], radii [d]
+    n : number of grains;  Lx : periodic width [d]
+    planes : kernels.layout.Planes, the wall planes z_bot, z_top [d] and their velocities w_bot,
+                 w_top [v0], which define the grid velocity w(z)
+    fields : kernels.layout.Deposited, out, float64[nx, nz] each:
+                 s, s_c = sum_k a_k G_kc / (dx dz) = 1 - phi [-];
+                 ux, uz, a W weighted mean of vx and of vz - w(z_k) [v0] (0 in cells without solid);
+                 grad_s_x, grad_s_z, -sum_k a_k dW_kc/dx_k / (dx dz) [1/d]: the derivative of
+                 s_c with respect to the cell position, so that moving every grain by delta
+                 changes s by -delta . grad_s to first order (a rigid translation generates no
+                 source).
     corners : float64[N_CORNERS, >= n] out (rows CR_*), per grain: the flat index c00 of its
                  corner cell (i0, j0) (row CR_CELL, coded: kernels.layout.CELL_CODE; c00 < 0
                  for a grain outside the layer), the areas a00, a10, a01, a11 its four cells
@@ -186,10 +187,13 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
                  (kernels.step.closed_velocity): the same bits as closing the step first,
                  without a pass over the grains.
     serial : (fast form only) for one thread: plain loops; the same sums in the same order.
-    finish : (fast form, not serial) False: stop after the groups' moments, leaving s, ux, uz_rel,
-                 grad_s_x, grad_s_z to a later deposit_finish (on one thread, while others do
-                 something else: kernels.coupled); the same bits.
+    finish : (fast form, not serial) False: stop after the groups' moments, leaving the fields to
+                 a later deposit_finish (on one thread, while others do something else:
+                 kernels.coupled); the same bits.
     """
+    x, z, vx, vz, radius = discs
+    z_bot, z_top, w_bot, w_top = planes
+    s, ux, uz_rel, grad_s_x, grad_s_z = fields
     nx, nz = s.shape
     size = nx * nz
     if partial is None:
@@ -206,10 +210,11 @@ def deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, s, ux, uz_r
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def deposit_finish(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial):
+def deposit_finish(Lx, z_bot, z_top, fields, partial):
     """The rest of a parallel fast deposit stopped with finish=False, on this thread: the groups'
-    records collected column by column in group order (_collect_column) and expanded into
-    s, ux, uz_rel, grad_s_x, grad_s_z (arguments as deposit's)."""
+    records collected column by column in group order (_collect_column) and expanded into the
+    fields (kernels.layout.Deposited; arguments as deposit's)."""
+    s, ux, uz_rel, grad_s_x, grad_s_z = fields
     nx, nz = s.shape
     _collect(partial, nx, nz, True)
     _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, True)

@@ -37,7 +37,7 @@ import numpy as np
 from numba import njit
 
 from . import NUMBA_CACHE
-from .layout import (AUTO_EXPLICIT, G_CAPACITY, G_DIAG, G_FQ, G_FX, G_FZ, G_P, G_PREV, G_Q, G_R, G_RHS, G_SX,
+from .layout import (AUTO_EXPLICIT, Deposited, Discs, Planes, G_CAPACITY, G_DIAG, G_FQ, G_FX, G_FZ, G_P, G_PREV, G_Q, G_R, G_RHS, G_SX,
                      G_SZ, G_TB, G_TMP, G_TX, G_TZ, G_Z, P_BETA, P_ETA, P_FILTER_WIDTH, P_KAPPA_C, P_MAX_ITER,
                      P_MAX_SUBSTEPS, P_PHI_MAX, P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT,
                      STATUS_NONFINITE, STATUS_OK, STATUS_SOLVER, S_DT_MAX, S_EXPLICIT_UPDATES, S_ITERATIONS,
@@ -95,6 +95,12 @@ def _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, extrapolate, mx, mz):
 
 
 @njit(cache=NUMBA_CACHE, inline="always")
+def _deposited(fluid):
+    """The deposit's five fields in the grid's arrays: s, ux, uz and grad s in work rows G_SX, G_SZ."""
+    return Deposited(fluid.s, fluid.ux, fluid.uz, fluid.work[G_SX], fluid.work[G_SZ])
+
+
+@njit(cache=NUMBA_CACHE, inline="always")
 def _triples(work):
     """The drag's interleaved (q, r_x, r_z) per cell: work rows G_R..G_P (free after the solve) as one
     flat float64[3 nx nz] (kernels.drag.interleave_triples)."""
@@ -138,8 +144,8 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, fluid, drag_x, drag_z)
     if not (z_top > z_bot):
         return STATUS_SOLVER
     params, state, s, s_old, div_u, work = fluid.params, fluid.state, fluid.s, fluid.s_old, fluid.div_u, fluid.work
-    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, 0.0, 0.0, s, fluid.ux, fluid.uz, work[G_SX], work[G_SZ],
-            fluid.corners, fluid.partial)
+    deposit(Discs(x, z, vx, vz, radius), n, Lx, Planes(z_bot, z_top, 0.0, 0.0), _deposited(fluid), fluid.corners,
+            fluid.partial)
     mx, mz = _filter(Lx, z_bot, z_top, fluid)
     nx, nz = s.shape
     for i in range(nx):
@@ -207,18 +213,16 @@ def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid, grain_ki
     if not (z_top - z_bot > 0.0 and dt_f > 0.0):
         return STATUS_SOLVER
     w_bot, w_top = _plane_velocities(fluid.state, z_bot, z_top, dt_f)
-    work = fluid.work
     copy_grid(fluid.s, fluid.s_old)
-    deposit(x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, fluid.s, fluid.ux, fluid.uz, work[G_SX],
-            work[G_SZ], fluid.corners, fluid.partial, grain_kick, serial, finish)
+    deposit(Discs(x, z, vx, vz, radius), n, Lx, Planes(z_bot, z_top, w_bot, w_top), _deposited(fluid),
+            fluid.corners, fluid.partial, grain_kick, serial, finish)
     return STATUS_OK
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_finish_deposit(Lx, z_bot, z_top, fluid):
     """The deposit's last part after fluid_begin(finish=False), on this thread (grid only)."""
-    work = fluid.work
-    deposit_finish(Lx, z_bot, z_top, fluid.s, fluid.ux, fluid.uz, work[G_SX], work[G_SZ], fluid.partial)
+    deposit_finish(Lx, z_bot, z_top, _deposited(fluid), fluid.partial)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")

@@ -127,6 +127,14 @@ G_PREV = 19          # P^n at the start of an update; then the pressure extrapol
 G_TMP = 20           # the filter's scratch (kernels.filter)
 N_GRID_WORK = 21
 
+# the deposit's inputs and outputs (kernels.deposit): the discs it reads, float64[>= n] each
+# (x, z [d], vx, vz [v0], radius [d]); the wall planes now and their velocities over the fluid step
+# (z_bot, z_top [d], w_bot, w_top [v0]); the five grid fields it writes, float64[nx, nz] each
+# (s, ux, uz relative to the grid, grad_s_x, grad_s_z)
+Discs = namedtuple("Discs", ("x", "z", "vx", "vz", "radius"))
+Planes = namedtuple("Planes", ("z_bot", "z_top", "w_bot", "w_top"))
+Deposited = namedtuple("Deposited", ("s", "ux", "uz", "grad_s_x", "grad_s_z"))
+
 # the grid's arrays as kernels.coupled takes them, addressed by name (model.fluid.FluidGrid.record;
 # shapes: kernels.fluid_update's module doc)
 FluidArrays = namedtuple("FluidArrays", ("params", "state", "pressure", "s", "s_old", "ux", "uz", "permeability",

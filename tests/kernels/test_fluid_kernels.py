@@ -17,6 +17,12 @@ from gouge_cli.kernels import fluid_update as KF
 from gouge_cli.kernels import pressure as KP
 
 
+def _deposit(x, z, vx, vz, radius, n, width, z_bot, z_top, w_bot, w_top, s, ux, uz, gx, gz, *rest):
+    """kernels.deposit.deposit with its records (layout.Discs, Planes, Deposited) made of plain arrays."""
+    planes = L.Planes(float(z_bot), float(z_top), float(w_bot), float(w_top))
+    KD.deposit(L.Discs(x, z, vx, vz, radius), n, width, planes, L.Deposited(s, ux, uz, gx, gz), *rest)
+
+
 def numeric_cap(h, r):
     zz = np.linspace(-r, r, 200001)
     chord = 2.0 * np.sqrt(np.maximum(r * r - zz * zz, 0.0))
@@ -68,20 +74,20 @@ def test_grouped_deposit_and_cached_drag():
     rng = np.random.default_rng(4)
     vx, vz = rng.normal(0, 1e-3, x.size), rng.normal(0, 1e-3, x.size)
     serial = [np.empty((5, 4)) for _ in range(5)]
-    KD.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *serial)
+    _deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *serial)
     grouped = []
     corners = np.zeros((L.N_CORNERS, x.size))
     for threads in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
         numba.set_num_threads(threads)
         out = [np.empty((5, 4)) for _ in range(5)]
         partial = np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS))
-        KD.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial)
+        _deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial)
         grouped.append(out)
         later = [np.full((5, 4), np.nan) for _ in range(5)]
-        KD.deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *later, corners, partial,
+        _deposit(x, z, vx, vz, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *later, corners, partial,
                    None, False, False)
         assert all(np.isnan(a).all() for a in later)          # nothing expanded yet
-        KD.deposit_finish(width, z_bot, z_top, *later, partial)
+        KD.deposit_finish(width, z_bot, z_top, L.Deposited(*later), partial)
         grouped.append(later)
     numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     for other in grouped[1:]:
@@ -131,7 +137,7 @@ def test_grouped_deposit_reuses_its_scratch_and_takes_owed_kicks():
     def run(partial, xs, grain_kick=None, u=vx, w=vz, serial=False):
         out = [np.empty((5, 4)) for _ in range(5)]
         corners = np.zeros((L.N_CORNERS, x.size))
-        KD.deposit(xs, z, u, w, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial,
+        _deposit(xs, z, u, w, radius, x.size, width, z_bot, z_top, 1e-4, -2e-4, *out, corners, partial,
                         grain_kick, serial)
         return b"".join(a.tobytes() for a in out)
 
@@ -162,14 +168,14 @@ def test_deposit_conserves_area_and_is_periodic():
     x, z, radius = _grains()
     v = np.full(x.size, 2e-3)
     s, ux, uz, gx, gz = (np.empty((5, 4)) for _ in range(5))
-    KD.deposit(x, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
+    _deposit(x, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
     cell_area = width / 5 * (z_top - z_bot) / 4
     total = sum(KD.in_domain_area(zk, rk, z_bot, z_top) for zk, rk in zip(z, radius))
     assert (s * cell_area).sum() == pytest.approx(total, rel=1e-12)
     np.testing.assert_allclose(ux, 2e-3, rtol=1e-12)
     np.testing.assert_allclose(uz, -2e-3, rtol=1e-12)
     shifted = np.empty_like(s)
-    KD.deposit(x + width, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, shifted, ux, uz, gx, gz)
+    _deposit(x + width, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, shifted, ux, uz, gx, gz)
     np.testing.assert_allclose(shifted, s, rtol=1e-12)
 
 
@@ -180,13 +186,13 @@ def test_solid_fraction_gradient_is_the_derivative_of_the_deposit():
     x, z, radius = x[inside], z[inside], radius[inside]
     v = np.zeros_like(x)
     s, ux, uz, gx, gz = (np.empty((5, 4)) for _ in range(5))
-    KD.deposit(x, z, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
+    _deposit(x, z, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
     shift = 1e-7
     for dxk, dzk, slope in ((shift, 0.0, gx), (0.0, shift, gz)):
         s_plus, s_minus = np.empty((5, 4)), np.empty((5, 4))
         scratch = [np.empty((5, 4)) for _ in range(4)]
-        KD.deposit(x + dxk, z + dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_plus, *scratch)
-        KD.deposit(x - dxk, z - dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_minus, *scratch)
+        _deposit(x + dxk, z + dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_plus, *scratch)
+        _deposit(x - dxk, z - dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_minus, *scratch)
         # moving every grain by +delta is moving the cells by -delta
         np.testing.assert_allclose(-(s_plus - s_minus) / (2 * shift), slope, atol=1e-6)
 
@@ -197,7 +203,7 @@ def test_deposit_velocity_is_relative_to_the_stretching_grid():
     rate = 1e-3
     vz = rate * (z - z_bot)
     s, ux, uz, gx, gz = (np.empty((5, 4)) for _ in range(5))
-    KD.deposit(x, z, 0 * x, vz, radius, x.size, width, z_bot, z_top, 0.0, rate * (z_top - z_bot),
+    _deposit(x, z, 0 * x, vz, radius, x.size, width, z_bot, z_top, 0.0, rate * (z_top - z_bot),
                     s, ux, uz, gx, gz)
     assert np.abs(uz).max() < 1e-15
 
@@ -534,7 +540,7 @@ def test_wall_grains_take_the_vector_path_with_the_bits_of_grain_area():
     v = np.zeros_like(x)
     corners = np.zeros((L.N_CORNERS, x.size))
     out = [np.empty((5, 4)) for _ in range(5)]
-    KD.deposit(x, z, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, *out, corners,
+    _deposit(x, z, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, *out, corners,
                np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS)), None, True)
     for k in range(70):
         area = KD.grain_area(z[k], radius[k], z_bot, z_top)

@@ -11,11 +11,18 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gouge_cli.kernels import drag as KG
+from gouge_cli.kernels import deposit as KD
 from gouge_cli.kernels import fluid_update as KF
 from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import pressure as KP
 
 shapes = st.tuples(st.integers(1, 6), st.integers(2, 7), st.integers(0, 2**31 - 1))
+
+
+def _deposit(x, z, vx, vz, radius, n, width, z_bot, z_top, w_bot, w_top, s, ux, uz, gx, gz, *rest):
+    """kernels.deposit.deposit with its records (layout.Discs, Planes, Deposited) made of plain arrays."""
+    planes = L.Planes(float(z_bot), float(z_top), float(w_bot), float(w_top))
+    KD.deposit(L.Discs(x, z, vx, vz, radius), n, width, planes, L.Deposited(s, ux, uz, gx, gz), *rest)
 
 
 def _fields(nx, nz, seed):
@@ -215,11 +222,11 @@ def test_deposit_on_narrow_grids_matches_the_direct_form(shape):
     radius = rng.uniform(0.4, 0.6, n)
     vx, vz = rng.normal(0, 1e-3, (2, n))
     direct = [np.empty((nx, nz)) for _ in range(5)]
-    KD.deposit(x, z, vx, vz, radius, n, width, z_bot, z_top, 1e-4, -2e-4, *direct)
+    _deposit(x, z, vx, vz, radius, n, width, z_bot, z_top, 1e-4, -2e-4, *direct)
     outs = []
     for serial in (False, True):
         out = [np.empty((nx, nz)) for _ in range(5)]
-        KD.deposit(x, z, vx, vz, radius, n, width, z_bot, z_top, 1e-4, -2e-4, *out,
+        _deposit(x, z, vx, vz, radius, n, width, z_bot, z_top, 1e-4, -2e-4, *out,
                    np.zeros((L.N_CORNERS, n)), np.zeros((L.DEPOSIT_GROUPS, nx * nz, L.N_MOMENTS)), None, serial)
         outs.append(out)
     for a, b, want in zip(outs[0], outs[1], direct):
