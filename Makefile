@@ -47,11 +47,15 @@ demo: $(STAMP)
 	$(BIN)/gouge run configs/demo.yaml --force
 
 # Two numba threads, so that the tests comparing 1 and 2 threads run (with one they are skipped, -rs says why).
+# Two pytest workers (pytest-xdist), a test file on one worker (--dist loadfile: its module fixtures
+# are built once): most tests run one single-threaded process or compile kernels, so a second
+# worker uses the second core. PYTEST_WORKERS=0 runs them in this process.
+PYTEST_WORKERS ?= 2
 test: $(TEST_STAMP)
-	NUMBA_NUM_THREADS=2 $(BIN)/python -m pytest -q
+	NUMBA_NUM_THREADS=2 $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
 
 validate: $(TEST_STAMP)
-	NUMBA_NUM_THREADS=2 $(BIN)/python -m pytest -q -m validation
+	NUMBA_NUM_THREADS=2 $(BIN)/python -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile -m validation
 
 bench: $(STAMP)
 	$(BIN)/gouge bench

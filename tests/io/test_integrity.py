@@ -64,7 +64,7 @@ def refused(result, *words):
 @pytest.fixture(scope="module")
 def run(tmp_path_factory):
     """A finished run with a slip kept with its checkpoint, and the drained fork of that slip."""
-    _, out, slips = slipping_run(SCENE, tmp_path_factory.mktemp("integrity"), slips=1)
+    _, out, slips = slipping_run(SCENE, tmp_path_factory.mktemp("integrity"), slips=1, grow=1.5)
     result = gouge("restart", out, "--slip", slips[0], "--set", "output.slip_frames=3", "--quiet")
     assert result.exit_code == 0, result.output
     return out, slips[0]

@@ -55,11 +55,13 @@ def _wait_for(path: Path, proc: subprocess.Popen, limit: float = 120.0):
 
 def slipping_scene(root: Path, tries: int = 4) -> tuple[Path, Path, float]:
     """SCENE, its seed raised by 0, 1, ... until an uninterrupted run slips with a ring checkpoint
-    (whether 14,000 t0 of one packing slip is that packing's business; the identities tested here
-    hold for any). Returns (scene file, run dir, seconds from run.h5 to the end)."""
+    (whether 14,000 t0 of one packing slip is that packing's business: some first slip just after,
+    so each try runs 1.5 times longer than the one before; the identities tested here hold for any).
+    Returns (scene file, run dir, seconds from run.h5 to the end)."""
     for k in range(tries):
         scene_file = root / f"kill{k}.yaml"
-        scene_file.write_text(yaml.safe_dump(dict(SCENE, seed=SCENE["seed"] + k)))
+        run = {"duration": SCENE["run"]["duration"] * 1.5 ** k}
+        scene_file.write_text(yaml.safe_dump(dict(SCENE, seed=SCENE["seed"] + k, run=run)))
         out = root / f"reference{k}"
         proc = _start(scene_file, out)
         _wait_for(out / "run.h5", proc)
