@@ -413,7 +413,9 @@ def test_advice_of_a_held_lock_and_ctrl_c_continues_the_restart(forked, tmp_path
     target = tmp_path / "run"
     shutil.copytree(run, target)
     shutil.rmtree(target / "forks")
-    args = ["restart", str(target), "--slip", str(slip), "--perm", "1e-3", "--quiet"]
+    # a fixed window of 30,000 t0 per branch (without --duration a branch ends with its first slip:
+    # a few seconds, and the first restart could finish both branches before the second one starts)
+    args = ["restart", str(target), "--slip", str(slip), "--perm", "1e-3", "--duration", "30000", "--quiet"]
     first = subprocess.Popen(GOUGE + args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                              env=dict(os.environ, NUMBA_NUM_THREADS="1"), start_new_session=True)
     branch = target / "forks" / f"slip_{slip:03d}" / "drained"
