@@ -4,7 +4,8 @@ Applied through one wrapper of ``build_packing`` (scene dicts, shipped configs a
 alike): in the test process by conftest, and in every Python process the tests start (gouge
 subprocesses, study process pools, Dask workers) through :func:`propagate`, so
 ``GOUGE_TEST_SEED_OFFSET=7 make test`` shows that no test depends on the trajectory of the seed it
-happens to use.
+happens to use. ``GOUGE_TEST_PACKING_LOG=FILE`` (with an offset) appends, for every packing built,
+the test module that built it: the list of modules the seed sweep runs (docs/developer.md).
 """
 
 from __future__ import annotations
@@ -29,7 +30,12 @@ def install() -> None:
     if getattr(original, "seed_offset", None) is not None:
         return
 
+    log = os.environ.get("GOUGE_TEST_PACKING_LOG")
+
     def shifted(config):
+        if log:         # which test module built a packing (the seed sweep's list of modules)
+            with open(log, "a") as fh:
+                fh.write(os.environ.get("PYTEST_CURRENT_TEST", "?").split("::")[0] + "\n")
         return original(config.model_copy(update={"seed": config.seed + OFFSET}))
 
     shifted.seed_offset = OFFSET
