@@ -16,6 +16,7 @@ removed by the next write of that checkpoint.
 
 from __future__ import annotations
 
+import io
 import json
 import os
 from dataclasses import dataclass, field
@@ -31,6 +32,7 @@ from ..config import build_config, Config, dump_config
 from ..errors import CheckpointError, ConfigError, DamagedFileError
 from .filedoc import document_checkpoint
 from .integrity import content_digest
+from .outputs import write_file
 from .rundir import pid_alive
 
 
@@ -96,14 +98,17 @@ def remove_stale_temps(path: Path) -> list[Path]:
 
 
 def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
-    """Write atomically; returns the file size in bytes."""
+    """Write atomically; returns the file size in bytes. The file is built in memory and then
+    written as plain bytes, so a full disk is an OSError of that write (HDF5 writing onto a full
+    disk failed inside freed handles, where its errors are ignored, and crashed the process)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(path)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     groups = _groups(checkpoint)
+    image = io.BytesIO()
     try:
-        with h5py.File(tmp, "w") as h5:
+        with h5py.File(image, "w") as h5:
             for group, arrays in groups.items():
                 g = h5.create_group(group)
                 for name, arr in arrays.items():
@@ -118,8 +123,7 @@ def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
             document_checkpoint(h5)
             arrays = {f"/{group}/{name}": arr for group, named in groups.items() for name, arr in named.items()}
             h5.attrs["checksum"] = DIGEST_PREFIX + content_digest(h5, arrays=arrays)
-        with open(tmp, "rb") as f:
-            os.fsync(f.fileno())
+        write_file(tmp, image.getbuffer())
         os.replace(tmp, path)
     finally:
         if tmp.exists():

@@ -131,14 +131,20 @@ def write_bytes(path: Path, data: bytes, next_step: str | None = None) -> None:
     path = Path(path)
     require_space(path.parent, len(data), f"{path.name} ({len(data) / 1e6:.1f} MB)", next_step)
     with temporary(path, next_step) as tmp:
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        try:
-            view = memoryview(data)
-            while view:
-                view = view[os.write(fd, view):]
-            os.fsync(fd)
-        finally:
-            os.close(fd)
+        write_file(tmp, data)
+
+
+def write_file(path: Path, data) -> None:
+    """Write the bytes `data` (any buffer) to the file `path` (created or truncated) and fsync it;
+    a full disk is the OSError of this write."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    try:
+        view = memoryview(data)
+        while view:
+            view = view[os.write(fd, view):]
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 def is_no_space(exc: BaseException) -> bool:

@@ -113,7 +113,11 @@ class RunFile:
         self.flush_rows = flush_rows
         self._rows: list[dict] = []
         self.reserve = Reserve(self.path)      # released before a close on a full disk (io.outputs)
-        self.h5 = h5py.File(self.path, mode)
+        # no raw-data chunk cache: a chunk is written by the call that fills it, so a full disk
+        # raises there (handled: the reserve released, the file closed) and not later, when a
+        # dataset handle is freed, where HDF5's error is ignored and the file's state is lost
+        # (a segmentation fault followed)
+        self.h5 = h5py.File(self.path, mode, rdcc_nbytes=0)
         if mode == "w":
             a = self.h5.attrs
             a["config"] = dump_config(config)
