@@ -40,6 +40,7 @@ the attribute; a file written before checksums (no root ``attrs_sha256``) is rea
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import os
@@ -62,7 +63,8 @@ from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, d
 from ..kernels import layout as L
 from .integrity import SEAL, STRUCTURE_ERRORS, check_seal, read, seal, seal_tree, stored_seal, structure_error
 from .layout import RUN_FILE, RunLayout
-from .outputs import Reserve
+from .outputs import Reserve, free_bytes
+from .rundir import RESERVE_BYTES
 from .rundir import open_run_file
 from ..units import pint_unit
 
@@ -142,29 +144,55 @@ class RunFile:
         if len(self._rows) >= self.flush_rows:
             self.flush()
 
-    def flush(self):
+    def _room(self):
+        """OSError (ENOSPC) before an HDF5 write when less than the reserve's size is free: HDF5
+        cannot flush a file again after a flush that met a full disk (its close then fails too, the
+        status stays 'running'), so the disk is checked first and the close that follows, on the
+        released reserve, completes."""
+        free = free_bytes(self.path.parent)
+        if free < RESERVE_BYTES:
+            raise OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)} ({free / 1e6:.1f} MB free)", str(self.path))
+
+    def flush(self, room: bool = True):
+        if room:
+            self._room()
         if self._rows:
             group = self.h5["series"]
             names = list(dict.fromkeys(n for r in self._rows for n in r if n in SERIES))
             rows_before = group["time"].shape[0] if "time" in group else 0
-            for name in names:     # a column missing from some rows (stick scaling's) is NaN there
-                values = np.array([r.get(name, np.nan) for r in self._rows], dtype=np.float64)
-                if name not in group:
-                    unit, description = SERIES[name]
-                    ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64,
-                                              chunks=(4096,), fletcher32=True)
-                    ds.attrs["unit"] = pint_unit(unit)
-                    ds.attrs["description"] = description
-                    seal(ds)
-                    if name != "time" and rows_before:
-                        ds.resize((rows_before,))
-                        ds[:] = np.nan
-                ds = group[name]
-                old = ds.shape[0]
-                ds.resize((old + values.size,))
-                ds[old:] = values
+            try:
+                self._append_rows(group, names, rows_before)
+            except BaseException:
+                # (a full disk): these rows follow the last checkpoint, so a resume computes them
+                # again; every column goes back to the rows it had, none left half appended
+                self._rows.clear()
+                for name in group:
+                    try:
+                        group[name].resize((rows_before,))
+                    except (OSError, RuntimeError, ValueError):
+                        pass
+                raise
             self._rows.clear()
         self.h5.flush()
+
+    def _append_rows(self, group, names: list[str], rows_before: int):
+        """The pending rows appended to the series columns `names` of `group` (rows_before each)."""
+        for name in names:     # a column missing from some rows (stick scaling's) is NaN there
+            values = np.array([r.get(name, np.nan) for r in self._rows], dtype=np.float64)
+            if name not in group:
+                unit, description = SERIES[name]
+                ds = group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=np.float64,
+                                          chunks=(4096,), fletcher32=True)
+                ds.attrs["unit"] = pint_unit(unit)
+                ds.attrs["description"] = description
+                seal(ds)
+                if name != "time" and rows_before:
+                    ds.resize((rows_before,))
+                    ds[:] = np.nan
+            ds = group[name]
+            old = ds.shape[0]
+            ds.resize((old + values.size,))
+            ds[old:] = values
 
     def truncate_after(self, time_limit: float, step_limit: int, slip_count: int):
         """Drop series rows after time_limit, snapshots after step_limit and catalog entries
@@ -188,6 +216,7 @@ class RunFile:
         s = sim.state
         if f"{s.step:012d}" in self.h5["snapshots"]:      # a dense (slip) and a regular snapshot coincide
             return
+        self._room()
         grp = self.h5["snapshots"].create_group(f"{s.step:012d}")
         grp.attrs["time"] = s.time
         grp.attrs["load_time"] = float(s.clock[L.C_DRIVE_TIME])
@@ -211,6 +240,7 @@ class RunFile:
     def add_slip(self, number: int, entry: dict, subevents: list[dict]):
         """Write slip `number` as /slips/NNN: `entry` as attributes, subevent_time and
         subevent_velocity (S,) datasets [t0, v0]; flushed at once."""
+        self._room()
         if "slips" not in self.h5:
             seal(self.h5.create_group("slips"))
         group = self.h5["slips"].create_group(f"{number:03d}")
@@ -231,7 +261,8 @@ class RunFile:
     def close(self, status: str = "finished", final_state_hash: str | None = None, full_disk: bool = False):
         """Write the final attributes and close. ``full_disk``: the reserve beside the file is
         released first, so that HDF5 has room to flush (io.outputs.Reserve)."""
-        if full_disk:
+        if full_disk:           # the rows not yet written follow the last checkpoint: a resume makes them again
+            self._rows.clear()
             self.reserve.release()
         try:
             self._close(status, final_state_hash)
@@ -240,7 +271,7 @@ class RunFile:
 
     def _close(self, status: str, final_state_hash: str | None):
         if self.h5.id.valid:
-            self.flush()
+            self.flush(room=False)
             if final_state_hash is not None:
                 self.h5.attrs["final_state_hash"] = final_state_hash
             if "deborah" in self.h5["series"]:
