@@ -64,8 +64,7 @@ from ..kernels import layout as L
 from .integrity import SEAL, STRUCTURE_ERRORS, check_seal, read, seal, seal_tree, stored_seal, structure_error
 from .layout import RUN_FILE, RunLayout
 from .outputs import Reserve, free_bytes
-from .rundir import RESERVE_BYTES
-from .rundir import open_run_file
+from .rundir import RESERVE_BYTES, open_run_file
 from ..units import pint_unit
 
 # name -> (unit, description); units are the dimensionless scales of docs/physics/units.md
