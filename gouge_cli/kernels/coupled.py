@@ -7,9 +7,10 @@ from numba import njit, prange
 
 from . import NUMBA_CACHE
 from .atomics import fetch_add
-from .layout import (BG_DAMPING, DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, LIST_OVERFLOW,
-                     OK, THREADS, WIDTH, W_VX, W_VZ, W_Z)
-from .fluid_update import fluid_begin, fluid_drag, fluid_finish_deposit, fluid_solve
+from .layout import (BG_DAMPING, DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, LIST_OVERFLOW, OK, STATUS_NONFINITE,
+                     THREADS, WIDTH, W_VX, W_VZ, W_Z)
+from .fluid_update import (BACK_Z, COLLECT, N_STAGES, TAPS, filter_half_widths, fluid_begin, fluid_drag,
+                           fluid_solve, grid_stage, pressure_stage, stage_parts)
 from .step import _step, close_step, move_range, open_step
 
 
@@ -71,41 +72,60 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     return OK, nsteps
 
 
+# _solve_and_drift's shared counters, at out[tasks + 1 + slot] (after the status and the per-thread
+# counts): thread 0 running, the drag's fields ready, and per grid stage (kernels.fluid_update:
+# COLLECT .. INTERLEAVE) a count of parts taken and one of parts done
+_ALIVE, _READY = 0, 1
+_TAKEN = 2
+_FINISHED = _TAKEN + N_STAGES
+_SLOTS = _FINISHED + N_STAGES
+_GO, _NO_DRAG = 1, 2          # out[_READY]: the drag's fields may be filtered back; or there are none
+_PARTS = 2                    # a field's columns in two parts: two threads share the grid
+
+
 @njit(parallel=True, cache=NUMBA_CACHE)
 def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv_inertia, body, x_build, z_build,
                      owed, params, width, z_bot, z_top, dt_f, fluid, pending, out):
-    """fluid_solve (serial, grid only) while the threads run step 2 of the next step, the grains'
-    kicks and drift (move_range), each grain on its own: the bits of one after the other.
-    Every thread moves its own part of the grains (kernels.step.kick_drift's: the ones it holds
-    in cache). If pending, the deposit's finish (deposit_finish: collect and expansion) must
-    precede the solve: thread 1 takes it (fetch_add on a claim counter)
-    before its own part, while thread 0 moves its own; thread 0 then waits for it (or, if no
-    other thread claimed it yet, does it itself: no thread ever waits on one that has not
-    started) and solves. On one thread: solve, then move every grain. Returns how many
-    grains are now past skin/2; out: int64 scratch (>= threads + 3: the lists' cell_count),
-    out[0] = fluid_solve's status.
-    [Each thread keeps its own grains: having the other threads move thread 0's grains in chunks
-    while it finished and solved was slower (those grains sit in the other core's cache). Arrays,
-    not the grains/lists records: unpacked from tuples inside this parallel function, the two
-    tasks ran slower than one after the other; the fluid record is only passed through.]"""
+    """fluid_solve while the threads run step 2 of the next step, the grains' kicks and drift
+    (move_range), each grain on its own: the bits of one after the other. Every thread moves its
+    own part of the grains (kernels.step.kick_drift's: the ones it holds in cache).
+
+    On two or more threads, threads 0 and 1 share the grid (_stages): the grid's stages before the
+    pressure (the deposit's finish if pending, then the filter forward), then thread 0 alone runs
+    pressure_stage, then both the stages after it. Each stage is cut into parts (grid_stage), each
+    part taken by fetch_add on the stage's counter, so each is done once, by whichever thread
+    takes it, in the same serial code: the same bits. Thread 1 takes parts first, then moves its
+    grains; thread 0 moves its grains first. A thread waits only for parts another has taken (that
+    thread is then running them), and thread 1 waits for the pressure stage only once thread 0
+    has signalled that it runs (out[_ALIVE]): the region is correct whichever threads run its
+    tasks and in whatever order. On one thread: solve, then move every grain. Returns how many
+    grains are now past skin/2; out: int64 scratch (>= threads + 1 + _SLOTS: the lists'
+    cell_count), out[0] = the solve's status.
+    [Arrays, not the grains/lists records: unpacked from tuples inside this parallel function, the
+    two tasks ran slower than one after the other; the fluid record is only passed through.]"""
     n = x.shape[0]
     tasks = max(min(int(params[THREADS]), n), 1)
-    claim = tasks + 1
-    done = tasks + 2
-    out[claim] = 0
-    out[done] = 0
+    base = tasks + 1
+    for k in range(_SLOTS):
+        out[base + k] = 0
+    first = COLLECT if pending else TAPS
     for t in prange(tasks):
-        if t != 0 and pending:
-            _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, fluid)
         if tasks == 1:                          # (one thread: the grid while the deposit's data is warm)
             out[0] = fluid_solve(width, z_bot, z_top, dt_f, fluid)
+        if t == 0 and tasks > 1:
+            fetch_add(out, base + _ALIVE, 1)
+        if t == 1:
+            _stages(out, base, first, BACK_Z, width, z_bot, z_top, fluid, False)
         late = move_range(t * n // tasks, (t + 1) * n // tasks, x, z, vx, vz, spin, force_x, force_z, torque,
                           inv_mass, inv_inertia, body, x_build, z_build, owed, params)
         if t == 0 and tasks > 1:
-            if pending and not _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, fluid):
-                while fetch_add(out, done, 0) == 0:         # (an atomic read: the claimant is running)
-                    pass
-            out[0] = fluid_solve(width, z_bot, z_top, dt_f, fluid)
+            out[0] = _grid_on_thread_0(out, base, first, width, z_bot, z_top, dt_f, fluid)
+        if t == 1 and fetch_add(out, base + _ALIVE, 0) != 0:
+            ready = fetch_add(out, base + _READY, 0)
+            while ready == 0:                   # (thread 0 runs: it reaches the pressure stage's end)
+                ready = fetch_add(out, base + _READY, 0)
+            if ready == _GO:
+                _stages(out, base, BACK_Z, N_STAGES, width, z_bot, z_top, fluid, False)
         out[t + 1] = late
     total = 0
     for t in range(tasks):
@@ -113,12 +133,35 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
     return total
 
 
-@njit(cache=NUMBA_CACHE, inline="always")
-def _finish_if_unclaimed(out, claim, done, width, z_bot, z_top, fluid):
-    """The deposit's finish (fluid_finish_deposit) if no thread has claimed it (fetch_add on
-    out[claim]), then out[done] set; returns whether this thread did it."""
-    if fetch_add(out, claim, 1) != 0:
-        return False
-    fluid_finish_deposit(width, z_bot, z_top, fluid)
-    fetch_add(out, done, 1)
-    return True
+@njit(cache=NUMBA_CACHE)
+def _grid_on_thread_0(out, base, first, width, z_bot, z_top, dt_f, fluid):
+    """Thread 0's part of the shared solve (_solve_and_drift); returns the solve's status."""
+    _stages(out, base, first, BACK_Z, width, z_bot, z_top, fluid, True)
+    status = pressure_stage(width, z_bot, z_top, dt_f, fluid)
+    if status == STATUS_NONFINITE:
+        fetch_add(out, base + _READY, _NO_DRAG)
+        return status
+    fetch_add(out, base + _READY, _GO)
+    _stages(out, base, BACK_Z, N_STAGES, width, z_bot, z_top, fluid, True)
+    return status
+
+
+@njit(cache=NUMBA_CACHE)
+def _stages(out, base, first, last, width, z_bot, z_top, fluid, wait):
+    """Grid stages first <= stage < last, shared: the parts of each (_PARTS per field's columns)
+    taken one at a time by fetch_add on the stage's counter until none is left; a stage starts
+    once every part of the one before is done (all are then taken: any in progress is another
+    running thread's). With wait, returns only once every part of the last stage is done."""
+    mx, mz = filter_half_widths(width, z_bot, z_top, fluid)
+    for stage in range(first, last):
+        count = stage_parts(stage, _PARTS)
+        if stage != first:
+            while fetch_add(out, base + _FINISHED + stage - 1, 0) < stage_parts(stage - 1, _PARTS):
+                pass
+        k = fetch_add(out, base + _TAKEN + stage, 1)
+        while k < count:
+            grid_stage(stage, k, _PARTS, width, z_bot, z_top, fluid, mx, mz)
+            fetch_add(out, base + _FINISHED + stage, 1)
+            k = fetch_add(out, base + _TAKEN + stage, 1)
+    while wait and fetch_add(out, base + _FINISHED + last - 1, 0) < stage_parts(last - 1, _PARTS):
+        pass

@@ -214,10 +214,33 @@ def deposit_finish(Lx, z_bot, z_top, fields, partial):
     """The rest of a parallel fast deposit stopped with finish=False, on this thread: the groups'
     records collected column by column in group order (_collect_column) and expanded into the
     fields (kernels.layout.Deposited; arguments as deposit's)."""
+    nx = fields.s.shape[0]
+    collect_columns(partial, nx, fields.s.shape[1], 0, nx)
+    expand_columns(Lx, z_bot, z_top, fields, partial, 0, nx)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def collect_columns(partial, nx, nz, i0, i1):
+    """deposit_finish's first half on grid columns i0 <= i < i1 (_collect_column; each column on
+    its own). All columns must be collected before any is expanded (a column's expansion reads
+    the column to its left)."""
+    records = partial.reshape(partial.size)
+    for i in range(i0, i1):
+        _collect_column(records, i, nx, nz)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def expand_columns(Lx, z_bot, z_top, fields, partial, i0, i1):
+    """deposit_finish's second half on grid columns i0 <= i < i1 (_expand_column, each column on
+    its own, the same bits whichever columns a call takes)."""
     s, ux, uz_rel, grad_s_x, grad_s_z = fields
     nx, nz = s.shape
-    _collect(partial, nx, nz, True)
-    _expand(Lx, z_bot, z_top, s, ux, uz_rel, grad_s_x, grad_s_z, partial, True)
+    size = nx * nz
+    inv_area = nx / Lx * nz / (z_top - z_bot)
+    records = partial.reshape(partial.size)
+    for i in range(i0, i1):
+        _expand_column(records, i, nx, nz, nx / Lx, inv_area, s.reshape(size), ux.reshape(size),
+                       uz_rel.reshape(size), grad_s_x.reshape(size), grad_s_z.reshape(size))
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")

@@ -183,25 +183,22 @@ def grain_drag_at(corners, n, nz, pairs, drag_x, drag_z):
 def drag_triples(P, s, grad_s_x, grad_s_z, q, rx, rz):
     """q = P/s [E], r = (P/s^2) grad s [E/d] per cell (0 where s <= 0); all float64[nx, nz]."""
     pf, sf, gx, gz, qf, xf, zf = flat(P), flat(s), flat(grad_s_x), flat(grad_s_z), flat(q), flat(rx), flat(rz)
-    for c in range(np.uint64(pf.size)):
-        if sf[c] > 0.0:
-            inv = 1.0 / sf[c]
-            value = pf[c] * inv
-            qf[c] = value
-            xf[c] = value * inv * gx[c]
-            zf[c] = value * inv * gz[c]
-        else:
-            qf[c] = 0.0
-            xf[c] = 0.0
-            zf[c] = 0.0
+    for c in range(np.uint64(pf.size)):          # (selects, not branches: the loop vectorises)
+        solid = sf[c] > 0.0
+        inv = 1.0 / sf[c]
+        value = pf[c] * inv
+        qf[c] = value if solid else 0.0
+        xf[c] = value * inv * gx[c] if solid else 0.0
+        zf[c] = value * inv * gz[c] if solid else 0.0
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def interleave_triples(q, rx, rz, triples):
-    """triples[3c], [3c + 1], [3c + 2] = q, rx, rz of flat cell c (float64[3 nx nz]): a grain's cells
-    (c00, c01) and (c10, c11) are then two runs of six adjacent values."""
+def interleave_triples(q, rx, rz, triples, i0, i1):
+    """triples[3c], [3c + 1], [3c + 2] = q, rx, rz of flat cell c (float64[3 nx nz]) on the grid columns
+    i0 <= i < i1: a grain's cells (c00, c01) and (c10, c11) are then two runs of six adjacent values."""
+    nz = q.shape[1]
     qf, xf, zf = flat(q), flat(rx), flat(rz)
-    for c in range(np.uint64(qf.size)):
+    for c in range(np.uint64(i0 * nz), np.uint64(i1 * nz)):
         k = np.uint64(3) * c
         triples[k] = qf[c]
         triples[k + np.uint64(1)] = xf[c]

@@ -47,6 +47,20 @@ def filter_sigmas(width, dx, dz):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
+def half_widths(width, dx, dz, nx, nz):
+    """(mx, mz): the filter's half widths in cells on an nx x nz grid of spacing dx, dz (0: no
+    smoothing on that axis); filter_setup's."""
+    sx, sz = filter_sigmas(width, dx, dz)
+    mx = 0
+    if sx > 1e-3 * dx:
+        mx = min(int(math.ceil(TRUNCATION * sx / dx)), (nx - 1) // 2)
+    mz = 0
+    if sz > 1e-3 * dz:
+        mz = min(int(math.ceil(TRUNCATION * sz / dz)), nz - 1)
+    return mx, mz
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
 def filter_setup(width, dx, dz, taps_x, bands_z):
     """Taps of S_x and the diagonals of S_z for the current cell sizes; returns (mx, mz), the half
     widths in cells (0: no smoothing on that axis).
@@ -58,12 +72,7 @@ def filter_setup(width, dx, dz, taps_x, bands_z):
     nx = taps_x.shape[0]
     nz = bands_z.shape[2]
     sx, sz = filter_sigmas(width, dx, dz)
-    mx = 0
-    if sx > 1e-3 * dx:
-        mx = min(int(math.ceil(TRUNCATION * sx / dx)), (nx - 1) // 2)
-    mz = 0
-    if sz > 1e-3 * dz:
-        mz = min(int(math.ceil(TRUNCATION * sz / dz)), nz - 1)
+    mx, mz = half_widths(width, dx, dz, nx, nz)
     if mx > 0:
         total = 0.0
         for m in range(mx + 1):
@@ -98,43 +107,54 @@ def filter_setup(width, dx, dz, taps_x, bands_z):
     return mx, mz
 
 
-@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _smooth_x(field, tmp, taps_x, mx):
-    """tmp = S_x field (periodic circulant; symmetric, so also S_x^T). Flat loops over the cells
-    (a cell's x neighbours m columns away are m nz apart; the first and last m columns wrap)."""
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def filter_x(field, target, taps_x, mx, i0, i1):
+    """target = S_x field on the columns i0 <= i < i1 (periodic circulant; symmetric, so also S_x^T;
+    mx = 0: a copy). Flat loops over the cells (a cell's x neighbours m columns away are m nz
+    apart; the first and last m columns wrap). Each cell's sum in a fixed order: the same bits
+    whichever columns a call takes."""
     nx, nz = field.shape
     f = field.reshape(field.size)
-    out = tmp.reshape(tmp.size)
+    out = target.reshape(target.size)
     size = np.uint64(f.size)
-    zero = np.uint64(0)
+    lo = np.uint64(i0 * nz)
+    hi = np.uint64(i1 * nz)
+    if mx == 0:
+        for c in range(lo, hi):
+            out[c] = f[c]
+        return
     t0 = taps_x[0]
-    for c in range(zero, size):
+    for c in range(lo, hi):
         out[c] = t0 * f[c]
     for m in range(1, mx + 1):
         t = taps_x[m]
         shift = np.uint64(m * nz)
         back = size - shift
-        for c in range(zero, shift):                 # (unsigned: no negative-index checks)
+        for c in range(lo, min(shift, hi)):                  # (unsigned: no negative-index checks)
             out[c] += t * (f[c + shift] + f[c + back])
-        for c in range(shift, back):
+        for c in range(max(shift, lo), min(back, hi)):
             out[c] += t * (f[c + shift] + f[c - shift])
-        for c in range(back, size):
+        for c in range(max(back, lo), hi):
             out[c] += t * (f[c - back] + f[c - shift])
 
 
-@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _smooth_z(source, target, bands, mz):
-    """target = the band matrix of diagonals bands[mz + d, j] (d = -mz..mz) times source, along z:
-    target[i, j] = sum_d bands[mz + d, j] source[i, j + d] (S_z with bands_z[0], S_z^T with [1]),
-    summed d = 0, +1, -1, +2, -2, ... per cell. Flat unsigned indices (no negative-index checks:
-    the short column loops then vectorise)."""
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def filter_z(source, target, bands, mz, i0, i1):
+    """target = the band matrix of diagonals bands[mz + d, j] (d = -mz..mz) times source, along z,
+    on the columns i0 <= i < i1: target[i, j] = sum_d bands[mz + d, j] source[i, j + d] (S_z with
+    bands_z[0], S_z^T with [1]; mz = 0: a copy), summed d = 0, +1, -1, +2, -2, ... per cell. Flat
+    unsigned indices (no negative-index checks: the short column loops then vectorise)."""
     nx, nz = source.shape
     f = source.reshape(source.size)
     out = target.reshape(target.size)
     unz = np.uint64(nz)
     zero = np.uint64(0)
+    if mz == 0:
+        for c in range(np.uint64(i0) * unz, np.uint64(i1) * unz):
+            out[c] = f[c]
+        return
     centre = bands[mz]
-    for i in range(np.uint64(nx)):
+    for i in range(np.uint64(i0), np.uint64(i1)):
         base = i * unz
         for j in range(zero, unz):
             out[base + j] = centre[j] * f[base + j]
@@ -150,52 +170,39 @@ def _smooth_z(source, target, bands, mz):
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def apply_filter(field, tmp, taps_x, bands_z, mx, mz):
-    """field = S field in place (S_x, then S_z); tmp: float64[nx, nz] scratch."""
-    if mx > 0:
-        _smooth_x(field, tmp, taps_x, mx)
-    else:
-        tmp[:, :] = field
-    if mz > 0:
-        _smooth_z(tmp, field, bands_z[0], mz)
-    else:
-        field[:, :] = tmp
+    """field = S field in place (S_x into tmp, then S_z back); tmp: float64[nx, nz] scratch."""
+    nx = field.shape[0]
+    filter_x(field, tmp, taps_x, mx, 0, nx)
+    filter_z(tmp, field, bands_z[0], mz, 0, nx)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def apply_filter_transpose(field, tmp, taps_x, bands_z, mx, mz):
-    """field = S^T field in place (S_z^T, then S_x); tmp: float64[nx, nz] scratch."""
-    if mz > 0:
-        _smooth_z(field, tmp, bands_z[1], mz)
-    else:
-        tmp[:, :] = field
-    if mx > 0:
-        _smooth_x(tmp, field, taps_x, mx)
-    else:
-        field[:, :] = tmp
+    """field = S^T field in place (S_z^T into tmp, then S_x back); tmp: float64[nx, nz] scratch."""
+    nx = field.shape[0]
+    filter_z(field, tmp, bands_z[1], mz, 0, nx)
+    filter_x(tmp, field, taps_x, mx, 0, nx)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def filter_deposit(s, ux, uz, grad_s_x, grad_s_z, tmp, taps_x, bands_z, mx, mz):
-    """The deposit's fields filtered in place: s~ = S s, grad s~ = S grad s (the same linear map of
-    the same deposit, so still its derivative with respect to the cell position), and the
-    velocities as S(s u) / S(s) (0 where S(s) = 0). All float64[nx, nz]."""
-    if mx == 0 and mz == 0:
-        return
+def velocity_moments(s, ux, uz, i0, i1):
+    """ux, uz *= s in place on the columns i0 <= i < i1: the moments S filters, so that the filtered
+    velocity is S(s u) / S(s) (velocities_of_moments; kernels.fluid_update.filter_begin .. filter_end)."""
+    nz = s.shape[1]
     sf, xf, zf = s.reshape(s.size), ux.reshape(ux.size), uz.reshape(uz.size)
-    size = np.uint64(sf.size)
-    for c in range(size):
+    for c in range(np.uint64(i0 * nz), np.uint64(i1 * nz)):
         xf[c] *= sf[c]
         zf[c] *= sf[c]
-    apply_filter(s, tmp, taps_x, bands_z, mx, mz)
-    apply_filter(ux, tmp, taps_x, bands_z, mx, mz)
-    apply_filter(uz, tmp, taps_x, bands_z, mx, mz)
-    apply_filter(grad_s_x, tmp, taps_x, bands_z, mx, mz)
-    apply_filter(grad_s_z, tmp, taps_x, bands_z, mx, mz)
-    for c in range(size):
-        if sf[c] > 0.0:
-            inv = 1.0 / sf[c]
-            xf[c] *= inv
-            zf[c] *= inv
-        else:
-            xf[c] = 0.0
-            zf[c] = 0.0
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def velocities_of_moments(s, ux, uz, i0, i1):
+    """ux, uz /= s in place on the columns i0 <= i < i1 once s and the moments are filtered (as
+    u * (1/s); 0 where s = 0: a select, so that the loop vectorises)."""
+    nz = s.shape[1]
+    sf, xf, zf = s.reshape(s.size), ux.reshape(ux.size), uz.reshape(uz.size)
+    for c in range(np.uint64(i0 * nz), np.uint64(i1 * nz)):
+        solid = sf[c] > 0.0
+        inv = 1.0 / sf[c]
+        xf[c] = xf[c] * inv if solid else 0.0
+        zf[c] = zf[c] * inv if solid else 0.0

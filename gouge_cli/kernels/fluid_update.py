@@ -42,9 +42,9 @@ from .layout import (AUTO_EXPLICIT, Deposited, Discs, Planes, G_CAPACITY, G_DIAG
                      P_MAX_SUBSTEPS, P_PHI_MAX, P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT,
                      STATUS_NONFINITE, STATUS_OK, STATUS_SOLVER, S_DT_MAX, S_EXPLICIT_UPDATES, S_ITERATIONS,
                      S_RESIDUAL, S_SUBSTEPS, S_UPDATES, S_Z_BOT, S_Z_TOP)
-from .deposit import deposit, deposit_finish
+from .deposit import collect_columns, deposit, expand_columns
 from .drag import drag_triples, grain_drag_consistent, interleave_triples
-from .filter import apply_filter_transpose, filter_deposit, filter_setup
+from .filter import filter_setup, filter_x, filter_z, half_widths, velocities_of_moments, velocity_moments
 from .pressure import (conjugate_gradient, copy_grid, explicit_bound, explicit_diffusion, face_conductances,
                        flat, heun_diffusion, implicit_system, permeability_field, undrained_source)
 
@@ -59,9 +59,19 @@ def _all_finite(P):
     return bad == 0
 
 
+FORWARD_FIELDS = 5    # the filter's fields: s, s ux, s uz, ds/dx, ds/dz (_forward_field)
+DRAG_FIELDS = 3       # the drag's fields filtered back: q, r_x, r_z (work rows G_FQ, G_FX, G_FZ)
+# The grid's work around the pressure stage, as stages run in this order (grid_stage): the deposit's
+# finish (COLLECT, EXPAND), the filter forward (TAPS, MOMENTS, FORWARD_X, FORWARD_Z, VELOCITIES: S = S_z S_x
+# on the deposit's fields), then pressure_stage, then the filter back (BACK_Z, BACK_X: S^T = S_x S_z^T
+# on the drag's fields) and INTERLEAVE
+COLLECT, EXPAND, TAPS, MOMENTS, FORWARD_X, FORWARD_Z, VELOCITIES, BACK_Z, BACK_X, INTERLEAVE = range(10)
+N_STAGES = 10
+
+
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, extrapolate, mx, mz):
-    """Absolute uz, finiteness check, the drag's fields on the grid; returns a status.
+def _drag_density(fluid, w_bot, w_top, extrapolate):
+    """Absolute uz, finiteness check, the drag's fields on the grid (before S^T); returns a status.
 
     The drag acts until the next update, so it is taken from the pressure extrapolated to the
     middle of that interval, P + (P - P^n)/2 (P^n in work[G_PREV]; extrapolate False, as at
@@ -69,7 +79,8 @@ def _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, extrapolate, mx, mz):
     half a fluid step, which at high De (no diffusion to damp it) pumps energy into the
     grain-fluid oscillation at a rate ~ omega^2 dt_f / 4; the extrapolation removes that first
     order term. The drag is the deposit's adjoint (kernels.drag.drag_triples: q = P/s,
-    r = (P/s^2) grad s), whose fields go back through the filter's transpose (kernels.filter)."""
+    r = (P/s^2) grad s), whose fields then go back through the filter's transpose
+    (grid stages BACK_Z, BACK_X, INTERLEAVE)."""
     P, s, uz, work = fluid.pressure, fluid.s, fluid.uz, fluid.work
     nx, nz = P.shape
     for j in range(nz):                     # (a row's w once: a division per row, not per cell)
@@ -87,10 +98,16 @@ def _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, extrapolate, mx, mz):
         for c in range(np.uint64(pf.size)):
             ef[c] = pf[c]
     drag_triples(ext, s, work[G_SX], work[G_SZ], work[G_FQ], work[G_FX], work[G_FZ])
-    if mx > 0 or mz > 0:
-        for row in (G_FQ, G_FX, G_FZ):
-            apply_filter_transpose(work[row], work[G_TMP], fluid.taps_x, fluid.bands_z, mx, mz)
-    interleave_triples(work[G_FQ], work[G_FX], work[G_FZ], _triples(work))
+    return STATUS_OK
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, extrapolate):
+    """_drag_density, then its fields through S^T on this thread; returns a status."""
+    status = _drag_density(fluid, w_bot, w_top, extrapolate)
+    if status != STATUS_OK:
+        return status
+    grid_stages(BACK_Z, N_STAGES, Lx, z_bot, z_top, fluid)
     return STATUS_OK
 
 
@@ -107,16 +124,94 @@ def _triples(work):
     return work[G_R:G_P + 1].reshape(3 * work.shape[1] * work.shape[2])
 
 
+@njit(cache=NUMBA_CACHE, inline="always")
+def _forward_field(fluid, k):
+    """The filter's field k: s, ux, uz (the moments s u while filtered), ds/dx, ds/dz."""
+    if k == 0:
+        return fluid.s
+    if k == 1:
+        return fluid.ux
+    if k == 2:
+        return fluid.uz
+    return fluid.work[G_SX + k - 3]
+
+
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _filter(Lx, z_bot, z_top, fluid):
-    """The filter's taps for the current cells, then the deposit filtered (kernels.filter);
-    returns (mx, mz)."""
+def filter_half_widths(Lx, z_bot, z_top, fluid):
+    """(mx, mz) of the filter on the current cells (kernels.filter.half_widths; both 0: no filter)."""
     nx, nz = fluid.s.shape
-    mx, mz = filter_setup(fluid.params[P_FILTER_WIDTH], Lx / nx, (z_top - z_bot) / nz, fluid.taps_x, fluid.bands_z)
+    return half_widths(fluid.params[P_FILTER_WIDTH], Lx / nx, (z_top - z_bot) / nz, nx, nz)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def stage_parts(stage, parts):
+    """How many parts grid_stage cuts `stage` into when a field's columns are cut into `parts`."""
+    if stage == TAPS:
+        return 1
+    if stage == FORWARD_X or stage == FORWARD_Z:
+        return FORWARD_FIELDS * parts
+    if stage == BACK_Z or stage == BACK_X:
+        return DRAG_FIELDS * parts
+    return parts
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def grid_stage(stage, index, parts, Lx, z_bot, z_top, fluid, mx, mz):
+    """Part `index` (< stage_parts(stage, parts)) of a grid stage; (mx, mz): filter_half_widths.
+
+    COLLECT, EXPAND: the deposit's finish (kernels.deposit: collect_columns, expand_columns);
+    TAPS: the filter's taps (kernels.filter.filter_setup); MOMENTS: u -> s u; FORWARD_X: S_x of
+    deposit field k (_forward_field: s, s ux, s uz, ds/dx, ds/dz) into scratch row G_TMP + k;
+    FORWARD_Z: S_z of that row back into the field; VELOCITIES: s u -> u = S(s u) / S(s);
+    BACK_Z: S_z^T of drag field k (G_FQ + k: q, r_x, r_z) into G_TMP + k; BACK_X: S_x of that row
+    back into the field; INTERLEAVE: the triples grain_drag_consistent reads (_triples). A
+    field's columns are cut into `parts` parts (k = index // parts). Each stage needs the one
+    before it complete on every column; within a stage the parts are independent and each cell's
+    sums run in one order, so any thread may take any part (the same bits). The filtered s and
+    grad s are S s and S grad s: the same linear map of the same deposit, so still its derivative
+    with respect to the cell position. With no filter (mx = mz = 0) the filter's stages do nothing."""
     work = fluid.work
-    filter_deposit(fluid.s, fluid.ux, fluid.uz, work[G_SX], work[G_SZ], work[G_TMP], fluid.taps_x, fluid.bands_z,
-                   mx, mz)
-    return mx, mz
+    nx = work.shape[1]
+    part = index % parts
+    i0 = part * nx // parts
+    i1 = (part + 1) * nx // parts
+    if stage == COLLECT:
+        collect_columns(fluid.partial, nx, work.shape[2], i0, i1)
+        return
+    if stage == EXPAND:
+        expand_columns(Lx, z_bot, z_top, _deposited(fluid), fluid.partial, i0, i1)
+        return
+    if stage == INTERLEAVE:
+        interleave_triples(work[G_FQ], work[G_FX], work[G_FZ], _triples(work), i0, i1)
+        return
+    if mx == 0 and mz == 0:
+        return
+    k = index // parts
+    tmp = work[G_TMP + k]
+    if stage == TAPS:
+        filter_setup(fluid.params[P_FILTER_WIDTH], Lx / nx, (z_top - z_bot) / work.shape[2], fluid.taps_x,
+                     fluid.bands_z)
+    elif stage == MOMENTS:
+        velocity_moments(fluid.s, fluid.ux, fluid.uz, i0, i1)
+    elif stage == FORWARD_X:
+        filter_x(_forward_field(fluid, k), tmp, fluid.taps_x, mx, i0, i1)
+    elif stage == FORWARD_Z:
+        filter_z(tmp, _forward_field(fluid, k), fluid.bands_z[0], mz, i0, i1)
+    elif stage == VELOCITIES:
+        velocities_of_moments(fluid.s, fluid.ux, fluid.uz, i0, i1)
+    elif stage == BACK_Z:
+        filter_z(work[G_FQ + k], tmp, fluid.bands_z[1], mz, i0, i1)
+    else:
+        filter_x(tmp, work[G_FQ + k], fluid.taps_x, mx, i0, i1)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def grid_stages(first, last, Lx, z_bot, z_top, fluid):
+    """Grid stages first <= stage < last on this thread (grid_stage, whole columns)."""
+    mx, mz = filter_half_widths(Lx, z_bot, z_top, fluid)
+    for stage in range(first, last):
+        for index in range(stage_parts(stage, 1)):
+            grid_stage(stage, index, 1, Lx, z_bot, z_top, fluid, mx, mz)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -146,7 +241,7 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, fluid, drag_x, drag_z)
     params, state, s, s_old, div_u, work = fluid.params, fluid.state, fluid.s, fluid.s_old, fluid.div_u, fluid.work
     deposit(Discs(x, z, vx, vz, radius), n, Lx, Planes(z_bot, z_top, 0.0, 0.0), _deposited(fluid), fluid.corners,
             fluid.partial)
-    mx, mz = _filter(Lx, z_bot, z_top, fluid)
+    grid_stages(TAPS, BACK_Z, Lx, z_bot, z_top, fluid)
     nx, nz = s.shape
     for i in range(nx):
         for j in range(nz):
@@ -161,7 +256,7 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, fluid, drag_x, drag_z)
     state[S_SUBSTEPS] = 0.0
     state[S_UPDATES] = 0.0
     state[S_EXPLICIT_UPDATES] = 0.0
-    status = _finish_grid(Lx, z_bot, z_top, fluid, 0.0, 0.0, False, mx, mz)
+    status = _finish_grid(Lx, z_bot, z_top, fluid, 0.0, 0.0, False)
     fluid_drag(n, Lx, fluid, drag_x, drag_z, status)
     return status
 
@@ -222,18 +317,31 @@ def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid, grain_ki
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_finish_deposit(Lx, z_bot, z_top, fluid):
     """The deposit's last part after fluid_begin(finish=False), on this thread (grid only)."""
-    deposit_finish(Lx, z_bot, z_top, _deposited(fluid), fluid.partial)
+    grid_stages(COLLECT, TAPS, Lx, z_bot, z_top, fluid)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_solve(Lx, z_bot, z_top, dt_f, fluid):
-    """Second part of fluid_update, on the grid only (serial): filter, source, permeability,
-    diffusion, gradient and drag density. fluid: kernels.layout.FluidArrays. Returns a status."""
+    """Second part of fluid_update, on the grid only, on this thread: filter, source, permeability,
+    diffusion, gradient and drag density. fluid: kernels.layout.FluidArrays. Returns a status.
+    (kernels.coupled runs the same parts with the filter's fields shared between two threads.)"""
+    grid_stages(TAPS, BACK_Z, Lx, z_bot, z_top, fluid)
+    status = pressure_stage(Lx, z_bot, z_top, dt_f, fluid)
+    if status == STATUS_NONFINITE:
+        return status
+    grid_stages(BACK_Z, N_STAGES, Lx, z_bot, z_top, fluid)
+    return status
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def pressure_stage(Lx, z_bot, z_top, dt_f, fluid):
+    """The part of fluid_solve between the filter and the drag's S^T: source, permeability,
+    diffusion, then the drag's fields (_drag_density). Returns a status: STATUS_NONFINITE leaves
+    the drag fields unset (fluid_drag then zeroes the drag)."""
     params, state, P, s, s_old, ux, uz, permeability, div_u, work = (
         fluid.params, fluid.state, fluid.pressure, fluid.s, fluid.s_old, fluid.ux, fluid.uz, fluid.permeability,
         fluid.div_u, fluid.work)
     nx, nz = P.shape
-    mx, mz = _filter(Lx, z_bot, z_top, fluid)
     copy_grid(P, work[G_PREV])
     dx = Lx / nx
     dz = (z_top - z_bot) / nz
@@ -282,7 +390,7 @@ def fluid_solve(Lx, z_bot, z_top, dt_f, fluid):
     state[S_Z_BOT] = z_bot
     state[S_Z_TOP] = z_top
     state[S_UPDATES] += 1.0
-    finish = _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, True, mx, mz)
+    finish = _drag_density(fluid, w_bot, w_top, True)
     if finish != STATUS_OK:
         return finish
     return status

@@ -124,8 +124,9 @@ G_SZ = 16            # ds/dz consistent with the deposit
 G_TZT = 17           # tz transposed (nz, nx), for the z-line solves (kernels.pressure)
 G_LINE = 18          # the z-line solves' right-hand side and solution, transposed (nz, nx)
 G_PREV = 19          # P^n at the start of an update; then the pressure extrapolated for the drag
-G_TMP = 20           # the filter's scratch (kernels.filter)
-N_GRID_WORK = 21
+G_TMP = 20           # the filter's scratch: rows G_TMP .. G_TMP + N_FILTER_SCRATCH - 1, one per field
+N_FILTER_SCRATCH = 5     # (the deposit's five fields filtered at once: kernels.fluid_update.grid_stage)
+N_GRID_WORK = G_TMP + N_FILTER_SCRATCH
 
 # the deposit's inputs and outputs (kernels.deposit): the discs it reads, float64[>= n] each
 # (x, z [d], vx, vz [v0], radius [d]); the wall planes now and their velocities over the fluid step

@@ -201,9 +201,12 @@ def test_gradient_density_source_and_finiteness_are_the_cell_by_cell_definitions
 
 def test_work_rows_hold_the_transposed_line_arrays():
     """The z-line solves use two extra work rows, viewed (nz, nx); every named row is its own and
-    within N_GRID_WORK (the drag's extrapolated pressure and the filter's scratch among them)."""
+    within N_GRID_WORK (the drag's extrapolated pressure and the filter's scratch among them: one
+    row per field it filters, the last rows)."""
     rows = [value for name, value in vars(L).items() if name.startswith("G_")]
-    assert len(set(rows)) == len(rows) and max(rows) + 1 == L.N_GRID_WORK
+    assert len(set(rows)) == len(rows) and max(rows) == L.G_TMP
+    assert L.G_TMP + L.N_FILTER_SCRATCH == L.N_GRID_WORK
+    assert L.N_FILTER_SCRATCH >= max(KF.FORWARD_FIELDS, KF.DRAG_FIELDS)
     assert len({L.G_CP, L.G_DINV, L.G_TZT, L.G_LINE, L.G_R, L.G_Z, L.G_P, L.G_Q}) == 8
 
 
