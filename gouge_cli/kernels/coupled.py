@@ -9,8 +9,8 @@ from . import NUMBA_CACHE
 from .atomics import fetch_add
 from .layout import (BG_DAMPING, DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, LIST_OVERFLOW, OK, STATUS_NONFINITE,
                      THREADS, WIDTH, W_VX, W_VZ, W_Z)
-from .fluid_update import (BACK_Z, COLLECT, N_STAGES, TAPS, filter_half_widths, fluid_begin, fluid_drag,
-                           fluid_solve, grid_stage, pressure_stage, stage_parts)
+from .fluid_update import (BACK_Z, COLLECT, DENSITY, N_STAGES, PREDICT, TAPS, filter_half_widths, fluid_begin,
+                           fluid_drag, fluid_solve, grid_stage, pressure_choose, pressure_close, stage_parts)
 from .step import _step, close_step, move_range, open_step
 
 
@@ -73,12 +73,14 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
 
 
 # _solve_and_drift's shared counters, at out[tasks + 1 + slot] (after the status and the per-thread
-# counts): thread 0 running, the drag's fields ready, and per grid stage (kernels.fluid_update:
-# COLLECT .. INTERLEAVE) a count of parts taken and one of parts done
-_ALIVE, _READY = 0, 1
-_TAKEN = 2
+# counts): thread 0 running, the solver chosen, the drag's fields ready, parts that found a pressure
+# not finite, and per grid stage (kernels.fluid_update: COLLECT .. INTERLEAVE) a count of parts taken
+# and one of parts done
+_ALIVE, _CHOSEN, _READY, _NONFINITE = range(4)
+_TAKEN = 4
 _FINISHED = _TAKEN + N_STAGES
 _SLOTS = _FINISHED + N_STAGES
+_HEUN, _SOLVED = 1, 2         # out[_CHOSEN]: Heun's stages follow; or the pressure is solved
 _GO, _NO_DRAG = 1, 2          # out[_READY]: the drag's fields may be filtered back; or there are none
 _PARTS = 2                    # a field's columns in two parts: two threads share the grid
 
@@ -90,9 +92,10 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
     (move_range), each grain on its own: the bits of one after the other. Every thread moves its
     own part of the grains (kernels.step.kick_drift's: the ones it holds in cache).
 
-    On two or more threads, threads 0 and 1 share the grid (_stages): the grid's stages before the
-    pressure (the deposit's finish if pending, then the filter forward), then thread 0 alone runs
-    pressure_stage, then both the stages after it. Each stage is cut into parts (grid_stage), each
+    On two or more threads, threads 0 and 1 share the grid's stages (_stages; kernels.fluid_update:
+    the deposit's finish if pending, the filter forward, the pressure's parts, the filter back);
+    thread 0 alone runs the serial steps between them (pressure_choose, with the backward Euler
+    or sub-stepped solvers, and pressure_close). Each stage is cut into parts (grid_stage), each
     part taken by fetch_add on the stage's counter, so each is done once, by whichever thread
     takes it, in the same serial code: the same bits. Thread 1 takes parts first, then moves its
     grains; thread 0 moves its grains first. A thread waits only for parts another has taken (that
@@ -115,17 +118,17 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
         if t == 0 and tasks > 1:
             fetch_add(out, base + _ALIVE, 1)
         if t == 1:
-            _stages(out, base, first, BACK_Z, width, z_bot, z_top, fluid, False)
+            _stages(out, base, first, PREDICT, width, z_bot, z_top, dt_f, fluid, False)
         late = move_range(t * n // tasks, (t + 1) * n // tasks, x, z, vx, vz, spin, force_x, force_z, torque,
                           inv_mass, inv_inertia, body, x_build, z_build, owed, params)
         if t == 0 and tasks > 1:
             out[0] = _grid_on_thread_0(out, base, first, width, z_bot, z_top, dt_f, fluid)
-        if t == 1 and fetch_add(out, base + _ALIVE, 0) != 0:
-            ready = fetch_add(out, base + _READY, 0)
-            while ready == 0:                   # (thread 0 runs: it reaches the pressure stage's end)
-                ready = fetch_add(out, base + _READY, 0)
-            if ready == _GO:
-                _stages(out, base, BACK_Z, N_STAGES, width, z_bot, z_top, fluid, False)
+        if t == 1 and fetch_add(out, base + _ALIVE, 0) != 0:       # (thread 0 runs: it sets each flag)
+            chosen = _await(out, base + _CHOSEN)
+            _stages(out, base, PREDICT if chosen == _HEUN else DENSITY, BACK_Z, width, z_bot, z_top, dt_f, fluid,
+                    False)
+            if _await(out, base + _READY) == _GO:
+                _stages(out, base, BACK_Z, N_STAGES, width, z_bot, z_top, dt_f, fluid, False)
         out[t + 1] = late
     total = 0
     for t in range(tasks):
@@ -136,22 +139,35 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
 @njit(cache=NUMBA_CACHE)
 def _grid_on_thread_0(out, base, first, width, z_bot, z_top, dt_f, fluid):
     """Thread 0's part of the shared solve (_solve_and_drift); returns the solve's status."""
-    _stages(out, base, first, BACK_Z, width, z_bot, z_top, fluid, True)
-    status = pressure_stage(width, z_bot, z_top, dt_f, fluid)
+    _stages(out, base, first, PREDICT, width, z_bot, z_top, dt_f, fluid, True)
+    heun, status = pressure_choose(dt_f, fluid)
+    fetch_add(out, base + _CHOSEN, _HEUN if heun else _SOLVED)
+    _stages(out, base, PREDICT if heun else DENSITY, BACK_Z, width, z_bot, z_top, dt_f, fluid, True)
+    status = pressure_close(z_bot, z_top, fluid, fetch_add(out, base + _NONFINITE, 0) == 0, status)
     if status == STATUS_NONFINITE:
         fetch_add(out, base + _READY, _NO_DRAG)
         return status
     fetch_add(out, base + _READY, _GO)
-    _stages(out, base, BACK_Z, N_STAGES, width, z_bot, z_top, fluid, True)
+    _stages(out, base, BACK_Z, N_STAGES, width, z_bot, z_top, dt_f, fluid, True)
     return status
 
 
+@njit(cache=NUMBA_CACHE, inline="always")
+def _await(out, slot):
+    """Spin until out[slot] is set (an atomic read; only for a flag a running thread will set)."""
+    value = fetch_add(out, slot, 0)
+    while value == 0:
+        value = fetch_add(out, slot, 0)
+    return value
+
+
 @njit(cache=NUMBA_CACHE)
-def _stages(out, base, first, last, width, z_bot, z_top, fluid, wait):
+def _stages(out, base, first, last, width, z_bot, z_top, dt_f, fluid, wait):
     """Grid stages first <= stage < last, shared: the parts of each (_PARTS per field's columns)
     taken one at a time by fetch_add on the stage's counter until none is left; a stage starts
     once every part of the one before is done (all are then taken: any in progress is another
-    running thread's). With wait, returns only once every part of the last stage is done."""
+    running thread's). A part that finds the pressure not finite counts in out[_NONFINITE]. With
+    wait, returns only once every part of the last stage is done."""
     mx, mz = filter_half_widths(width, z_bot, z_top, fluid)
     for stage in range(first, last):
         count = stage_parts(stage, _PARTS)
@@ -160,7 +176,8 @@ def _stages(out, base, first, last, width, z_bot, z_top, fluid, wait):
                 pass
         k = fetch_add(out, base + _TAKEN + stage, 1)
         while k < count:
-            grid_stage(stage, k, _PARTS, width, z_bot, z_top, fluid, mx, mz)
+            if not grid_stage(stage, k, _PARTS, width, z_bot, z_top, dt_f, fluid, mx, mz):
+                fetch_add(out, base + _NONFINITE, 1)
             fetch_add(out, base + _FINISHED + stage, 1)
             k = fetch_add(out, base + _TAKEN + stage, 1)
     while wait and fetch_add(out, base + _FINISHED + last - 1, 0) < stage_parts(last - 1, _PARTS):

@@ -24,7 +24,7 @@ from . import NUMBA_CACHE
 from .layout import CELL_BITS, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ
 from .deposit import cell_weights, corner_shares, grain_area
 from .lanes import bilinear_pairs
-from .pressure import flat, flat_columns
+from .pressure import cells, flat, flat_columns
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -180,10 +180,12 @@ def grain_drag_at(corners, n, nz, pairs, drag_x, drag_z):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def drag_triples(P, s, grad_s_x, grad_s_z, q, rx, rz):
-    """q = P/s [E], r = (P/s^2) grad s [E/d] per cell (0 where s <= 0); all float64[nx, nz]."""
+def drag_triples(P, s, grad_s_x, grad_s_z, q, rx, rz, i0=0, i1=-1):
+    """q = P/s [E], r = (P/s^2) grad s [E/d] per cell (0 where s <= 0); all float64[nx, nz]
+    (i0, i1: kernels.pressure.cells)."""
     pf, sf, gx, gz, qf, xf, zf = flat(P), flat(s), flat(grad_s_x), flat(grad_s_z), flat(q), flat(rx), flat(rz)
-    for c in range(np.uint64(pf.size)):          # (selects, not branches: the loop vectorises)
+    lo, hi = cells(P, i0, i1)
+    for c in range(lo, hi):          # (selects, not branches: the loop vectorises)
         solid = sf[c] > 0.0
         inv = 1.0 / sf[c]
         value = pf[c] * inv

@@ -45,8 +45,9 @@ from .layout import (AUTO_EXPLICIT, Deposited, Discs, Planes, G_CAPACITY, G_DIAG
 from .deposit import collect_columns, deposit, expand_columns
 from .drag import drag_triples, grain_drag_consistent, interleave_triples
 from .filter import filter_setup, filter_x, filter_z, half_widths, velocities_of_moments, velocity_moments
-from .pressure import (conjugate_gradient, copy_grid, explicit_bound, explicit_diffusion, face_conductances,
-                       flat, heun_diffusion, implicit_system, permeability_field, undrained_source)
+from .pressure import (bound_of_rates, bound_rates, cells, conjugate_gradient, copy_grid, explicit_diffusion,
+                       face_conductances, flat, heun_corrector, heun_predictor, implicit_system, permeability_field,
+                       undrained_source, _face_diagonal)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -61,17 +62,22 @@ def _all_finite(P):
 
 FORWARD_FIELDS = 5    # the filter's fields: s, s ux, s uz, ds/dx, ds/dz (_forward_field)
 DRAG_FIELDS = 3       # the drag's fields filtered back: q, r_x, r_z (work rows G_FQ, G_FX, G_FZ)
-# The grid's work around the pressure stage, as stages run in this order (grid_stage): the deposit's
-# finish (COLLECT, EXPAND), the filter forward (TAPS, MOMENTS, FORWARD_X, FORWARD_Z, VELOCITIES: S = S_z S_x
-# on the deposit's fields), then pressure_stage, then the filter back (BACK_Z, BACK_X: S^T = S_x S_z^T
-# on the drag's fields) and INTERLEAVE
-COLLECT, EXPAND, TAPS, MOMENTS, FORWARD_X, FORWARD_Z, VELOCITIES, BACK_Z, BACK_X, INTERLEAVE = range(10)
-N_STAGES = 10
+# A fluid update's grid work as stages run in this order (grid_stage): the deposit's finish (COLLECT,
+# EXPAND), the filter forward (TAPS, MOMENTS, FORWARD_X, FORWARD_Z, VELOCITIES: S = S_z S_x on the
+# deposit's fields), the source, permeability and face conductances (SOURCE, FACES), the cells'
+# explicit bounds (RATES), then the choice of solver (pressure_choose, serial), Heun's two halves
+# (PREDICT, CORRECT: when it is chosen), the drag's fields (DENSITY), the update's close
+# (pressure_close, serial), then the filter back (BACK_Z, BACK_X: S^T = S_x S_z^T on the drag's
+# fields) and INTERLEAVE
+(COLLECT, EXPAND, TAPS, MOMENTS, FORWARD_X, FORWARD_Z, VELOCITIES, SOURCE, FACES, RATES, PREDICT, CORRECT, DENSITY,
+ BACK_Z, BACK_X, INTERLEAVE) = range(16)
+N_STAGES = 16
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _drag_density(fluid, w_bot, w_top, extrapolate):
-    """Absolute uz, finiteness check, the drag's fields on the grid (before S^T); returns a status.
+def _drag_density(fluid, w_bot, w_top, extrapolate, i0=0, i1=-1):
+    """Absolute uz, the drag's fields on the grid (before S^T) on columns i0..i1 (-1: all); returns
+    whether P is finite on them (if not, the fields are not used: STATUS_NONFINITE).
 
     The drag acts until the next update, so it is taken from the pressure extrapolated to the
     middle of that interval, P + (P - P^n)/2 (P^n in work[G_PREV]; extrapolate False, as at
@@ -83,31 +89,33 @@ def _drag_density(fluid, w_bot, w_top, extrapolate):
     (grid stages BACK_Z, BACK_X, INTERLEAVE)."""
     P, s, uz, work = fluid.pressure, fluid.s, fluid.uz, fluid.work
     nx, nz = P.shape
+    last = nx if i1 < 0 else i1
     for j in range(nz):                     # (a row's w once: a division per row, not per cell)
         w = w_bot + (j + 0.5) / nz * (w_top - w_bot)
-        for i in range(nx):
+        for i in range(i0, last):
             uz[i, j] += w
-    if not _all_finite(P):
-        return STATUS_NONFINITE
     ext = work[G_PREV]
     pf, ef = flat(P), flat(ext)
+    lo, hi = cells(P, i0, i1)
+    bad = 0
+    for c in range(lo, hi):
+        bad += 0 if abs(pf[c]) < math.inf else 1
     if extrapolate:
-        for c in range(np.uint64(pf.size)):
+        for c in range(lo, hi):
             ef[c] = 1.5 * pf[c] - 0.5 * ef[c]
     else:
-        for c in range(np.uint64(pf.size)):
+        for c in range(lo, hi):
             ef[c] = pf[c]
-    drag_triples(ext, s, work[G_SX], work[G_SZ], work[G_FQ], work[G_FX], work[G_FZ])
-    return STATUS_OK
+    drag_triples(ext, s, work[G_SX], work[G_SZ], work[G_FQ], work[G_FX], work[G_FZ], i0, i1)
+    return bad == 0
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, extrapolate):
     """_drag_density, then its fields through S^T on this thread; returns a status."""
-    status = _drag_density(fluid, w_bot, w_top, extrapolate)
-    if status != STATUS_OK:
-        return status
-    grid_stages(BACK_Z, N_STAGES, Lx, z_bot, z_top, fluid)
+    if not _drag_density(fluid, w_bot, w_top, extrapolate):
+        return STATUS_NONFINITE
+    grid_stages(BACK_Z, N_STAGES, Lx, z_bot, z_top, 0.0, fluid)
     return STATUS_OK
 
 
@@ -156,15 +164,17 @@ def stage_parts(stage, parts):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def grid_stage(stage, index, parts, Lx, z_bot, z_top, fluid, mx, mz):
+def grid_stage(stage, index, parts, Lx, z_bot, z_top, dt_f, fluid, mx, mz):
     """Part `index` (< stage_parts(stage, parts)) of a grid stage; (mx, mz): filter_half_widths.
+    Returns False if the part found a pressure that is not finite (DENSITY), else True.
 
     COLLECT, EXPAND: the deposit's finish (kernels.deposit: collect_columns, expand_columns);
     TAPS: the filter's taps (kernels.filter.filter_setup); MOMENTS: u -> s u; FORWARD_X: S_x of
     deposit field k (_forward_field: s, s ux, s uz, ds/dx, ds/dz) into scratch row G_TMP + k;
     FORWARD_Z: S_z of that row back into the field; VELOCITIES: s u -> u = S(s u) / S(s);
     BACK_Z: S_z^T of drag field k (G_FQ + k: q, r_x, r_z) into G_TMP + k; BACK_X: S_x of that row
-    back into the field; INTERLEAVE: the triples grain_drag_consistent reads (_triples). A
+    back into the field; INTERLEAVE: the triples grain_drag_consistent reads (_triples); SOURCE,
+    FACES, RATES, PREDICT, CORRECT, DENSITY: pressure_stage's parts (kernels.pressure). A
     field's columns are cut into `parts` parts (k = index // parts). Each stage needs the one
     before it complete on every column; within a stage the parts are independent and each cell's
     sums run in one order, so any thread may take any part (the same bits). The filtered s and
@@ -177,16 +187,22 @@ def grid_stage(stage, index, parts, Lx, z_bot, z_top, fluid, mx, mz):
     i1 = (part + 1) * nx // parts
     if stage == COLLECT:
         collect_columns(fluid.partial, nx, work.shape[2], i0, i1)
-        return
-    if stage == EXPAND:
+    elif stage == EXPAND:
         expand_columns(Lx, z_bot, z_top, _deposited(fluid), fluid.partial, i0, i1)
-        return
-    if stage == INTERLEAVE:
+    elif stage == INTERLEAVE:
         interleave_triples(work[G_FQ], work[G_FX], work[G_FZ], _triples(work), i0, i1)
-        return
-    if mx == 0 and mz == 0:
-        return
-    k = index // parts
+    elif stage >= SOURCE and stage <= DENSITY:
+        return _pressure_part(stage, Lx, z_bot, z_top, dt_f, fluid, i0, i1)
+    elif mx > 0 or mz > 0:
+        _filter_part(stage, index // parts, fluid, Lx, z_bot, z_top, mx, mz, i0, i1)
+    return True
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _filter_part(stage, k, fluid, Lx, z_bot, z_top, mx, mz, i0, i1):
+    """grid_stage's filter stages on field k, columns i0..i1."""
+    work = fluid.work
+    nx = work.shape[1]
     tmp = work[G_TMP + k]
     if stage == TAPS:
         filter_setup(fluid.params[P_FILTER_WIDTH], Lx / nx, (z_top - z_bot) / work.shape[2], fluid.taps_x,
@@ -206,12 +222,44 @@ def grid_stage(stage, index, parts, Lx, z_bot, z_top, fluid, mx, mz):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def grid_stages(first, last, Lx, z_bot, z_top, fluid):
-    """Grid stages first <= stage < last on this thread (grid_stage, whole columns)."""
+def _pressure_part(stage, Lx, z_bot, z_top, dt_f, fluid, i0, i1):
+    """grid_stage's pressure stages on columns i0..i1 (pressure_stage: the order and the arrays)."""
+    params, state, P, s, work = fluid.params, fluid.state, fluid.pressure, fluid.s, fluid.work
+    nx, nz = P.shape
+    beta = params[P_BETA]
+    capacity, tx, tz, tb, diag = work[G_CAPACITY], work[G_TX], work[G_TZ], work[G_TB], work[G_DIAG]
+    if stage == SOURCE:
+        copy_grid(P, work[G_PREV], i0, i1)
+        undrained_source(P, s, fluid.s_old, fluid.ux, fluid.uz, work[G_SX], work[G_SZ], dt_f, beta,
+                         1.0 - params[P_PHI_MAX], 1.0 - params[P_PHI_MIN], work[G_RHS], fluid.div_u, i0, i1)
+        permeability_field(s, params[P_KAPPA_C], params[P_PHI_MIN], params[P_PHI_MAX], fluid.permeability, capacity,
+                           beta, i0, i1)
+    elif stage == FACES:
+        face_conductances(P, fluid.permeability, Lx / nx, (z_top - z_bot) / nz, beta, params[P_ETA], tx, tz, tb,
+                          i0, i1)
+    elif stage == RATES:
+        bound_rates(capacity, tx, tz, tb, work[G_R], i0, i1)
+        _face_diagonal(tx, tz, tb, diag, i0, i1)
+    elif stage == PREDICT:
+        heun_predictor(P, capacity, tx, tz, dt_f, diag, work[G_Q], work[G_P], i0, i1)
+    elif stage == CORRECT:
+        heun_corrector(P, capacity, tx, tz, dt_f, diag, work[G_Q], work[G_P], work[G_Z], i0, i1)
+    else:
+        w_bot, w_top = _plane_velocities(state, z_bot, z_top, dt_f)
+        return _drag_density(fluid, w_bot, w_top, True, i0, i1)
+    return True
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def grid_stages(first, last, Lx, z_bot, z_top, dt_f, fluid):
+    """Grid stages first <= stage < last on this thread (grid_stage, whole columns); returns
+    False if the pressure is not finite (DENSITY)."""
     mx, mz = filter_half_widths(Lx, z_bot, z_top, fluid)
+    finite = True
     for stage in range(first, last):
         for index in range(stage_parts(stage, 1)):
-            grid_stage(stage, index, 1, Lx, z_bot, z_top, fluid, mx, mz)
+            finite &= grid_stage(stage, index, 1, Lx, z_bot, z_top, dt_f, fluid, mx, mz)
+    return finite
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -241,7 +289,7 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, fluid, drag_x, drag_z)
     params, state, s, s_old, div_u, work = fluid.params, fluid.state, fluid.s, fluid.s_old, fluid.div_u, fluid.work
     deposit(Discs(x, z, vx, vz, radius), n, Lx, Planes(z_bot, z_top, 0.0, 0.0), _deposited(fluid), fluid.corners,
             fluid.partial)
-    grid_stages(TAPS, BACK_Z, Lx, z_bot, z_top, fluid)
+    grid_stages(TAPS, SOURCE, Lx, z_bot, z_top, 0.0, fluid)
     nx, nz = s.shape
     for i in range(nx):
         for j in range(nz):
@@ -317,7 +365,7 @@ def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid, grain_ki
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_finish_deposit(Lx, z_bot, z_top, fluid):
     """The deposit's last part after fluid_begin(finish=False), on this thread (grid only)."""
-    grid_stages(COLLECT, TAPS, Lx, z_bot, z_top, fluid)
+    grid_stages(COLLECT, TAPS, Lx, z_bot, z_top, 0.0, fluid)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -325,39 +373,37 @@ def fluid_solve(Lx, z_bot, z_top, dt_f, fluid):
     """Second part of fluid_update, on the grid only, on this thread: filter, source, permeability,
     diffusion, gradient and drag density. fluid: kernels.layout.FluidArrays. Returns a status.
     (kernels.coupled runs the same parts with the filter's fields shared between two threads.)"""
-    grid_stages(TAPS, BACK_Z, Lx, z_bot, z_top, fluid)
+    grid_stages(TAPS, SOURCE, Lx, z_bot, z_top, 0.0, fluid)
     status = pressure_stage(Lx, z_bot, z_top, dt_f, fluid)
     if status == STATUS_NONFINITE:
         return status
-    grid_stages(BACK_Z, N_STAGES, Lx, z_bot, z_top, fluid)
+    grid_stages(BACK_Z, N_STAGES, Lx, z_bot, z_top, dt_f, fluid)
     return status
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def pressure_stage(Lx, z_bot, z_top, dt_f, fluid):
-    """The part of fluid_solve between the filter and the drag's S^T: source, permeability,
-    diffusion, then the drag's fields (_drag_density). Returns a status: STATUS_NONFINITE leaves
-    the drag fields unset (fluid_drag then zeroes the drag)."""
-    params, state, P, s, s_old, ux, uz, permeability, div_u, work = (
-        fluid.params, fluid.state, fluid.pressure, fluid.s, fluid.s_old, fluid.ux, fluid.uz, fluid.permeability,
-        fluid.div_u, fluid.work)
-    nx, nz = P.shape
-    copy_grid(P, work[G_PREV])
-    dx = Lx / nx
-    dz = (z_top - z_bot) / nz
-    beta = params[P_BETA]
-    w_bot, w_top = _plane_velocities(state, z_bot, z_top, dt_f)
+    """The part of fluid_solve between the filter and the drag's S^T, on this thread: source and
+    permeability, face conductances (with 1 + beta P^n), the explicit bound, diffusion over dt_f,
+    then the drag's fields (_drag_density). Returns a status: STATUS_NONFINITE leaves the drag
+    fields unused (fluid_drag then zeroes the drag). As grid stages SOURCE .. DENSITY around the
+    serial pressure_choose and pressure_close, which kernels.coupled shares between two threads."""
+    grid_stages(SOURCE, PREDICT, Lx, z_bot, z_top, dt_f, fluid)
+    heun, status = pressure_choose(dt_f, fluid)
+    finite = grid_stages(PREDICT if heun else DENSITY, BACK_Z, Lx, z_bot, z_top, dt_f, fluid)
+    return pressure_close(z_bot, z_top, fluid, finite, status)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def pressure_choose(dt_f, fluid):
+    """After RATES: the explicit bound (state S_DT_MAX) and the solver for dt_f: Heun (auto, while
+    dt_f <= AUTO_EXPLICIT x the bound: returns heun True, P = P*, and grid stages PREDICT and
+    CORRECT must follow), or here, on this thread, the explicit sub-steps or backward Euler
+    (kernels.pressure). Returns (heun, status)."""
+    params, state, P, work = fluid.params, fluid.state, fluid.pressure, fluid.work
+    capacity, tx, tz, tb = work[G_CAPACITY], work[G_TX], work[G_TZ], work[G_TB]
     p_star = work[G_RHS]
-    undrained_source(P, s, s_old, ux, uz, work[G_SX], work[G_SZ], dt_f, beta,
-                     1.0 - params[P_PHI_MAX], 1.0 - params[P_PHI_MIN], p_star, div_u)
-    capacity = work[G_CAPACITY]
-    permeability_field(s, params[P_KAPPA_C], params[P_PHI_MIN], params[P_PHI_MAX],
-                       permeability, capacity, beta)
-    tx = work[G_TX]
-    tz = work[G_TZ]
-    tb = work[G_TB]
-    face_conductances(P, permeability, dx, dz, beta, params[P_ETA], tx, tz, tb)
-    dt_max = explicit_bound(capacity, tx, tz, tb, work[G_DIAG])      # (diag: scratch until the solver sets it)
+    dt_max = bound_of_rates(work[G_R])
     state[S_DT_MAX] = dt_max
     status = STATUS_OK
     solver = params[P_SOLVER]
@@ -369,29 +415,30 @@ def pressure_stage(Lx, z_bot, z_top, dt_f, fluid):
         state[S_RESIDUAL] = 0.0
         state[S_SUBSTEPS] = substeps
         if not substeps <= params[P_MAX_SUBSTEPS]:
-            status = STATUS_SOLVER
-        else:
-            if heun:
-                heun_diffusion(P, capacity, tx, tz, tb, dt_f, work[G_DIAG], work[G_Q], work[G_P], work[G_Z])
-            else:
-                n_sub = int(substeps)
-                explicit_diffusion(P, capacity, tx, tz, tb, dt_f / n_sub, n_sub, work[G_DIAG], work[G_Q])
-            state[S_EXPLICIT_UPDATES] += 1.0
-    else:
-        diag = work[G_DIAG]
-        implicit_system(capacity, tx, tz, tb, dt_f, p_star, P, diag)
-        iterations, residual, converged = conjugate_gradient(
-            P, p_star, diag, tx, tz, work, params[P_TOL], int(params[P_MAX_ITER]))
-        state[S_ITERATIONS] = iterations
-        state[S_RESIDUAL] = residual
-        state[S_SUBSTEPS] = 1.0
-        if not converged:
-            status = STATUS_SOLVER
+            return False, STATUS_SOLVER
+        if not heun:
+            n_sub = int(substeps)
+            explicit_diffusion(P, capacity, tx, tz, tb, dt_f / n_sub, n_sub, work[G_DIAG], work[G_Q])
+        state[S_EXPLICIT_UPDATES] += 1.0
+        return heun, status
+    diag = work[G_DIAG]
+    implicit_system(capacity, tx, tz, tb, dt_f, p_star, P, diag)
+    iterations, residual, converged = conjugate_gradient(
+        P, p_star, diag, tx, tz, work, params[P_TOL], int(params[P_MAX_ITER]))
+    state[S_ITERATIONS] = iterations
+    state[S_RESIDUAL] = residual
+    state[S_SUBSTEPS] = 1.0
+    if not converged:
+        status = STATUS_SOLVER
+    return False, status
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def pressure_close(z_bot, z_top, fluid, finite, status):
+    """After DENSITY: the planes of this update and the update count in the state; returns the
+    update's status (STATUS_NONFINITE if the pressure is not finite)."""
+    state = fluid.state
     state[S_Z_BOT] = z_bot
     state[S_Z_TOP] = z_top
     state[S_UPDATES] += 1.0
-    finish = _drag_density(fluid, w_bot, w_top, True)
-    if finish != STATUS_OK:
-        return finish
-    return status
-
+    return status if finite else STATUS_NONFINITE

@@ -67,15 +67,27 @@ def flat(a):
 
 
 @njit(cache=NUMBA_CACHE, inline="always")
-def copy_grid(source, target):
-    """target[:] = source for two grid arrays of one shape, as one flat (vectorised) loop."""
+def cells(a, i0, i1):
+    """(lo, hi): the flat cells of grid columns i0 <= i < i1 of a (nx, nz) as uint64; i1 < 0: to the
+    last column. The functions taking (i0, i1) do those columns' cells only, each cell with the
+    same operations whatever the range: a grid shared out by columns has the bits of one pass."""
+    nz = np.uint64(a.shape[1])
+    last = a.shape[0] if i1 < 0 else i1
+    return np.uint64(i0) * nz, np.uint64(last) * nz
+
+
+@njit(cache=NUMBA_CACHE, inline="always")
+def copy_grid(source, target, i0=0, i1=-1):
+    """target[:] = source for two grid arrays of one shape (columns i0..i1: cells), one flat loop."""
     sf, tf = flat(source), flat(target)
-    for c in range(np.uint64(sf.size)):
+    lo, hi = cells(source, i0, i1)
+    for c in range(lo, hi):
         tf[c] = sf[c]
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def undrained_source(P, s, s_old, ux, uz_rel, grad_s_x, grad_s_z, dt_f, beta, s_min, s_max, p_star, div_u):
+def undrained_source(P, s, s_old, ux, uz_rel, grad_s_x, grad_s_z, dt_f, beta, s_min, s_max, p_star, div_u, i0=0,
+                     i1=-1):
     """Pressure after the exact undrained response to the solid-fraction change.
 
     P : float64[nx, nz] pressure P^n [E];  s, s_old : s^{n+1}, s^n [-]
@@ -83,11 +95,12 @@ def undrained_source(P, s, s_old, ux, uz_rel, grad_s_x, grad_s_z, dt_f, beta, s_
     The material change is s_e - s^n with s_e = s^{n+1} + dt_f u_rel . grad s.
     p_star : out, P* = P^n + (1 + beta P^n)(s_e - s^n) / (beta s^n (1 - s_e))  [E]
     div_u : out, solid volumetric strain rate -(s_e - s^n) / (dt_f (s_e + s^n)/2) [1/t0]
-    s is clamped to [s_min, s_max] = [1 - phi_max, 1 - phi_min] in both formulas.
+    s is clamped to [s_min, s_max] = [1 - phi_max, 1 - phi_min] in both formulas. (i0, i1: cells.)
     """
     p, sn, so, u, w, gx, gz, out, div = (flat(P), flat(s), flat(s_old), flat(ux), flat(uz_rel), flat(grad_s_x),
                                          flat(grad_s_z), flat(p_star), flat(div_u))
-    for c in range(np.uint64(p.size)):
+    lo, hi = cells(P, i0, i1)
+    for c in range(lo, hi):
         s_end = sn[c] + dt_f * (u[c] * gx[c] + w[c] * gz[c])
         s_start = so[c]
         s_end = min(max(s_end, s_min), s_max)
@@ -97,14 +110,15 @@ def undrained_source(P, s, s_old, ux, uz_rel, grad_s_x, grad_s_z, dt_f, beta, s_
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def permeability_field(s, kappa_c, phi_min, phi_max, permeability, capacity, beta):
+def permeability_field(s, kappa_c, phi_min, phi_max, permeability, capacity, beta, i0=0, i1=-1):
     """Carman-Kozeny permeability (docs/physics/fluid.md; thesis Eq. 20 corrected) and capacity.
 
     permeability : out, kappa_c phi^3 / (1 - phi)^2 [d^2];  capacity : out, beta phi [1/E]
-    with phi = 1 - s clamped to [phi_min, phi_max].
+    with phi = 1 - s clamped to [phi_min, phi_max]. (i0, i1: cells.)
     """
     sf, kf, cf = flat(s), flat(permeability), flat(capacity)
-    for c in range(np.uint64(sf.size)):
+    lo, hi = cells(s, i0, i1)
+    for c in range(lo, hi):
         phi = min(max(1.0 - sf[c], phi_min), phi_max)
         kf[c] = kappa_c * phi * phi * phi / ((1.0 - phi) * (1.0 - phi))
         cf[c] = beta * phi
@@ -118,7 +132,7 @@ def _face(p0, p1, k0, k1, half_beta, scale):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def face_conductances(P, permeability, dx, dz, beta, eta, tx, tz, tb):
+def face_conductances(P, permeability, dx, dz, beta, eta, tx, tz, tb, i0=0, i1=-1):
     """Face conductances of div[(1 + beta P)(kappa/eta) grad P] per unit cell area.
 
     P : lagged pressure P^n [E]. tx[i, j]: face (i+1/2, j), periodic;
@@ -127,6 +141,7 @@ def face_conductances(P, permeability, dx, dz, beta, eta, tx, tz, tb):
     the cell value and 1 (P = 0 on the plane), distance dz/2; 0 for inner cells.
     Units 1/(E t0). Flat loops: the x neighbour of cell c is c + nz (the last column wraps
     to the first); tz is computed across a column's top face too, then set to 0 there.
+    (i0, i1: cells; they read P and kappa of the next column and cell.)
     """
     nx, nz = P.shape
     cx = 1.0 / (eta * dx * dx)
@@ -134,15 +149,17 @@ def face_conductances(P, permeability, dx, dz, beta, eta, tx, tz, tb):
     half_beta = 0.5 * beta
     p, k, fx, fz, fb = flat(P), flat(permeability), flat(tx), flat(tz), flat(tb)
     size, unz, inner, one = flat_columns(P)
-    for c in range(np.uint64(0), inner):
+    lo, hi = cells(P, i0, i1)
+    for c in range(lo, min(inner, hi)):
         fx[c] = _face(p[c], p[c + unz], k[c], k[c + unz], half_beta, cx)
-    for c in range(inner, size):
+    for c in range(max(inner, lo), hi):
         fx[c] = _face(p[c], p[c - inner], k[c], k[c - inner], half_beta, cx)
-    for c in range(np.uint64(0), size - one):
+    for c in range(lo, min(size - one, hi)):
         fz[c] = _face(p[c], p[c + one], k[c], k[c + one], half_beta, cz)
         fb[c] = 0.0
-    fb[size - one] = 0.0
-    for i in range(nx):
+    if hi == size:
+        fb[size - one] = 0.0
+    for i in range(i0, nx if i1 < 0 else i1):
         top = i * nz + nz - 1
         fz[top] = 0.0
         fb[i * nz] += (1.0 + 0.5 * beta * p[i * nz]) * k[i * nz] * 2.0 * cz
@@ -173,16 +190,18 @@ def flat_columns(a):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _add_face_sums(tx, tz, tb, diag):
+def _add_face_sums(tx, tz, tb, diag, i0=0, i1=-1):
     """diag += the sum of each cell's face conductances (the diagonal of L). Flat loops, the tz
     term below a column's first cell being a zero face (tz = 0 on the top row of the previous
-    column)."""
+    column). (i0, i1: cells.)"""
     fx, fz, fb, df = flat(tx), flat(tz), flat(tb), flat(diag)
     size, unz, last, one = flat_columns(tx)
-    df[0] = df[0] + fx[0] + fx[last] + fb[0] + fz[0]
-    for c in range(one, unz):
+    lo, hi = cells(tx, i0, i1)
+    if lo == 0 and hi > 0:
+        df[0] = df[0] + fx[0] + fx[last] + fb[0] + fz[0]
+    for c in range(max(one, lo), min(unz, hi)):
         df[c] = df[c] + fx[c] + fx[c + last] + fb[c] + fz[c] + fz[c - one]
-    for c in range(unz, size):
+    for c in range(max(unz, lo), hi):
         df[c] = df[c] + fx[c] + fx[c - unz] + fb[c] + fz[c] + fz[c - one]
 
 
@@ -202,16 +221,31 @@ def explicit_bound(capacity, tx, tz, tb, rates=None):
     """
     if rates is None:
         rates = np.empty_like(capacity)
+    bound_rates(capacity, tx, tz, tb, rates)
+    return bound_of_rates(rates)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def bound_rates(capacity, tx, tz, tb, rates, i0=0, i1=-1):
+    """rates (nx, nz) out: each cell's Gershgorin bound of explicit_bound (i0, i1: cells)."""
     fx, fz, fb, cap, rf = flat(tx), flat(tz), flat(tb), flat(capacity), flat(rates)
     size, unz, last, one = flat_columns(capacity)
-    rf[0] = (2.0 * (fx[0] + fx[last] + fz[0]) + fb[0]) / cap[0]
-    for c in range(one, unz):                        # (flat, as _add_face_sums)
+    lo, hi = cells(capacity, i0, i1)
+    if lo == 0 and hi > 0:
+        rf[0] = (2.0 * (fx[0] + fx[last] + fz[0]) + fb[0]) / cap[0]
+    for c in range(max(one, lo), min(unz, hi)):      # (flat, as _add_face_sums)
         rf[c] = (2.0 * (fx[c] + fx[c + last] + fz[c] + fz[c - one]) + fb[c]) / cap[c]
-    for c in range(unz, size):
+    for c in range(max(unz, lo), hi):
         rf[c] = (2.0 * (fx[c] + fx[c - unz] + fz[c] + fz[c - one]) + fb[c]) / cap[c]
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def bound_of_rates(rates):
+    """explicit_bound from the cells' bounds (bound_rates; rates[0, 0] is overwritten)."""
+    rf = flat(rates)
     bits = rf.view(np.int64)
     top = bits[0]
-    for c in range(one, size):
+    for c in range(np.uint64(1), np.uint64(rf.size)):
         top = max(top, bits[c])
     bits[0] = top
     lam_max = rf[0]
@@ -228,36 +262,41 @@ def _row(d, p, tx_east, p_east, tx_west, p_west, tz_up, p_up, tz_down, p_down):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _apply_operator(p, diag, tx, tz, q):
+def _apply_operator(p, diag, tx, tz, q, i0=0, i1=-1):
     """q = (C/dt + L) p for the 5-point operator (diag holds C/dt + sum of face conductances).
     Flat loops (the middle columns vectorise): the x neighbours of cell c are c + nz and c - nz
     (wrapping in the first and last columns); the z terms use tz = 0 across the walls (c + 1 and
     c - 1 then lie in the next or previous column: their product is a zero and the difference
     keeps the value). The first and last cells, whose z neighbour would fall outside the
-    arrays, take a zero term."""
+    arrays, take a zero term. (i0, i1: cells; they read p of the neighbouring columns.)"""
     nx, nz = p.shape
     pf, df, fx, fz, qf = flat(p), flat(diag), flat(tx), flat(tz), flat(q)
     size, unz, last, one = flat_columns(p)   # (size >= 2: nz >= 2; last = 0 if nx = 1)
     end = size - one
+    lo, hi = cells(p, i0, i1)
+    if hi <= lo:
+        return
     east = unz if nx > 1 else np.uint64(0)
-    qf[0] = _row(df[0], pf[0], fx[0], pf[east], fx[last], pf[last], fz[0], pf[1], 0.0, 0.0)
+    if lo == 0:
+        qf[0] = _row(df[0], pf[0], fx[0], pf[east], fx[last], pf[last], fz[0], pf[1], 0.0, 0.0)
     if nx == 1:                           # one column: it is its own x neighbour
         for c in range(one, end):
             qf[c] = _row(df[c], pf[c], fx[c], pf[c], fx[c], pf[c], fz[c], pf[c + one], fz[c - one], pf[c - one])
     else:
-        for c in range(one, unz):
+        for c in range(max(one, lo), min(unz, hi)):
             w = c + last
             qf[c] = _row(df[c], pf[c], fx[c], pf[c + unz], fx[w], pf[w], fz[c], pf[c + one], fz[c - one], pf[c - one])
-        for c in range(unz, last):
+        for c in range(max(unz, lo), min(last, hi)):
             w = c - unz
             qf[c] = _row(df[c], pf[c], fx[c], pf[c + unz], fx[w], pf[w], fz[c], pf[c + one], fz[c - one], pf[c - one])
-        for c in range(last, end):
+        for c in range(max(last, lo), min(end, hi)):
             w = c - unz
             e = c - last
             qf[c] = _row(df[c], pf[c], fx[c], pf[e], fx[w], pf[w], fz[c], pf[c + one], fz[c - one], pf[c - one])
-    w = end - unz if nx > 1 else end
-    e = end - last
-    qf[end] = _row(df[end], pf[end], fx[end], pf[e], fx[w], pf[w], 0.0, 0.0, fz[end - one], pf[end - one])
+    if hi == size:
+        w = end - unz if nx > 1 else end
+        e = end - last
+        qf[end] = _row(df[end], pf[end], fx[end], pf[e], fx[w], pf[w], 0.0, 0.0, fz[end - one], pf[end - one])
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -399,14 +438,29 @@ def conjugate_gradient(solution, rhs, diag, tx, tz, work, tol, max_iter):
 def heun_diffusion(P, capacity, tx, tz, tb, dt, diag, slope, predictor, slope_2):
     """One Heun (explicit trapezoidal, second-order) step of C dP/dt = -L P with P = 0 on the
     planes: P~ = P - dt (L P) / C, then P <- P - dt/2 (L P + L P~) / C. diag (out): the sum of
-    each cell's face conductances; slope, predictor, slope_2 (nx, nz): scratch. Flat loops."""
-    pf, q1, q2, cap = flat(P), flat(slope), flat(slope_2), flat(capacity)
+    each cell's face conductances; slope, predictor, slope_2 (nx, nz): scratch. Flat loops, in
+    three parts that a caller may also run on column ranges (heun_predictor after _face_diagonal
+    on every column, heun_corrector after heun_predictor on every column)."""
     _face_diagonal(tx, tz, tb, diag)
-    _apply_operator(P, diag, tx, tz, slope)
-    _forward_euler(P, slope, capacity, dt, predictor)
-    _apply_operator(predictor, diag, tx, tz, slope_2)
+    heun_predictor(P, capacity, tx, tz, dt, diag, slope, predictor)
+    heun_corrector(P, capacity, tx, tz, dt, diag, slope, predictor, slope_2)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def heun_predictor(P, capacity, tx, tz, dt, diag, slope, predictor, i0=0, i1=-1):
+    """Heun's first half: slope = L P, predictor = P - dt slope / C (i0, i1: cells)."""
+    _apply_operator(P, diag, tx, tz, slope, i0, i1)
+    _forward_euler(P, slope, capacity, dt, predictor, i0, i1)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def heun_corrector(P, capacity, tx, tz, dt, diag, slope, predictor, slope_2, i0=0, i1=-1):
+    """Heun's second half: slope_2 = L predictor, P -= dt/2 (slope + slope_2) / C (i0, i1: cells)."""
+    _apply_operator(predictor, diag, tx, tz, slope_2, i0, i1)
+    pf, q1, q2, cap = flat(P), flat(slope), flat(slope_2), flat(capacity)
     half = 0.5 * dt
-    for c in range(np.uint64(pf.size)):
+    lo, hi = cells(P, i0, i1)
+    for c in range(lo, hi):
         pf[c] -= half * (q1[c] + q2[c]) / cap[c]
 
 
@@ -422,17 +476,19 @@ def explicit_diffusion(P, capacity, tx, tz, tb, dt_sub, n_sub, diag, scratch):
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _face_diagonal(tx, tz, tb, diag):
-    """diag = the sum of each cell's face conductances (the diagonal of L alone)."""
+def _face_diagonal(tx, tz, tb, diag, i0=0, i1=-1):
+    """diag = the sum of each cell's face conductances (the diagonal of L alone; i0, i1: cells)."""
     df = flat(diag)
-    for c in range(np.uint64(df.size)):
+    lo, hi = cells(diag, i0, i1)
+    for c in range(lo, hi):
         df[c] = 0.0
-    _add_face_sums(tx, tz, tb, diag)
+    _add_face_sums(tx, tz, tb, diag, i0, i1)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _forward_euler(P, slope, capacity, dt, out):
-    """out = P - dt slope / C (slope = L P); out may be P itself."""
+def _forward_euler(P, slope, capacity, dt, out, i0=0, i1=-1):
+    """out = P - dt slope / C (slope = L P); out may be P itself (i0, i1: cells)."""
     pf, qf, cap, of = flat(P), flat(slope), flat(capacity), flat(out)
-    for c in range(np.uint64(pf.size)):
+    lo, hi = cells(P, i0, i1)
+    for c in range(lo, hi):
         of[c] = pf[c] - dt * qf[c] / cap[c]

@@ -3,6 +3,7 @@ takes whichever part of whichever stage, the grid, the drag's triples and the mo
 the bits of the serial solve followed by the serial drift."""
 
 import numpy as np
+import pytest
 
 from gouge_cli.config import build_config
 from gouge_cli.driver.compaction import compact
@@ -10,11 +11,11 @@ from gouge_cli.driver.simulation import Simulation
 from gouge_cli.kernels import coupled as KC
 from gouge_cli.kernels import fluid_update as KF
 from gouge_cli.kernels import step as KS
-from gouge_cli.kernels.layout import THREADS, W_Z
+from gouge_cli.kernels.layout import S_EXPLICIT_UPDATES, THREADS, W_Z
 from gouge_cli.model.params import numba_threads
 from needs import skip_unless_two_threads
 
-SCENE = {"packing": {"n_grains": 600, "width": 30}, "seed": 11, "fluid": {"permeability": 1e-5},
+SCENE = {"packing": {"n_grains": 600, "width": 30}, "seed": 11,
          "loading": {"spring_constant": 2e-4, "velocity": 4e-4}, "numerics": {"dt_safety": 0.3}}
 
 
@@ -53,17 +54,22 @@ def _update(sim, threads):
                     "work": fl.work[:KF.G_TMP].copy(), "x": s.x.copy(), "z": s.z.copy(), "vx": s.vx.copy()}
 
 
-def test_shared_grid_solve_has_the_serial_bits():
+@pytest.mark.parametrize("fluid, heun", [({"permeability": 1e-5}, False),
+                                         ({"permeability": 1e-6, "step": 0.25}, True)])
+def test_shared_grid_solve_has_the_serial_bits(fluid, heun):
     """30 updates from one state on two threads (the parts go to whichever thread takes them
     first, which changes from call to call) against the one-thread update: every array equal to
-    the bit. And the two-thread region is a real split: its grid is not the input's."""
-    sim = Simulation(build_config(SCENE))
+    the bit. With backward Euler (solved by thread 0 between the shared stages) and with Heun's
+    step (its two halves shared)."""
+    sim = Simulation(build_config(dict(SCENE, fluid=fluid)))
     compact(sim)
     sim.advance(3000)
     assert sim.fluid is not None and sim.fluid.nx >= 2
     saved = _state(sim)
+    explicit = sim.fluid.state[S_EXPLICIT_UPDATES]
     status, serial = _update(sim, 1)
     assert status == 0 and np.abs(serial["pressure"]).max() > 0
+    assert (sim.fluid.state[S_EXPLICIT_UPDATES] > explicit) == heun
     skip_unless_two_threads("the shared grid solve")
     with numba_threads(2):
         for trial in range(30):
