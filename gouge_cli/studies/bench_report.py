@@ -110,7 +110,7 @@ def _fluid(r: BenchResult) -> list[str]:
         solve = "one explicit step" if f["explicit"] else f"{f['cg_iterations']:.0f} CG iterations"
         lines.append(f"one fluid update (N {f['n_grains']}, grid {f['grid'][0]}x{f['grid'][1]}, dt {f['dt']:.3g}), "
                      f"{f['threads']} thread(s), best of 3 x 30 calls: deposit {f['deposit']:.0f} us, grid solve "
-                     f"{f['solve']:.0f} us (solver {f['solver']}: {solve}; serial), drag {f['drag']:.0f} us, "
+                     f"{f['solve']:.0f} us (solver {f['solver']}: {solve}; on one thread: a run shares it), drag {f['drag']:.0f} us, "
                      f"together {f['update']:.0f} us")
     for f in r.fluid:
         lines.append(f"undrained (kappa_c {f['permeability']:g}, solver {f['solver']}, "
