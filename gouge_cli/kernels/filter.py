@@ -110,9 +110,10 @@ def filter_setup(width, dx, dz, taps_x, bands_z):
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def filter_x(field, target, taps_x, mx, i0, i1):
     """target = S_x field on the columns i0 <= i < i1 (periodic circulant; symmetric, so also S_x^T;
-    mx = 0: a copy). Flat loops over the cells (a cell's x neighbours m columns away are m nz
-    apart; the first and last m columns wrap). Each cell's sum in a fixed order: the same bits
-    whichever columns a call takes."""
+    mx = 0: a copy): t_0 f + t_1 (f_east + f_west) + t_2 (...) + ... per cell, in that order (a
+    cell's x neighbours m columns away are m nz apart; the first and last m columns wrap). For
+    mx <= 4 the cells whose neighbours do not wrap take every term in one expression, the others
+    _x_cell; otherwise one pass per tap (_x_passes). The same bits whichever columns a call takes."""
     nx, nz = field.shape
     f = field.reshape(field.size)
     out = target.reshape(target.size)
@@ -123,6 +124,53 @@ def filter_x(field, target, taps_x, mx, i0, i1):
         for c in range(lo, hi):
             out[c] = f[c]
         return
+    if mx > 4:
+        _x_passes(f, out, taps_x, mx, nz, lo, hi)
+        return
+    reach = np.uint64(mx * nz)
+    inner_lo = max(lo, reach)
+    inner_hi = max(min(hi, size - reach), inner_lo)
+    for c in range(lo, min(hi, inner_lo)):
+        out[c] = _x_cell(f, taps_x, mx, c, nz, size)
+    for c in range(inner_hi, hi):
+        out[c] = _x_cell(f, taps_x, mx, c, nz, size)
+    t0, t1 = taps_x[0], taps_x[1]
+    t2 = taps_x[2] if mx >= 2 else 0.0
+    t3 = taps_x[3] if mx >= 3 else 0.0
+    t4 = taps_x[4] if mx >= 4 else 0.0
+    s1, s2, s3, s4 = np.uint64(nz), np.uint64(2 * nz), np.uint64(3 * nz), np.uint64(4 * nz)
+    if mx == 1:
+        for c in range(inner_lo, inner_hi):
+            out[c] = t0 * f[c] + t1 * (f[c + s1] + f[c - s1])
+    elif mx == 2:
+        for c in range(inner_lo, inner_hi):
+            out[c] = (t0 * f[c] + t1 * (f[c + s1] + f[c - s1])) + t2 * (f[c + s2] + f[c - s2])
+    elif mx == 3:
+        for c in range(inner_lo, inner_hi):
+            out[c] = ((t0 * f[c] + t1 * (f[c + s1] + f[c - s1])) + t2 * (f[c + s2] + f[c - s2])) + \
+                t3 * (f[c + s3] + f[c - s3])
+    else:
+        for c in range(inner_lo, inner_hi):
+            out[c] = (((t0 * f[c] + t1 * (f[c + s1] + f[c - s1])) + t2 * (f[c + s2] + f[c - s2])) +
+                      t3 * (f[c + s3] + f[c - s3])) + t4 * (f[c + s4] + f[c - s4])
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _x_cell(f, taps_x, mx, c, nz, size):
+    """One flat cell c of filter_x (f flat, size cells), its terms in filter_x's order, wrapping."""
+    acc = taps_x[0] * f[c]
+    for m in range(1, mx + 1):
+        shift = np.uint64(m * nz)
+        east = c + shift if c + shift < size else c + shift - size
+        west = c - shift if c >= shift else c + size - shift
+        acc += taps_x[m] * (f[east] + f[west])
+    return acc
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _x_passes(f, out, taps_x, mx, nz, lo, hi):
+    """filter_x for any mx on flat cells lo <= c < hi: one pass per tap (f, out: flat)."""
+    size = np.uint64(f.size)
     t0 = taps_x[0]
     for c in range(lo, hi):
         out[c] = t0 * f[c]
@@ -142,8 +190,10 @@ def filter_x(field, target, taps_x, mx, i0, i1):
 def filter_z(source, target, bands, mz, i0, i1):
     """target = the band matrix of diagonals bands[mz + d, j] (d = -mz..mz) times source, along z,
     on the columns i0 <= i < i1: target[i, j] = sum_d bands[mz + d, j] source[i, j + d] (S_z with
-    bands_z[0], S_z^T with [1]; mz = 0: a copy), summed d = 0, +1, -1, +2, -2, ... per cell. Flat
-    unsigned indices (no negative-index checks: the short column loops then vectorise)."""
+    bands_z[0], S_z^T with [1]; mz = 0: a copy), summed d = 0, +1, -1, +2, -2, ... per cell (the
+    terms with j + d inside the column). For mz <= 4 a column's inner rows take every term in one
+    expression (one store per cell; the same sums in the same order), its mz rows at each end
+    _z_cell; otherwise one pass per diagonal. Flat unsigned indices (no negative-index checks)."""
     nx, nz = source.shape
     f = source.reshape(source.size)
     out = target.reshape(target.size)
@@ -153,6 +203,62 @@ def filter_z(source, target, bands, mz, i0, i1):
         for c in range(np.uint64(i0) * unz, np.uint64(i1) * unz):
             out[c] = f[c]
         return
+    if mz > 4 or nz <= 2 * mz:
+        _z_passes(f, out, bands, mz, nz, i0, i1)
+        return
+    m = np.uint64(mz)
+    c0 = bands[mz]
+    u1, d1 = bands[mz + 1], bands[mz - 1]
+    u2, d2 = bands[mz + 2 if mz >= 2 else mz], bands[mz - 2 if mz >= 2 else mz]
+    u3, d3 = bands[mz + 3 if mz >= 3 else mz], bands[mz - 3 if mz >= 3 else mz]
+    u4, d4 = bands[mz + 4 if mz >= 4 else mz], bands[mz - 4 if mz >= 4 else mz]
+    for i in range(np.uint64(i0), np.uint64(i1)):
+        base = i * unz
+        for j in range(zero, m):
+            out[base + j] = _z_cell(f, bands, mz, base, j, unz)
+        for j in range(unz - m, unz):
+            out[base + j] = _z_cell(f, bands, mz, base, j, unz)
+        one, two, three, four = np.uint64(1), np.uint64(2), np.uint64(3), np.uint64(4)
+        if mz == 1:
+            for j in range(m, unz - m):
+                k = base + j
+                out[k] = (c0[j] * f[k] + u1[j] * f[k + one]) + d1[j] * f[k - one]
+        elif mz == 2:
+            for j in range(m, unz - m):
+                k = base + j
+                out[k] = (((c0[j] * f[k] + u1[j] * f[k + one]) + d1[j] * f[k - one]) + u2[j] * f[k + two]) + \
+                    d2[j] * f[k - two]
+        elif mz == 3:
+            for j in range(m, unz - m):
+                k = base + j
+                out[k] = (((((c0[j] * f[k] + u1[j] * f[k + one]) + d1[j] * f[k - one]) + u2[j] * f[k + two]) +
+                           d2[j] * f[k - two]) + u3[j] * f[k + three]) + d3[j] * f[k - three]
+        else:
+            for j in range(m, unz - m):
+                k = base + j
+                out[k] = (((((((c0[j] * f[k] + u1[j] * f[k + one]) + d1[j] * f[k - one]) + u2[j] * f[k + two]) +
+                             d2[j] * f[k - two]) + u3[j] * f[k + three]) + d3[j] * f[k - three]) +
+                          u4[j] * f[k + four]) + d4[j] * f[k - four]
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
+def _z_cell(f, bands, mz, base, j, unz):
+    """One cell (row j of the column at flat offset base) of filter_z, its terms in filter_z's order."""
+    acc = bands[mz][j] * f[base + j]
+    for m in range(1, mz + 1):
+        d = np.uint64(m)
+        if j + d < unz:
+            acc += bands[mz + m][j] * f[base + j + d]
+        if j >= d:
+            acc += bands[mz - m][j] * f[base + j - d]
+    return acc
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def _z_passes(f, out, bands, mz, nz, i0, i1):
+    """filter_z for any mz: one pass per diagonal over each column (f, out: flat)."""
+    unz = np.uint64(nz)
+    zero = np.uint64(0)
     centre = bands[mz]
     for i in range(np.uint64(i0), np.uint64(i1)):
         base = i * unz

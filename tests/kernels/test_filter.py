@@ -173,3 +173,46 @@ def test_filtered_solid_fraction_converges_at_fixed_width():
     plain = [field(0.0, h) for h in (2.0, 1.0, 0.5)]
     change = float(np.sqrt(np.mean((plain[1] - plain[2]) ** 2)))
     assert change > 10 * errors[1], (change, errors)
+
+
+@pytest.mark.parametrize("mz", [1, 2, 3, 4, 5])
+@pytest.mark.parametrize("nz", [2, 5, 8, 31])
+def test_z_pass_in_one_expression_has_the_bits_of_one_pass_per_diagonal(mz, nz):
+    """filter_z's inner rows (every term in one expression for mz <= 4) against its pass per
+    diagonal (_z_passes, the definition): equal to the bit, signs of zero included, on fields with
+    exact zeros and negative zeros, on column ranges and on columns shorter than the band."""
+    mz = min(mz, nz - 1)
+    rng = np.random.default_rng(nz * 10 + mz)
+    nx = 7
+    field = rng.normal(size=(nx, nz))
+    field[rng.random((nx, nz)) < 0.2] = 0.0
+    field[rng.random((nx, nz)) < 0.2] = -0.0
+    bands = rng.normal(size=(2 * nz - 1, nz))
+    bands[rng.random(bands.shape) < 0.1] = 0.0
+    fast, reference = np.full((nx, nz), np.nan), np.full((nx, nz), np.nan)
+    for i0, i1 in ((0, nx), (2, 5)):
+        KFI.filter_z(field, fast, bands, mz, i0, i1)
+        KFI._z_passes(field.reshape(-1), reference.reshape(-1), bands, mz, nz, i0, i1)
+        assert np.array_equal(fast, reference, equal_nan=True)
+        assert np.array_equal(np.signbit(fast), np.signbit(reference))
+
+
+@pytest.mark.parametrize("mx", [1, 2, 3, 4, 5])
+@pytest.mark.parametrize("nx", [3, 9, 12])
+def test_x_pass_in_one_expression_has_the_bits_of_one_pass_per_tap(mx, nx):
+    """filter_x (every term in one expression where no neighbour wraps, mx <= 4) against its pass
+    per tap (_x_passes, the definition): equal to the bit, signs of zero included, on column ranges
+    that start and end inside the wrapping columns."""
+    mx = min(mx, (nx - 1) // 2)
+    nz = 5
+    rng = np.random.default_rng(nx * 10 + mx)
+    field = rng.normal(size=(nx, nz))
+    field[rng.random((nx, nz)) < 0.2] = 0.0
+    field[rng.random((nx, nz)) < 0.2] = -0.0
+    taps = rng.normal(size=nx)
+    fast, reference = np.full((nx, nz), np.nan), np.full((nx, nz), np.nan)
+    for i0, i1 in ((0, nx), (1, nx - 1), (0, 1)):
+        KFI.filter_x(field, fast, taps, mx, i0, i1)
+        KFI._x_passes(field.reshape(-1), reference.reshape(-1), taps, mx, nz, np.uint64(i0 * nz), np.uint64(i1 * nz))
+        assert np.array_equal(fast, reference, equal_nan=True)
+        assert np.array_equal(np.signbit(fast), np.signbit(reference))
