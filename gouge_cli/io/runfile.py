@@ -265,8 +265,26 @@ class RunFile:
             self.reserve.release()
         try:
             self._close(status, final_state_hash)
+        except (OSError, RuntimeError):
+            if not full_disk:
+                raise
+            self._status_anew(status)
         finally:
             self.reserve.release()
+
+    def _status_anew(self, status: str):
+        """The status written through a new handle, when the disk filled during an HDF5 write after
+        the space check (HDF5 then cannot flush or close this handle again): the handle is dropped
+        and the file opened anew, on the released reserve, for its status and seal alone (its
+        rows after the last checkpoint may be lost: a resume makes them again). Raises the
+        OSError if even that fails."""
+        try:
+            self.h5.close()
+        except (OSError, RuntimeError):
+            pass
+        with h5py.File(self.path, "r+", rdcc_nbytes=0) as h5:
+            h5.attrs["status"] = status
+            seal(h5)
 
     def _close(self, status: str, final_state_hash: str | None):
         if self.h5.id.valid:
