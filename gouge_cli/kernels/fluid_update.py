@@ -51,11 +51,13 @@ from .pressure import (bound_of_rates, bound_rates, cells, conjugate_gradient, c
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _all_finite(P):
-    """True if every cell of P is finite (one branch-free pass: it vectorises)."""
+def _all_finite(P, i0=0, i1=-1):
+    """True if every cell of P on columns i0..i1 (kernels.pressure.cells) is finite (one
+    branch-free pass: it vectorises)."""
     pf = flat(P)
+    lo, hi = cells(P, i0, i1)
     bad = 0
-    for c in range(np.uint64(pf.size)):
+    for c in range(lo, hi):
         bad += 0 if abs(pf[c]) < math.inf else 1
     return bad == 0
 
@@ -97,9 +99,7 @@ def _drag_density(fluid, w_bot, w_top, extrapolate, i0=0, i1=-1):
     ext = work[G_PREV]
     pf, ef = flat(P), flat(ext)
     lo, hi = cells(P, i0, i1)
-    bad = 0
-    for c in range(lo, hi):
-        bad += 0 if abs(pf[c]) < math.inf else 1
+    finite = _all_finite(P, i0, i1)
     if extrapolate:
         for c in range(lo, hi):
             ef[c] = 1.5 * pf[c] - 0.5 * ef[c]
@@ -107,7 +107,7 @@ def _drag_density(fluid, w_bot, w_top, extrapolate, i0=0, i1=-1):
         for c in range(lo, hi):
             ef[c] = pf[c]
     drag_triples(ext, s, work[G_SX], work[G_SZ], work[G_FQ], work[G_FX], work[G_FZ], i0, i1)
-    return bad == 0
+    return finite
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
