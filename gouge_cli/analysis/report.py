@@ -20,9 +20,8 @@ import numpy as np
 
 from ..errors import NoSlipsError
 from ..io.filedoc import json_safe
-from ..io.outputs import require_space, write_bytes
-from ..io.rundir import SPACE_MARGIN
-from ..io.runfile import RunInfo, RunReader, write_analysis_tables
+from ..io.outputs import is_no_space, require_space, write_bytes
+from ..io.runfile import RunInfo, RunReader, analysis_bytes, write_analysis_tables
 from .catalog import CATALOG_COLUMNS, FIT_COLUMNS, catalog_table, fit_table, read_catalog, summary_statistics
 from .forkpairs import PAIR_COLUMNS, ForkPair, campaign, run_pairs
 
@@ -139,16 +138,17 @@ def write_analysis(analysis: RunAnalysis, out_dir: Path | None = None, into_h5: 
                                                      allow_nan=False).encode())
     written["summary"] = out_dir / "summary.json"
     if into_h5:
-        rows = sum(len(r) for r in (analysis.catalog, analysis.fits, analysis.pair_rows if analysis.pairs else []))
-        # run.h5 is written in place: HDF5 must never meet a full disk there (rundir.SPACE_MARGIN kept free)
-        require_space(info.h5_path.parent, 64 * 40 * rows + SPACE_MARGIN, f"the /analysis tables in {info.h5_path}")
+        tables = {"catalog": (analysis.catalog, CATALOG_COLUMNS), "fits": (analysis.fits, FIT_COLUMNS)}
+        if analysis.pairs:
+            tables["pairs"] = (analysis.pair_rows, PAIR_COLUMNS)
+        # run.h5 is written in place: HDF5 must never meet a full disk there (its room allocated first)
+        require_space(info.h5_path.parent, analysis_bytes(tables), f"the /analysis tables in {info.h5_path}")
         try:
-            tables = {"catalog": (analysis.catalog, CATALOG_COLUMNS), "fits": (analysis.fits, FIT_COLUMNS)}
-            if analysis.pairs:
-                tables["pairs"] = (analysis.pair_rows, PAIR_COLUMNS)
             write_analysis_tables(info.h5_path, bool(analysis.notch),
                                   json.dumps(json_safe(summary), default=_json_default, allow_nan=False), tables)
         except OSError as exc:
+            if is_no_space(exc):        # (another writer took the room after the check: nothing written)
+                raise
             # the tables are in the CSV files already; run.h5 is left as it is (read-only, or open elsewhere)
             written["h5_skipped"] = (f"/analysis not written into {info.h5_path} "
                                      f"({str(exc).splitlines()[0][:120] if str(exc) else type(exc).__name__}); "

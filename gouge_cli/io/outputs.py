@@ -9,6 +9,8 @@ it is complete.
   path, which is its own).
 * :func:`require_space` refuses a write of a known size when the file system lacks it plus
   SPACE_MARGIN (NoSpaceError, exit 3, naming how much to free and the command that continues).
+* :func:`preallocate` gives an in-place HDF5 write (``gouge analyze``'s tables in run.h5) its
+  room on disk before it starts.
 * :func:`temporary` yields a hidden temporary path in the destination folder; the caller writes
   it whole and it is renamed onto the output, or removed when anything fails (a full disk
   included), so no partial output and no temporary file is left, and an earlier output stays
@@ -90,6 +92,26 @@ def require_space(folder: Path, need: float, what: str, next_step: str | None = 
         raise NoSpaceError(str(folder), next_step, need=need + SPACE_MARGIN - free,
                            detail=f"{what} needs about {(need + SPACE_MARGIN) / 1e6:.1f} MB, "
                                   f"{free / 1e6:.1f} MB are free")
+
+
+def preallocate(path: Path, nbytes: int) -> None:
+    """Allocate `nbytes` of disk blocks past the end of the existing file `path` before an
+    in-place HDF5 write: HDF5 writes past its own end into them, so that write cannot meet a full
+    disk (on one, HDF5 left the file unreadable or crashed the process), and its close trims the
+    file back to its end. ENOSPC here, before anything is written, when the room is not there
+    (the file is left at its size). A no-op where the OS has no posix_fallocate."""
+    if not hasattr(os, "posix_fallocate"):
+        return
+    fd = os.open(path, os.O_RDWR)
+    try:
+        size = os.fstat(fd).st_size
+        try:
+            os.posix_fallocate(fd, size, int(nbytes))
+        except OSError:
+            os.ftruncate(fd, size)
+            raise
+    finally:
+        os.close(fd)
 
 
 def temp_for(path: Path) -> Path:

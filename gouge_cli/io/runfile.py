@@ -63,7 +63,7 @@ from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, d
 from ..kernels import layout as L
 from .integrity import SEAL, STRUCTURE_ERRORS, check_seal, read, seal, seal_tree, stored_seal, structure_error
 from .layout import RUN_FILE, RunLayout
-from .outputs import Reserve, free_bytes
+from .outputs import Reserve, free_bytes, preallocate
 from .rundir import RESERVE_BYTES, open_run_file
 from ..units import pint_unit
 
@@ -245,8 +245,8 @@ class RunFile:
         group = self.h5["slips"].create_group(f"{number:03d}")
         for key, value in entry.items():
             group.attrs[key] = value
-        group.create_dataset("subevent_time", data=np.array([s["time"] for s in subevents], float))
-        group.create_dataset("subevent_velocity", data=np.array([s["velocity"] for s in subevents], float))
+        _checked(group, "subevent_time", np.array([s["time"] for s in subevents], float))
+        _checked(group, "subevent_velocity", np.array([s["velocity"] for s in subevents], float))
         document_slip(group)
         for ds in group.values():
             seal(ds)
@@ -308,7 +308,9 @@ class RunFile:
 
 def _checked(group, name: str, data: np.ndarray, **options):
     """A dataset with Fletcher-32 per chunk (an empty one, which cannot be chunked, is covered by
-    its seal instead)."""
+    its seal instead). Chunked, in a file without a chunk cache, its data is written by this call:
+    a full disk raises here, never later when the handle is freed (a small contiguous dataset waits
+    in HDF5's sieve buffer until then, where the error is only printed)."""
     if data.size == 0:
         return group.create_dataset(name, data=data)
     return group.create_dataset(name, data=data, chunks=options.pop("chunks", True), fletcher32=True, **options)
@@ -685,20 +687,28 @@ def _table_to_group(group: h5py.Group, rows: list[dict], columns) -> None:
     for col in columns:
         values = [r.get(col) for r in rows]
         if all(isinstance(v, (bool, np.bool_)) for v in values) and values:
-            data = np.asarray(values, dtype=bool)
+            _checked(group, col, np.asarray(values, dtype=bool))
         elif all(isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
                  for v in values):
-            data = np.asarray(values, dtype=float)
-        else:
-            data = np.asarray(["" if v is None else str(v) for v in values], dtype=h5py.string_dtype())
-        group.create_dataset(col, data=data)
+            _checked(group, col, np.asarray(values, dtype=float))
+        else:       # text: chunked (written by this call) without filters, which HDF5 refuses for it
+            group.create_dataset(col, data=np.asarray(["" if v is None else str(v) for v in values],
+                                                      dtype=h5py.string_dtype()), chunks=True)
+
+
+def analysis_bytes(tables: dict) -> int:
+    """Bytes ``/analysis`` may take in run.h5, over-estimated: 40 columns of 64 bytes a row, and
+    1 MB for its attributes, descriptions and seals; `tables` as in write_analysis_tables."""
+    return 64 * 40 * sum(len(rows) for rows, _ in tables.values()) + 1_000_000
 
 
 def write_analysis_tables(h5_path: Path, notch: bool, summary: str, tables: dict) -> None:
     """Replace ``/analysis`` in run.h5 (written by `gouge analyze`): attrs created, version, notch,
     summary (JSON); one group per table, `tables` = {name: (rows as dicts, columns)}, one dataset
-    per column. Raises OSError if the file cannot be written (read-only, or open elsewhere)."""
-    with h5py.File(h5_path, "a") as h5:
+    per column. Its room (analysis_bytes) is allocated first (io.outputs.preallocate): ENOSPC then,
+    with nothing written. Raises OSError if the file cannot be written (read-only, or open elsewhere)."""
+    preallocate(h5_path, analysis_bytes(tables))
+    with h5py.File(h5_path, "a", rdcc_nbytes=0) as h5:       # (written by each call: RunFile's rule)
         if "analysis" in h5:
             del h5["analysis"]
         grp = h5.create_group("analysis")

@@ -3,7 +3,6 @@ outputs, slip checkpoints, periodic checkpoints and clean stops."""
 
 from __future__ import annotations
 
-import errno
 import sys
 import time
 from dataclasses import dataclass
@@ -22,7 +21,7 @@ from ..model.scene import Scene
 from ..driver.compaction import compaction_phase
 from ..driver.phases import load_phase
 from ..errors import RunDirError
-from ..io.outputs import require_space
+from ..io.outputs import is_no_space, require_space
 from ..io.rundir import SPACE_MARGIN, check_run_dir, open_run_file, prepare_run_dir, restart_command, RunLock
 from ..driver.simulation import Simulation
 from ..driver.slips import recorded_count
@@ -93,7 +92,7 @@ def stopped_by_os_error(writer: RunFile, err: BaseException) -> BaseException:
     if cause is None:
         return err
     try:
-        writer.close(f"failed: {cause.strerror or cause}", full_disk=cause.errno == errno.ENOSPC)
+        writer.close(f"failed: {cause.strerror or cause}", full_disk=is_no_space(cause))      # (ENOSPC or a quota)
     except (OSError, RuntimeError):
         pass
     return cause
