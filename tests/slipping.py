@@ -55,3 +55,22 @@ def slipping_run(scene: dict, root: Path, slips: int = 2, min_drop: float = 0.0,
     pytest.fail(f"none of {tries} packings of scene {scene['name']!r} gave {slips} slips with checkpoints "
                 f"and a stress drop above {min_drop} "
                 f"(they gave {counts})")
+
+
+def slipping_start(scene: dict, root: Path, tries: int = 6, grow: float = 1.5):
+    """The accuracy ladders' Start (studies.accuracy.prepare_start) from the checkpoint before the
+    first slip of `scene`, at the first of `tries` seeds whose loading (run.duration, `grow` times
+    longer each try) brings a slip with a checkpoint."""
+    from gouge_cli.config import build_config
+    from gouge_cli.studies.accuracy import prepare_start
+
+    sources = []
+    for k in range(tries):
+        run = dict(scene.get("run", {}))
+        if "duration" in run:
+            run["duration"] = run["duration"] * grow ** k
+        start = prepare_start(build_config(dict(scene, seed=scene["seed"] + k, run=run)), Path(root) / f"seed_{k}")
+        if Path(start.source).name.startswith("slip_"):
+            return start
+        sources.append(Path(start.source).name)
+    pytest.fail(f"none of {tries} packings of scene {scene['name']!r} slipped with a checkpoint (starts: {sources})")
