@@ -98,8 +98,9 @@ def preallocate(path: Path, nbytes: int) -> None:
     """Allocate `nbytes` of disk blocks past the end of the existing file `path` before an
     in-place HDF5 write: HDF5 writes past its own end into them, so that write cannot meet a full
     disk (on one, HDF5 left the file unreadable or crashed the process), and its close trims the
-    file back to its end. ENOSPC here, before anything is written, when the room is not there
-    (the file is left at its size). A no-op where the OS has no posix_fallocate."""
+    file back to its end. ENOSPC (or EDQUOT) here, before anything is written, when the room is
+    not there (the file is left at its size). A no-op where the OS or the file system cannot
+    allocate (no posix_fallocate, EOPNOTSUPP): the write then goes as it would without."""
     if not hasattr(os, "posix_fallocate"):
         return
     fd = os.open(path, os.O_RDWR)
@@ -107,9 +108,10 @@ def preallocate(path: Path, nbytes: int) -> None:
         size = os.fstat(fd).st_size
         try:
             os.posix_fallocate(fd, size, int(nbytes))
-        except OSError:
+        except OSError as exc:
             os.ftruncate(fd, size)
-            raise
+            if exc.errno in (errno.ENOSPC, errno.EDQUOT):
+                raise
     finally:
         os.close(fd)
 
