@@ -9,8 +9,8 @@ it is complete.
   path, which is its own).
 * :func:`require_space` refuses a write of a known size when the file system lacks it plus
   SPACE_MARGIN (NoSpaceError, exit 3, naming how much to free and the command that continues).
-* :func:`preallocate` gives an in-place HDF5 write (``gouge analyze``'s tables in run.h5) its
-  room on disk before it starts.
+* :func:`preallocate` gives an in-place HDF5 write its room on disk before it starts (the run
+  file's writes and its reserve for the close, ``gouge analyze``'s tables in run.h5).
 * :func:`temporary` yields a hidden temporary path in the destination folder; the caller writes
   it whole and it is renamed onto the output, or removed when anything fails (a full disk
   included), so no partial output and no temporary file is left, and an earlier output stays
@@ -28,7 +28,7 @@ from pathlib import Path
 from ..config import not_a_file
 from ..errors import InputError, NoSpaceError
 from .layout import CHECKPOINTS, CONFIG_FILE, LATEST, PAIR_FILE, RUN_FILE
-from .rundir import LOCK_NAME, RESERVE_BYTES
+from .rundir import LOCK_NAME
 
 SPACE_MARGIN = 256_000          # bytes left free beyond a sized write
 RUN_FILES = {RUN_FILE, CONFIG_FILE, LOCK_NAME, PAIR_FILE, LATEST, "point.yaml"}
@@ -94,26 +94,31 @@ def require_space(folder: Path, need: float, what: str, next_step: str | None = 
                                   f"{free / 1e6:.1f} MB are free")
 
 
-def preallocate(path: Path, nbytes: int) -> None:
-    """Allocate `nbytes` of disk blocks past the end of the existing file `path` before an
-    in-place HDF5 write: HDF5 writes past its own end into them, so that write cannot meet a full
-    disk (on one, HDF5 left the file unreadable or crashed the process), and its close trims the
-    file back to its end. ENOSPC (or EDQUOT) here, before anything is written, when the room is
-    not there (the file is left at its size). A no-op where the OS or the file system cannot
-    allocate (no posix_fallocate, EOPNOTSUPP): the write then goes as it would without."""
+def preallocate(path: Path, nbytes: int, start: int | None = None) -> bool:
+    """Allocate the disk blocks of bytes [start, start + nbytes) of the existing file `path`
+    (start: its end), growing it if needed, before an HDF5 write: HDF5 writes past its own end
+    (its end of allocation, below the file's size) into blocks it already holds, so that write
+    cannot meet a full disk, whatever else writes to the disk (on a full disk HDF5 left a file
+    unreadable or crashed the process); a close of a file opened after the allocation trims it
+    to HDF5's end, other bytes past it are ignored by HDF5. ENOSPC (or EDQUOT) here, before
+    anything is written, when the room is not there (the file keeps its size). False where the
+    OS or the file system cannot allocate (no posix_fallocate, EOPNOTSUPP)."""
     if not hasattr(os, "posix_fallocate"):
-        return
+        return False
     fd = os.open(path, os.O_RDWR)
     try:
         size = os.fstat(fd).st_size
         try:
-            os.posix_fallocate(fd, size, int(nbytes))
+            os.posix_fallocate(fd, size if start is None else int(start), int(nbytes))
         except OSError as exc:
-            os.ftruncate(fd, size)
+            if os.fstat(fd).st_size > size:
+                os.ftruncate(fd, size)
             if exc.errno in (errno.ENOSPC, errno.EDQUOT):
                 raise
+            return False
     finally:
         os.close(fd)
+    return True
 
 
 def temp_for(path: Path) -> Path:
@@ -188,23 +193,3 @@ def _remove(path: Path) -> None:
         os.unlink(path)
     except FileNotFoundError:
         pass
-
-
-
-class Reserve:
-    """A file of RESERVE_BYTES beside an HDF5 file being written (``.<name>.reserve``). HDF5
-    cannot close a file whose metadata it cannot flush (on a full disk it crashed the process):
-    :meth:`release` frees this room first, so the close that follows can complete and the file
-    stays readable. Released (removed) on every close; a stale one is simply rewritten."""
-
-    def __init__(self, path: Path):
-        self.path = Path(path).with_name(f".{Path(path).name}.reserve")
-        try:
-            with open(self.path, "wb") as fh:
-                fh.truncate(0)
-                os.posix_fallocate(fh.fileno(), 0, RESERVE_BYTES)
-        except OSError:         # no room even for the reserve: what the writes after it will meet
-            _remove(self.path)
-
-    def release(self) -> None:
-        _remove(self.path)

@@ -186,7 +186,7 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
 
 
 SPACE_MARGIN = 4_000_000     # bytes kept free beyond the next checkpoints
-RESERVE_BYTES = 500_000      # of them, held by a run file's reserve (io.outputs.Reserve) while it is written
+RESERVE_BYTES = 500_000      # of them, allocated past a run file's end for its close (io.runfile.RunFile._room)
 
 
 def ensure_space(run_dir: Path, need: float):

@@ -63,7 +63,7 @@ from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, d
 from ..kernels import layout as L
 from .integrity import SEAL, STRUCTURE_ERRORS, check_seal, read, seal, seal_tree, stored_seal, structure_error
 from .layout import RUN_FILE, RunLayout
-from .outputs import Reserve, free_bytes, preallocate
+from .outputs import free_bytes, is_no_space, preallocate
 from .rundir import RESERVE_BYTES, open_run_file
 from ..units import pint_unit
 
@@ -113,9 +113,8 @@ class RunFile:
         self.path = Path(path)
         self.flush_rows = flush_rows
         self._rows: list[dict] = []
-        self.reserve = Reserve(self.path)      # released before a close on a full disk (io.outputs)
         # no raw-data chunk cache: a chunk is written by the call that fills it, so a full disk
-        # raises there (handled: the reserve released, the file closed) and not later, when a
+        # raises there (handled: the file closed on its reserve) and not later, when a
         # dataset handle is freed, where HDF5's error is ignored and the file's state is lost
         # (a segmentation fault followed)
         self.h5 = h5py.File(self.path, mode, rdcc_nbytes=0)
@@ -143,18 +142,30 @@ class RunFile:
         if len(self._rows) >= self.flush_rows:
             self.flush()
 
-    def _room(self):
-        """OSError (ENOSPC) before an HDF5 write when less than the reserve's size is free: HDF5
-        cannot flush a file again after a flush that met a full disk (its close then fails too, the
-        status stays 'running'), so the disk is checked first and the close that follows, on the
-        released reserve, completes."""
-        free = free_bytes(self.path.parent)
-        if free < RESERVE_BYTES:
+    def _room(self, need: int = 0):
+        """Before an HDF5 write of about `need` bytes: the blocks HDF5 writes into next, `need` and
+        a reserve of RESERVE_BYTES past its end, are allocated in the file itself
+        (io.outputs.preallocate), so neither this write nor a close after it can meet a full disk,
+        whatever else fills the disk meanwhile (HDF5 can neither flush nor close a file again after
+        a flush that met a full disk: its status stayed 'running', and a reserve held in a file
+        beside it, released for the close, could be taken by another writer, which left the file
+        unreadable). OSError (ENOSPC) when the room is not there, before anything is written. Where
+        the file system cannot allocate, the free space is checked instead."""
+        room = need + RESERVE_BYTES
+        try:
+            short = (not preallocate(self.path, room, start=self.h5.id.get_filesize())
+                     and free_bytes(self.path.parent) < room)
+        except OSError as exc:
+            if not is_no_space(exc):
+                raise
+            short = True
+        if short:
+            free = free_bytes(self.path.parent)
             raise OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)} ({free / 1e6:.1f} MB free)", str(self.path))
 
     def flush(self, room: bool = True):
         if room:
-            self._room()
+            self._room(64 * len(SERIES) * len(self._rows))
         if self._rows:
             group = self.h5["series"]
             names = list(dict.fromkeys(n for r in self._rows for n in r if n in SERIES))
@@ -215,20 +226,22 @@ class RunFile:
         s = sim.state
         if f"{s.step:012d}" in self.h5["snapshots"]:      # a dense (slip) and a regular snapshot coincide
             return
-        self._room()
+        grains = {name: s.by_id(getattr(s, name)) for name in ("x", "z", "radius", "vx", "vz", "spin", "body")}
+        contacts = dict(zip(("contact_i", "contact_j", "contact_fx", "contact_fz"), sim.contacts()))
+        fields = {}
+        if sim.fluid is not None:
+            f = sim.fluid
+            geometry = grid_geometry(f.state[L.S_Z_BOT], f.dx, f.dz)
+            fields = f.snapshot_fields()
+        self._room(sum(a.nbytes for part in (grains, contacts, fields) for a in part.values()) + 100_000)
         grp = self.h5["snapshots"].create_group(f"{s.step:012d}")
         grp.attrs["time"] = s.time
         grp.attrs["load_time"] = float(s.clock[L.C_DRIVE_TIME])
         grp.attrs["step"] = s.step
-        for name in ("x", "z", "radius", "vx", "vz", "spin", "body"):     # in original grain order
-            _checked(grp, name, s.by_id(getattr(s, name)), compression="gzip", compression_opts=1)
-        for name, arr in zip(("contact_i", "contact_j", "contact_fx", "contact_fz"), sim.contacts()):
+        for name, arr in {**grains, **contacts}.items():     # grains in original grain order
             _checked(grp, name, arr, compression="gzip", compression_opts=1)
-        if sim.fluid is not None:
-            f = sim.fluid
-            geometry = grid_geometry(f.state[L.S_Z_BOT], f.dx, f.dz)
-            for name, arr in f.snapshot_fields().items():
-                _checked(grp, name, arr).attrs.update(geometry)
+        for name, arr in fields.items():
+            _checked(grp, name, arr).attrs.update(geometry)
         for name, ds in grp.items():
             describe(ds, *SNAPSHOT[name])
             seal(ds)
@@ -258,26 +271,23 @@ class RunFile:
         seal(self.h5)
 
     def close(self, status: str = "finished", final_state_hash: str | None = None, full_disk: bool = False):
-        """Write the final attributes and close. ``full_disk``: the reserve beside the file is
-        released first, so that HDF5 has room to flush (io.outputs.Reserve)."""
-        if full_disk:           # the rows not yet written follow the last checkpoint: a resume makes them again
+        """Write the final attributes and close. ``full_disk``: the rows not yet written are
+        dropped (they follow the last checkpoint: a resume makes them again) and the close writes
+        into the reserve allocated past the file's end (_room)."""
+        if full_disk:
             self._rows.clear()
-            self.reserve.release()
         try:
             self._close(status, final_state_hash)
         except (OSError, RuntimeError):
             if not full_disk:
                 raise
             self._status_anew(status)
-        finally:
-            self.reserve.release()
 
     def _status_anew(self, status: str):
         """The status written through a new handle, when the disk filled during an HDF5 write after
         the space check (HDF5 then cannot flush or close this handle again): the handle is dropped
-        and the file opened anew, on the released reserve, for its status and seal alone (its
-        rows after the last checkpoint may be lost: a resume makes them again). Raises the
-        OSError if even that fails."""
+        and the file opened anew for its status and seal alone (its rows after the last checkpoint
+        may be lost: a resume makes them again). Raises the OSError if even that fails."""
         try:
             self.h5.close()
         except (OSError, RuntimeError):
