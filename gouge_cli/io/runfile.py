@@ -314,6 +314,10 @@ class RunFile:
             self.h5.visititems(lambda _, obj: None if SEAL in obj.attrs else seal(obj))   # from before seals
             seal(self.h5)
             self.h5.close()
+            try:        # opened and closed again, HDF5 trims the file to its end (the reserve past it: _room)
+                h5py.File(self.path, "a", rdcc_nbytes=0).close()
+            except (OSError, RuntimeError):
+                pass
 
 
 def _checked(group, name: str, data: np.ndarray, **options):
