@@ -113,6 +113,7 @@ class RunFile:
         self.path = Path(path)
         self.flush_rows = flush_rows
         self._rows: list[dict] = []
+        self._allocated = 0         # the end of the blocks allocated past HDF5's end (_room) [bytes]
         # no raw-data chunk cache: a chunk is written by the call that fills it, so a full disk
         # raises there (handled: the file closed on its reserve) and not later, when a
         # dataset handle is freed, where HDF5's error is ignored and the file's state is lost
@@ -151,14 +152,20 @@ class RunFile:
         beside it, released for the close, could be taken by another writer, which left the file
         unreadable). OSError (ENOSPC) when the room is not there, before anything is written. Where
         the file system cannot allocate, the free space is checked instead."""
-        room = need + RESERVE_BYTES
-        try:
-            short = (not preallocate(self.path, room, start=self.h5.id.get_filesize())
-                     and free_bytes(self.path.parent) < room)
-        except OSError as exc:
-            if not is_no_space(exc):
-                raise
-            short = True
+        start, room = self.h5.id.get_filesize(), need + RESERVE_BYTES
+        if start + room <= self._allocated:
+            return
+        short = True
+        for ahead in (room + RESERVE_BYTES, room):    # a reserve more at once, so most writes need no call
+            try:
+                if preallocate(self.path, ahead, start=start):
+                    self._allocated, short = start + ahead, False
+                else:
+                    short = free_bytes(self.path.parent) < room       # (the file system cannot allocate)
+                break
+            except OSError as exc:
+                if not is_no_space(exc):
+                    raise
         if short:
             free = free_bytes(self.path.parent)
             raise OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)} ({free / 1e6:.1f} MB free)", str(self.path))
