@@ -114,22 +114,24 @@ def test_dt_ladder_errors_fall_with_dt(start):
 
 def test_grid_ladder_converges_at_a_fixed_filter_width(start):
     """The pore-fluid coupling at a fixed filter width w = 3 d (kappa_c = 1e-5, forked wet from the
-    dry checkpoint) on grids h = w and w/2 against w/4, over the approach to the slip: the pressure
-    field (probed at fixed points) gets closer to the finest grid as h falls, at a positive order
-    (0.40 at seed offset 7, where the approach is slow creep and the pressures small; on the whole
-    slip of the validation page, seed 4: errors 0.19 / 0.067 / 0.035 for h = w, w/2, w/4 against
-    w/8, order 1.2). The wall's creep before the slip hardly feels the grid (its error stayed at
-    0.014 on both grids at seed offset 38), so it is not asserted here; through the slip it
-    converges (validation page)."""
+    dry checkpoint) on grids h = w and w/2 against w/4, over the first tenth of the approach to the
+    slip: the pressure field (probed at fixed points) gets closer to the finest grid as h falls,
+    at orders 0.47-0.99 over seed offsets 0, 5, 7, 13, 22, 28, 29, 33 and 38 (on the whole slip of
+    the validation page, seed 4: errors 0.19 / 0.067 / 0.035 for h = w, w/2, w/4 against w/8,
+    order 1.2). The window is short so that the levels' grain paths stay together: over a quarter
+    of the approach, at seed offset 29 the errors of both grids grew to 0.12-0.15 in its last
+    tenth as the paths parted before the slip, and the whole window's were 0.054 and 0.054. The
+    wall's creep before the slip hardly feels the grid (its error stayed at 0.014 on both grids
+    at seed offset 38), so it is not asserted here; through the slip it converges (validation page)."""
     import dataclasses
-    window = dataclasses.replace(start, interval=0.25 * start.interval)
+    window = dataclasses.replace(start, interval=0.1 * start.interval)
     levels = [lv for lv in scene_ladders(start.config, quick=True, fluid=True) if lv.ladder == "grid"]
     assert [lv.setting for lv in levels] == ["cell_size=3", "cell_size=1.5", "cell_size=0.75"]
     result = run_scene_ladders(window, levels, samples=100)
     assert all(r.status == "ok" for r in result["results"])
     coarse, fine = errors_of(result, "grid", "pressure_field")
     assert 0.0 < fine < coarse, (coarse, fine)
-    assert result["orders"]["grid"]["pressure_field"] > 0.0
+    assert result["orders"]["grid"]["pressure_field"] > 0.25
 
 
 def test_analytic_orders_quick():
