@@ -29,6 +29,14 @@ TINY = {        # 300 grains: two or more slips with checkpoints in 80,000 t0 fo
 }
 
 
+def _next_packing(scene: dict, k: int, grow: float) -> dict:
+    """Try k of `scene`: seed + k, run.duration `grow`**k times longer."""
+    run = dict(scene.get("run", {}))
+    if "duration" in run:
+        run["duration"] = run["duration"] * grow ** k
+    return dict(scene, seed=scene["seed"] + k, run=run)
+
+
 def slipping_run(scene: dict, root: Path, slips: int = 2, min_drop: float = 0.0, tries: int = 6,
                  args: tuple = (), grow: float = 1.0) -> tuple[Path, Path, list[int]]:
     """(config file, run directory, numbers of the slips kept with checkpoints and a stress drop
@@ -40,10 +48,7 @@ def slipping_run(scene: dict, root: Path, slips: int = 2, min_drop: float = 0.0,
     config, out = root / f"{scene['name']}.yaml", root / scene["name"]
     counts = []
     for k in range(tries):
-        run = dict(scene.get("run", {}))
-        if "duration" in run:
-            run["duration"] = run["duration"] * grow ** k
-        config.write_text(yaml.safe_dump(dict(scene, seed=scene["seed"] + k, run=run)))
+        config.write_text(yaml.safe_dump(_next_packing(scene, k, grow)))
         if out.exists():
             shutil.rmtree(out)
         result = CliRunner().invoke(app, ["run", str(config), "--out", str(out), "--quiet", *map(str, args)])
@@ -66,10 +71,7 @@ def slipping_start(scene: dict, root: Path, tries: int = 6, grow: float = 1.5):
 
     sources = []
     for k in range(tries):
-        run = dict(scene.get("run", {}))
-        if "duration" in run:
-            run["duration"] = run["duration"] * grow ** k
-        start = prepare_start(build_config(dict(scene, seed=scene["seed"] + k, run=run)), Path(root) / f"seed_{k}")
+        start = prepare_start(build_config(_next_packing(scene, k, grow)), Path(root) / f"seed_{k}")
         if Path(start.source).name.startswith("slip_"):
             return start
         sources.append(Path(start.source).name)

@@ -155,20 +155,21 @@ class RunFile:
         start, room = self.h5.id.get_filesize(), need + RESERVE_BYTES
         if start + room <= self._allocated:
             return
-        short = True
         for ahead in (room + RESERVE_BYTES, room):    # a reserve more at once, so most writes need no call
             try:
-                if preallocate(self.path, ahead, start=start):
-                    self._allocated, short = start + ahead, False
-                else:
-                    short = free_bytes(self.path.parent) < room       # (the file system cannot allocate)
-                break
+                allocated = preallocate(self.path, ahead, start=start)
             except OSError as exc:
                 if not is_no_space(exc):
                     raise
-        if short:
-            free = free_bytes(self.path.parent)
-            raise OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)} ({free / 1e6:.1f} MB free)", str(self.path))
+                continue
+            if allocated:
+                self._allocated = start + ahead
+                return
+            if free_bytes(self.path.parent) >= room:        # (a file system that cannot allocate)
+                return
+            break
+        free = free_bytes(self.path.parent)
+        raise OSError(errno.ENOSPC, f"{os.strerror(errno.ENOSPC)} ({free / 1e6:.1f} MB free)", str(self.path))
 
     def flush(self, room: bool = True):
         if room:
