@@ -203,7 +203,8 @@ class CheckpointKeeper(Callback):
         for cb in self.callbacks:
             cb.sync(sim)
         saved, attached = states(self.callbacks)
-        write_checkpoint(self.layout.latest, snapshot_of(sim, {"phase": self.phase, **saved}, attached))
+        extra = {"phase": self.phase, **saved, **self.writer.series_tail().as_extra()}
+        write_checkpoint(self.layout.latest, snapshot_of(sim, extra, attached))
 
 
 @contextmanager

@@ -24,7 +24,7 @@ from ..errors import DamagedFileError, InputError
 from .checkpoint import read_checkpoint
 from .layout import RUN_FILE, ForkLayout, RunLayout, branch_flag
 from .integrity import STRUCTURE_ERRORS, all_objects, check_seal, damaged_rows, read, stored_seal, structure_error
-from .runfile import attr_value, checked_time
+from .runfile import SeriesTail, attr_value, checked_time, run_status, torn_series_tail
 
 
 @dataclass
@@ -130,7 +130,9 @@ def continued_problems(path: Path, time: float, step: int, slips: int) -> list[P
     for p in problems:
         if p.part == "analysis" or (p.part == "snapshot" and p.step > step) or (p.part == "slip" and p.slip > slips):
             continue
-        if p.part == "series" and p.rows is not None and p.time is not None and p.time > time:
+        # (a series part's time is the clock of the row before its first: times increase strictly,
+        # so at or after the checkpoint's clock every damaged row follows the checkpoint)
+        if p.part == "series" and p.rows is not None and p.time is not None and p.time >= time:
             continue
         if p.part == "lengths" and _rows_up_to(path, time) <= p.rows[0]:
             continue
@@ -190,9 +192,13 @@ def verify_run(run_dir: Path) -> dict:
     reports = []
     problems, sealed = run_file_problems(layout.run_file)
     main = FileReport(layout.relative(layout.run_file), "run", "damaged" if problems else ("sound" if sealed else "unchecked"), problems)
+    torn = _torn_tail(layout)
     for p in problems:
         if p.part == "analysis":
             p.recompute = f"`gouge analyze {root}` (rewrites /analysis)"
+        elif p.part == "series" and p.rows and (p.object.rsplit("/", 1)[-1], p.rows[0]) in torn:
+            p.recompute = (f"`gouge resume {root}`, which mends it: a stop inside a write left this chunk's "
+                           "checksum stale, and its rows up to checkpoints/latest.h5 match that checkpoint's record")
         else:
             p.recompute = _source(checkpoints, p.time)
     reports.append(main)
@@ -214,6 +220,18 @@ def verify_run(run_dir: Path) -> dict:
         reports.append(report)
     return {"run": str(root), "sound": not any(r.status == "damaged" for r in reports),
             "files": [_plain(asdict(r)) for r in reports]}
+
+
+def _torn_tail(layout: RunLayout) -> set[tuple[str, int]]:
+    """(column, first row) of the series chunks that `gouge resume` mends (runfile.torn_series_tail
+    against latest.h5's record; empty when the run finished or latest.h5 cannot be read)."""
+    try:
+        if run_status(layout.run_file) in ("finished", None):         # (a finished run is not resumed)
+            return set()
+        tail = SeriesTail.from_extra(read_checkpoint(layout.latest).extra)
+        return {(name, tail.start) for name in torn_series_tail(layout.run_file, tail)}
+    except (InputError, OSError, KeyError, ValueError, TypeError, RuntimeError):
+        return set()
 
 
 def _checkpoint_time_hint(root: Path, rel: str) -> float | None:

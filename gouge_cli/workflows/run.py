@@ -15,7 +15,7 @@ from ..config import Config, dump_config, load_config
 from ..errors import ConfigError, DamagedFileError, hdf5_os_error
 from ..kernels import layout as L
 from ..io.layout import RunLayout
-from ..io.runfile import RunFile
+from ..io.runfile import RunFile, SeriesTail, mend_series_tail
 from ..io.verify import continued_problems
 from ..model.scene import Scene
 from ..driver.compaction import compaction_phase
@@ -175,6 +175,11 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
                 if str(h5.attrs["status"]) == "finished":
                     raise RunDirError(f"{run_dir} already finished; nothing to resume")
             count = recorded_count(ck.extra)
+            mended = mend_series_tail(layout.run_file, SeriesTail.from_extra(ck.extra))
+            if mended:
+                print(f"mended the series' last chunk in {len(mended)} column(s) ({', '.join(mended[:3])}"
+                      f"{', ...' if len(mended) > 3 else ''}): its checksum was stale after the stop, its rows "
+                      f"up to the checkpoint match the checkpoint's record", file=sys.stderr, flush=True)
             _refuse_damaged(layout.run_file, ck.time, ck.step, count)
             writer = RunFile(layout.run_file, ck.config, sim.dt, mode="a", threads=sim.threads)
             writer.truncate_after(ck.time, ck.step, count)

@@ -344,7 +344,7 @@ def test_resume_refuses_a_damaged_chunk_before_its_checkpoint(run, tmp_path):
     run_dir, _ = run
     stopped = interrupted_copy(run_dir, tmp_path / "resume")
     name, offset, size = next(s for s in dataset_spans(stopped / "run.h5") if s[0] == "/series/wall_x")
-    flip(stopped / "run.h5", offset + size // 2, 3)
+    flip(stopped / "run.h5", offset + 8 * 7 + 2, 3)           # inside row 7, before the checkpoint's rows
     before = sha(stopped / "run.h5")
     refused(gouge("resume", stopped, "--quiet"), "series/wall_x", "rows", "nothing was resumed")
     assert sha(stopped / "run.h5") == before
@@ -477,3 +477,20 @@ def test_damaged_parent_checkpoint_named_in_pair_record(run, tmp_path):
     _flip_text(ck, b"friction: 0.5", b"friction: 1.5")
     (line,) = branch_bit_risks(branch)
     assert line.startswith("not compared") and ck.name in line
+
+
+def test_series_damage_after_the_checkpoints_row_is_left_to_the_resume(monkeypatch):
+    """A damaged part of a series whose row before it is the checkpoint's own row (its clock, the
+    part's time, equals the checkpoint's) holds only rows the resume drops and computes again:
+    not refused; one starting a row earlier is."""
+    from gouge_cli.io import verify
+    from gouge_cli.io.verify import Problem, continued_problems
+
+    def problems(time):
+        return lambda path: ([Problem("/series/wall_x", "fails its checksum", "series", rows=(4096, 4200), time=time)],
+                             True)
+
+    monkeypatch.setattr(verify, "run_file_problems", problems(30000.0))
+    assert continued_problems(Path("run.h5"), 30000.0, 3000, 0) == []
+    monkeypatch.setattr(verify, "run_file_problems", problems(29990.0))
+    assert [p.object for p in continued_problems(Path("run.h5"), 30000.0, 3000, 0)] == ["/series/wall_x"]
