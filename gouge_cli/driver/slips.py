@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections import deque
 import numpy as np
 
-from ..io.checkpoint import Checkpoint, snapshot_of, write_checkpoint
+from ..io.checkpoint import SLIP_RECORDER, Checkpoint, snapshot_of, write_checkpoint
 from ..io.layout import RunLayout
 from ..config import Config
 from ..model.slip_rule import Slip, SlipDetector, SlipRule
@@ -41,7 +41,7 @@ class SlipRecorder(Callback):
     Fed by the series writer (not scheduled itself); its checkpoint state (``state_dict`` and
     ``attachments``: the ring and the pending pre-slip state) is saved under ``name``."""
 
-    name = "slip_recorder"
+    name = SLIP_RECORDER
 
     def __init__(self, config: Config, sim, run_file, layout: RunLayout | None, state: dict | None = None,
                  attached: dict | None = None):
@@ -198,8 +198,3 @@ class SlipRecorder(Callback):
         self.slips.append(entry)
         if self.run_file is not None:
             self.run_file.add_slip(self.count, entry, subevents)
-
-
-def recorded_count(extra: dict) -> int:
-    """Slips a recorder had recorded when it saved the checkpoint whose extra this is (0 if none)."""
-    return int(extra.get(SlipRecorder.name, {}).get("count", 0))

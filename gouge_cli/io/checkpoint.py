@@ -36,6 +36,9 @@ from .outputs import write_file
 from .rundir import pid_alive
 
 
+SLIP_RECORDER = "slip_recorder"     # the slip recorder's key in a checkpoint's extra (driver.slips)
+
+
 @dataclass
 class Checkpoint:
     config: Config
@@ -53,6 +56,11 @@ class Checkpoint:
     @property
     def step(self) -> int:
         return int(self.state["counters"][0])
+
+    @property
+    def slips_recorded(self) -> int:
+        """Slips the run's slip recorder had recorded when this checkpoint was written (0: none)."""
+        return int(self.extra.get(SLIP_RECORDER, {}).get("count", 0))
 
 
 def _plain(value):

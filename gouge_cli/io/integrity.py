@@ -148,14 +148,40 @@ def read(ds, selection=Ellipsis) -> np.ndarray:
         raise DamagedFileError(f"{where}: cannot be read, damaged data ({_short(err)})") from None
 
 
+def walk_objects(h5) -> tuple[dict, dict]:
+    """({path: object}, {path: error}) of an open file's root and every group and dataset below it:
+    an object that cannot be opened (damaged metadata, such as a link to an object header written
+    past the end the file records when a kill cut an HDF5 flush short) is in the second, and what
+    is below it is not walked."""
+    objects, failures = {"/": h5}, {}
+
+    def walk(group, prefix: str):
+        try:
+            names = list(group.keys())
+        except STRUCTURE_ERRORS as err:
+            failures[prefix.rstrip("/") or "/"] = err
+            return
+        for name in names:
+            path = prefix + name
+            try:
+                obj = group[name]
+            except STRUCTURE_ERRORS + (ValueError,) as err:
+                failures[path] = err
+                continue
+            objects[path] = obj
+            if isinstance(obj, h5py.Group):
+                walk(obj, path + "/")
+
+    walk(h5, "/")
+    return objects, failures
+
+
 def all_objects(h5) -> dict:
-    """{path: object} of an open file's root and every group and dataset below it."""
-    objects = {"/": h5}
-
-    def visit(name, obj):
-        objects["/" + name] = obj      # (returns None: visititems stops at the first other value)
-
-    h5.visititems(visit)
+    """{path: object} of an open file's root and every group and dataset below it; the error of
+    the first that cannot be opened is raised (walk_objects)."""
+    objects, failures = walk_objects(h5)
+    if failures:
+        raise next(iter(failures.values()))
     return objects
 
 

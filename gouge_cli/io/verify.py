@@ -23,7 +23,7 @@ import numpy as np
 from ..errors import DamagedFileError, InputError
 from .checkpoint import read_checkpoint
 from .layout import RUN_FILE, ForkLayout, RunLayout, branch_flag
-from .integrity import STRUCTURE_ERRORS, all_objects, check_seal, damaged_rows, read, stored_seal, structure_error
+from .integrity import STRUCTURE_ERRORS, check_seal, damaged_rows, read, stored_seal, structure_error, walk_objects
 from .runfile import SeriesTail, attr_value, checked_time, run_status, torn_series_tail
 
 
@@ -40,6 +40,7 @@ class Problem:
     slip: int | None = None
     time: float | None = None          # clock of the start of the damaged part, when known [t0]
     recompute: str | None = None
+    unopened: bool | None = None       # True: the object itself cannot be opened (its metadata)
 
 
 @dataclass
@@ -80,11 +81,10 @@ def run_file_problems(path: Path) -> tuple[list[Problem], bool]:
             sealed = stored_seal(h5) is not None
         except DamagedFileError as err:
             return [Problem("/", str(err))], True
-        objects = {"/": h5}
-        try:
-            objects = all_objects(h5)
-        except (OSError, RuntimeError, KeyError, ValueError) as err:
-            problems.append(Problem("/", f"its structure cannot be walked ({str(err).splitlines()[0][:160]})"))
+        objects, failures = walk_objects(h5)
+        for name, err in failures.items():
+            problems.append(Problem(name, f"cannot be opened ({str(err).splitlines()[0][:160]})", **_part(name),
+                                    unopened=True))
         for name, obj in sorted(objects.items()):
             try:
                 check_seal(obj, sealed)
@@ -121,23 +121,31 @@ def run_file_problems(path: Path) -> tuple[list[Problem], bool]:
     return problems, sealed
 
 
-def continued_problems(path: Path, time: float, step: int, slips: int) -> list[Problem]:
-    """The problems of run file `path` in what a resume from a checkpoint at clock `time`, step
-    `step`, after `slips` slips keeps (series rows up to `time`, snapshots up to `step`, slips up
-    to `slips`, the root attributes); /analysis is left out (`gouge analyze` rewrites it)."""
+def continued_problems(path: Path, time: float, step: int, slips: int) -> tuple[list[Problem], list[Problem]]:
+    """(kept, dropped): the problems of run file `path` in what a resume from a checkpoint at clock
+    `time`, step `step`, after `slips` slips keeps (series rows up to `time`, snapshots up to
+    `step`, slips up to `slips`, the root attributes), and in what it drops and computes again;
+    /analysis is in neither (`gouge analyze` rewrites it)."""
     problems, _ = run_file_problems(path)
-    kept = []
-    for p in problems:
-        if p.part == "analysis" or (p.part == "snapshot" and p.step > step) or (p.part == "slip" and p.slip > slips):
-            continue
-        # (a series part's time is the clock of the row before its first: times increase strictly,
-        # so at or after the checkpoint's clock every damaged row follows the checkpoint)
-        if p.part == "series" and p.rows is not None and p.time is not None and p.time >= time:
-            continue
-        if p.part == "lengths" and _rows_up_to(path, time) <= p.rows[0]:
-            continue
-        kept.append(p)
-    return kept
+    kept = [p for p in problems if p.part != "analysis" and not _follows(p, path, time, step, slips)]
+    dropped = [p for p in problems if p.part != "analysis" and _follows(p, path, time, step, slips)]
+    return kept, dropped
+
+
+def _follows(p: Problem, path: Path, time: float, step: int, slips: int) -> bool:
+    """Whether damaged part `p` of run file `path` lies wholly after a checkpoint at (time, step,
+    slips): what a resume from it drops and computes again."""
+    if p.part == "snapshot":
+        return p.step > step
+    if p.part == "slip":
+        return p.slip > slips
+    if p.part == "series":
+        # (its time is the clock of the row before its first: times increase strictly, so at or
+        # after the checkpoint's clock every damaged row follows the checkpoint)
+        return p.rows is not None and p.time is not None and p.time >= time
+    if p.part == "lengths":
+        return _rows_up_to(path, time) <= p.rows[0]
+    return False
 
 
 def _rows_up_to(path: Path, time: float) -> int:
@@ -192,13 +200,16 @@ def verify_run(run_dir: Path) -> dict:
     reports = []
     problems, sealed = run_file_problems(layout.run_file)
     main = FileReport(layout.relative(layout.run_file), "run", "damaged" if problems else ("sound" if sealed else "unchecked"), problems)
-    torn = _torn_tail(layout)
+    latest = _resumed_from(layout)
+    torn = _torn_tail(layout, latest)
     for p in problems:
         if p.part == "analysis":
             p.recompute = f"`gouge analyze {root}` (rewrites /analysis)"
         elif p.part == "series" and p.rows and (p.object.rsplit("/", 1)[-1], p.rows[0]) in torn:
             p.recompute = (f"`gouge resume {root}`, which mends it: a stop inside a write left this chunk's "
                            "checksum stale, and its rows up to checkpoints/latest.h5 match that checkpoint's record")
+        elif latest is not None and _follows(p, layout.run_file, latest.time, latest.step, latest.slips_recorded):
+            p.recompute = f"`gouge resume {root}`, which drops it and computes it again from checkpoints/latest.h5"
         else:
             p.recompute = _source(checkpoints, p.time)
     reports.append(main)
@@ -222,15 +233,26 @@ def verify_run(run_dir: Path) -> dict:
             "files": [_plain(asdict(r)) for r in reports]}
 
 
-def _torn_tail(layout: RunLayout) -> set[tuple[str, int]]:
-    """(column, first row) of the series chunks that `gouge resume` mends (runfile.torn_series_tail
-    against latest.h5's record; empty when the run finished or latest.h5 cannot be read)."""
+def _resumed_from(layout: RunLayout):
+    """The checkpoint `gouge resume` continues the run from (latest.h5), None when the run finished
+    or it cannot be read."""
     try:
-        if run_status(layout.run_file) in ("finished", None):         # (a finished run is not resumed)
-            return set()
-        tail = SeriesTail.from_extra(read_checkpoint(layout.latest).extra)
-        return {(name, tail.start) for name in torn_series_tail(layout.run_file, tail)}
+        if run_status(layout.run_file) in ("finished", None):
+            return None
+        return read_checkpoint(layout.latest)
     except (InputError, OSError, KeyError, ValueError, TypeError, RuntimeError):
+        return None
+
+
+def _torn_tail(layout: RunLayout, latest) -> set[tuple[str, int]]:
+    """(column, first row) of the series chunks that `gouge resume` from checkpoint `latest` mends
+    (runfile.torn_series_tail against its record)."""
+    if latest is None:
+        return set()
+    try:
+        tail = SeriesTail.from_extra(latest.extra)
+        return {(name, tail.start) for name in torn_series_tail(layout.run_file, tail)}
+    except (OSError, KeyError, ValueError, TypeError, RuntimeError):
         return set()
 
 

@@ -15,7 +15,7 @@ from ..config import Config, dump_config, load_config
 from ..errors import ConfigError, DamagedFileError, hdf5_os_error
 from ..kernels import layout as L
 from ..io.layout import RunLayout
-from ..io.runfile import RunFile, SeriesTail, mend_series_tail
+from ..io.runfile import RunFile, SeriesTail, mend_series_tail, rebuild_kept
 from ..io.verify import continued_problems
 from ..model.scene import Scene
 from ..driver.compaction import compaction_phase
@@ -24,7 +24,6 @@ from ..errors import RunDirError
 from ..io.outputs import is_no_space, require_space
 from ..io.rundir import SPACE_MARGIN, check_run_dir, open_run_file, prepare_run_dir, restart_command, RunLock
 from ..driver.simulation import Simulation
-from ..driver.slips import recorded_count
 from ..errors import PhysicsError
 
 
@@ -174,13 +173,16 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
             with open_run_file(layout.run_file) as h5:
                 if str(h5.attrs["status"]) == "finished":
                     raise RunDirError(f"{run_dir} already finished; nothing to resume")
-            count = recorded_count(ck.extra)
+            count = ck.slips_recorded
             mended = mend_series_tail(layout.run_file, SeriesTail.from_extra(ck.extra))
             if mended:
                 print(f"mended the series' last chunk in {len(mended)} column(s) ({', '.join(mended[:3])}"
                       f"{', ...' if len(mended) > 3 else ''}): its checksum was stale after the stop, its rows "
                       f"up to the checkpoint match the checkpoint's record", file=sys.stderr, flush=True)
-            _refuse_damaged(layout.run_file, ck.time, ck.step, count)
+            if _refuse_damaged(layout.run_file, ck.time, ck.step, count):
+                rebuild_kept(layout.run_file, ck.time, ck.step, count, f"`gouge resume {run_dir}`")
+                print(f"rebuilt {layout.run_file} from what it holds up to the checkpoint: a snapshot or slip "
+                      "written after it could not be opened (the stop cut a write short)", file=sys.stderr, flush=True)
             writer = RunFile(layout.run_file, ck.config, sim.dt, mode="a", threads=sim.threads)
             writer.truncate_after(ck.time, ck.step, count)
             writer.set_attr("status", "running")
@@ -200,15 +202,17 @@ def _refuse_branch(run_dir: Path) -> None:
                       "(it runs the fork's unfinished branches; no --force needed)")
 
 
-def _refuse_damaged(path: Path, time: float, step: int, slips: int) -> None:
-    """DamagedFileError naming what is damaged in the part of run.h5 a resume keeps (nothing is run)."""
-    damaged = continued_problems(path, time, step, slips)
+def _refuse_damaged(path: Path, time: float, step: int, slips: int) -> bool:
+    """DamagedFileError naming what is damaged in the part of run.h5 a resume keeps (nothing is
+    run); else whether a snapshot or slip after the checkpoint cannot be opened (rebuild_kept)."""
+    damaged, dropped = continued_problems(path, time, step, slips)
     if damaged:
         listed = ", ".join(p.object + (f" rows {p.rows[0]}-{p.rows[1]}" if p.rows else "") for p in damaged[:3])
         more = f" and {len(damaged) - 3} more" if len(damaged) > 3 else ""
         raise DamagedFileError(f"{path} holds damaged data before the checkpoint the run would continue from "
                                f"({listed}{more}), so nothing was resumed; `gouge verify {path.parent}` says what "
                                "recomputes it")
+    return any(p.unopened for p in dropped)
 
 
 __all__ = ["RunResult", "default_run_dir", "run_scene", "resume_run", "stopped_by_os_error"]

@@ -491,6 +491,6 @@ def test_series_damage_after_the_checkpoints_row_is_left_to_the_resume(monkeypat
                              True)
 
     monkeypatch.setattr(verify, "run_file_problems", problems(30000.0))
-    assert continued_problems(Path("run.h5"), 30000.0, 3000, 0) == []
+    assert continued_problems(Path("run.h5"), 30000.0, 3000, 0)[0] == []
     monkeypatch.setattr(verify, "run_file_problems", problems(29990.0))
-    assert [p.object for p in continued_problems(Path("run.h5"), 30000.0, 3000, 0)] == ["/series/wall_x"]
+    assert [p.object for p in continued_problems(Path("run.h5"), 30000.0, 3000, 0)[0]] == ["/series/wall_x"]
