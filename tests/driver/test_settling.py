@@ -69,9 +69,11 @@ def test_settle_report_prints_progress_toward_the_criterion(capsys):
 
 def test_progress_and_eta_on_a_small_scene(single_thread):
     """A 300-grain compaction observed by SettleTracker: the fraction is below 1 until the check
-    that settles and 1 there; it mostly rises; once it passes 0.5 the predicted remaining
-    simulated time is within a factor 3 of the actual one (median within 2), and the wall ETA is
-    finite and its median within a factor 4 of the actual wall time left. Observing changes no bit."""
+    that settles and 1 there; it mostly rises; once it passes 0.5 the median ratio of predicted to
+    actual remaining simulated time is within a factor 2 (0.67-1.67 over seed offsets 0-59; a
+    single prediction is not: the first after 0.5 was off 3.7x at offset 43 and 7x at 46, one
+    later 36x at 11), and the wall ETA is finite and its median within a factor 4 of the actual
+    wall time left. Observing changes no bit."""
     config = build_config(SCENE)
     plain = Simulation(config)
     compact(plain)
@@ -97,7 +99,6 @@ def test_progress_and_eta_on_a_small_scene(single_thread):
     late = [(t, w, out) for t, w, out in rows[:-1] if out["fraction"] >= 0.5]
     assert late, "the fraction never passed 0.5 before settling"
     ratios = [out["remaining"] / (end_t - t) for t, _, out in late]
-    assert 1 / 3 <= ratios[0] <= 3, ratios
     assert 1 / 2 <= float(np.median(ratios)) <= 2, ratios
     assert all(math.isfinite(out["eta"]) for _, _, out in late)
     wall_ratios = [out["eta"] / (end_wall - w) for _, w, out in late]

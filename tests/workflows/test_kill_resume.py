@@ -24,6 +24,7 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
+from gouge_cli.errors import CheckpointError
 from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.io.integrity import seal
 from gouge_cli.cli.main import app
@@ -53,11 +54,19 @@ def _wait_for(path: Path, proc: subprocess.Popen, limit: float = 120.0):
         time.sleep(0.002)
 
 
-def slipping_scene(root: Path, tries: int = 4) -> tuple[Path, Path, float]:
+def _phase(latest: Path) -> str | None:
+    try:
+        return read_checkpoint(latest).extra.get("phase")
+    except (OSError, ValueError, KeyError, CheckpointError):       # (not there yet)
+        return None
+
+
+def slipping_scene(root: Path, tries: int = 4) -> tuple[Path, Path, float, float]:
     """SCENE, its seed raised by 0, 1, ... until an uninterrupted run slips with a ring checkpoint
     (whether 14,000 t0 of one packing slip is that packing's business: some first slip just after,
     so each try runs 1.5 times longer than the one before; the identities tested here hold for any).
-    Returns (scene file, run dir, seconds from run.h5 to the end)."""
+    Returns (scene file, run dir, seconds from run.h5 to the end, seconds from run.h5 to the last
+    compaction checkpoint seen: at most the compaction's length, which is the packing's)."""
     for k in range(tries):
         scene_file = root / f"kill{k}.yaml"
         run = {"duration": SCENE["run"]["duration"] * 1.5 ** k}
@@ -65,16 +74,21 @@ def slipping_scene(root: Path, tries: int = 4) -> tuple[Path, Path, float]:
         out = root / f"reference{k}"
         proc = _start(scene_file, out)
         _wait_for(out / "run.h5", proc)
-        t0 = time.time()
+        t0, compaction, phase = time.time(), 0.0, None
+        while proc.poll() is None and phase != "loading":
+            phase = _phase(out / "checkpoints" / "latest.h5")
+            if phase == "compaction":
+                compaction = time.time() - t0
+            time.sleep(0.005)
         assert proc.wait(timeout=300) == 0, proc.stderr.read().decode()
         if any(e["checkpoint"] for e in slip_catalog(out)):
-            return scene_file, out, time.time() - t0
+            return scene_file, out, time.time() - t0, compaction
     pytest.fail(f"none of {tries} packings of the kill scene slipped with a ring checkpoint")
 
 
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
-    """Uninterrupted run; returns (scene file, run dir, seconds from run.h5 to the end)."""
+    """Uninterrupted run: (scene file, run dir, seconds from run.h5 to the end, to loading)."""
     return slipping_scene(tmp_path_factory.mktemp("kill"))
 
 
@@ -111,11 +125,12 @@ def assert_identical(ref: Path, run: Path):
 def kill_and_resume(reference, out: Path, kind: str, rng: random.Random) -> dict:
     """One trial: start the run, kill -9 it (kind: 'compaction', 'write' or 'random'), resume,
     compare with the reference. Returns what was hit."""
-    scene_file, ref, span = reference
+    scene_file, ref, span, compaction = reference
     proc = _start(scene_file, out)
     _wait_for(out / "run.h5", proc)
-    delay = {"compaction": rng.uniform(0.0, 0.1), "write": rng.uniform(0.0, 0.8), "random": rng.uniform(0.0, 0.85),
-             "ctrl-c": rng.uniform(0.0, 0.85)}[kind] * span
+    # (compaction: within the first half of the reference's, whatever the packing's compaction length)
+    delay = {"compaction": rng.uniform(0.0, 0.5) * compaction / span, "write": rng.uniform(0.0, 0.8),
+             "random": rng.uniform(0.0, 0.85), "ctrl-c": rng.uniform(0.0, 0.85)}[kind] * span
     time.sleep(delay)
     tmp_seen = False
     if kind == "write":
@@ -183,7 +198,7 @@ def test_kill_9_twenty_times(reference, tmp_path):
 def test_resume_keeps_the_pre_slip_ring(reference, tmp_path, where):
     """A run stopped where the slip's checkpoint exists only in memory (the ring of pre-slip
     states, or the state set aside at the trigger) and resumed: the slip keeps that checkpoint."""
-    scene_file, ref, _ = reference
+    scene_file, ref, _, _ = reference
     entry = next(e for e in slip_catalog(ref) if e["checkpoint"])
     stop = entry["onset_time"] - 5.0 if where == "before the onset" else 0.5 * (entry["onset_time"] + entry["end_time"])
     with h5py.File(ref / "run.h5", "r") as h5:
