@@ -52,7 +52,7 @@ def tree(root: Path) -> dict:
 @pytest.fixture(scope="module")
 def slipping(tmp_path_factory):
     """(scene file, finished run) of the kill scene, with a slip kept with a checkpoint."""
-    scene_file, out, _ = slipping_scene(tmp_path_factory.mktemp("safety"))
+    scene_file, out, _, _ = slipping_scene(tmp_path_factory.mktemp("safety"))
     return scene_file, out
 
 
