@@ -334,10 +334,8 @@ class RunFile:
         """The SeriesTail of the rows flushed so far (read back from the file; after flush())."""
         group = self.h5["series"]
         rows = group["time"].shape[0] if "time" in group else 0
-        tail = SeriesTail(rows)
-        if rows % SERIES_CHUNK:
-            tail.digests.update({name: _rows_digest(ds[tail.start:rows]) for name, ds in group.items()})
-        return tail
+        start = SeriesTail(rows).start
+        return SeriesTail(rows, {name: _rows_digest(ds[start:rows]) for name, ds in group.items()} if rows > start else {})
 
     def truncate_after(self, time_limit: float, step_limit: int, slip_count: int):
         """Drop series rows after time_limit, snapshots after step_limit and catalog entries

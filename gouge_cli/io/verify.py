@@ -127,8 +127,10 @@ def continued_problems(path: Path, time: float, step: int, slips: int) -> tuple[
     `step`, slips up to `slips`, the root attributes), and in what it drops and computes again;
     /analysis is in neither (`gouge analyze` rewrites it)."""
     problems, _ = run_file_problems(path)
-    kept = [p for p in problems if p.part != "analysis" and not _follows(p, path, time, step, slips)]
-    dropped = [p for p in problems if p.part != "analysis" and _follows(p, path, time, step, slips)]
+    kept, dropped = [], []
+    for p in problems:
+        if p.part != "analysis":
+            (dropped if _follows(p, path, time, step, slips) else kept).append(p)
     return kept, dropped
 
 
