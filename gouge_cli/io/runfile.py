@@ -189,38 +189,32 @@ def mend_series_tail(path: Path, tail: SeriesTail | None) -> list[str]:
     return sorted(torn)
 
 
-def rebuild_kept(path: Path, time_limit: float, step_limit: int, slip_count: int, next_step: str) -> None:
-    """Replace run file `path` by a copy of what a resume keeps: the root attributes, the series
-    rows up to time_limit, the snapshots up to step_limit and the slips up to slip_count (HDF5's
-    object copy: attributes, seals, chunks and checksums as they were), written to a temporary file
+def _copy_attributes(src, dst) -> None:
+    for name in src.attrs:         # (each with its stored type, so the seals still match)
+        dst.attrs.create(name, src.attrs[name], dtype=src.attrs.get_id(name).dtype)
+
+
+def rebuild_openable(path: Path, next_step: str) -> None:
+    """Replace run file `path` by a copy of every object in it that can be opened (HDF5's object
+    copy: attributes, seals, chunks and checksums as they were), written to a temporary file
     renamed onto `path` when complete. For a file holding, after its checkpoint, an object that
     cannot be opened (a kill inside an HDF5 flush can leave a link to an object header past the end
-    the file records): HDF5 cannot delete such a link, so truncate_after cannot drop it."""
+    the file records): HDF5 cannot delete such a link, so truncate_after could not drop it; it
+    trims the copy instead. Only after the resume's check (nothing it keeps fails to open)."""
     path = Path(path)
     remove_temps(path)
     require_space(path.parent, path.stat().st_size, f"rebuilding {path}", next_step)
     with temporary(path, next_step) as tmp:
         with h5py.File(path, "r") as src, h5py.File(tmp, "w", rdcc_nbytes=0) as dst:
-            for name in src.attrs:
-                dst.attrs.create(name, src.attrs[name], dtype=src.attrs.get_id(name).dtype)
-            for group, keep in (("series", None), ("snapshots", lambda n: int(n) <= step_limit),
-                                ("slips", lambda n: int(n) <= slip_count)):
-                if group not in src:
-                    continue
-                if keep is None:
-                    src.copy(src[group], dst)
-                    continue
+            _copy_attributes(src, dst)
+            for group in src:                      # (series, snapshots, slips: groups of objects)
                 out = dst.create_group(group)
-                for name in src[group].attrs:
-                    out.attrs.create(name, src[group].attrs[name], dtype=src[group].attrs.get_id(name).dtype)
+                _copy_attributes(src[group], out)
                 for name in src[group]:
-                    if keep(name):
+                    try:
                         src.copy(src[group][name], out)
-            series = dst["series"]
-            if "time" in series:
-                rows = int(np.searchsorted(series["time"][...], time_limit, side="right"))
-                for column in series.values():
-                    column.resize((min(rows, column.shape[0]),))
+                    except STRUCTURE_ERRORS:        # (what the resume drops)
+                        continue
 
 
 class RunFile:

@@ -15,7 +15,7 @@ from ..config import Config, dump_config, load_config
 from ..errors import ConfigError, DamagedFileError, hdf5_os_error
 from ..kernels import layout as L
 from ..io.layout import RunLayout
-from ..io.runfile import RunFile, SeriesTail, mend_series_tail, rebuild_kept
+from ..io.runfile import RunFile, SeriesTail, mend_series_tail, rebuild_openable
 from ..io.verify import continued_problems
 from ..model.scene import Scene
 from ..driver.compaction import compaction_phase
@@ -180,9 +180,9 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
                       f"{', ...' if len(mended) > 3 else ''}): its checksum was stale after the stop, its rows "
                       f"up to the checkpoint match the checkpoint's record", file=sys.stderr, flush=True)
             if _refuse_damaged(layout.run_file, ck.time, ck.step, count):
-                rebuild_kept(layout.run_file, ck.time, ck.step, count, f"`gouge resume {run_dir}`")
-                print(f"rebuilt {layout.run_file} from what it holds up to the checkpoint: a snapshot or slip "
-                      "written after it could not be opened (the stop cut a write short)", file=sys.stderr, flush=True)
+                rebuild_openable(layout.run_file, f"`gouge resume {run_dir}`")
+                print(f"rebuilt {layout.run_file} without what could not be opened after the checkpoint (a snapshot "
+                      "or slip whose write the stop cut short)", file=sys.stderr, flush=True)
             writer = RunFile(layout.run_file, ck.config, sim.dt, mode="a", threads=sim.threads)
             writer.truncate_after(ck.time, ck.step, count)
             writer.set_attr("status", "running")
@@ -204,7 +204,7 @@ def _refuse_branch(run_dir: Path) -> None:
 
 def _refuse_damaged(path: Path, time: float, step: int, slips: int) -> bool:
     """DamagedFileError naming what is damaged in the part of run.h5 a resume keeps (nothing is
-    run); else whether a snapshot or slip after the checkpoint cannot be opened (rebuild_kept)."""
+    run); else whether a snapshot or slip after the checkpoint cannot be opened (rebuild_openable)."""
     damaged, dropped = continued_problems(path, time, step, slips)
     if damaged:
         listed = ", ".join(p.object + (f" rows {p.rows[0]}-{p.rows[1]}" if p.rows else "") for p in damaged[:3])

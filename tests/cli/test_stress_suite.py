@@ -115,11 +115,13 @@ def check_high_velocity(sim, s):
     assert s["wall_vx"][quarter:].min() > 0.1 * v_load
     assert abs(second_half(s, "wall_vx").mean() / v_load - 1.0) < 0.1   # and it follows the drive on average
     tau = second_half(s, "tau_over_sigma")
-    # sliding friction: positive but for brief dips, mean in the range of sheared gouge (the dips
-    # follow the scene's rearrangements: minimum 0.08-0.15 over seeds 3 and 10, -0.03 for seed 7,
-    # where a rearrangement lets the wall overshoot for a few samples; 6 % of the samples at seed
-    # offset 37)
-    assert np.mean(tau <= 0.0) < 0.1 and tau.min() > -0.2 and tau.max() < 0.8 and 0.15 < tau.mean() < 0.6
+    # sliding friction: positive but for brief dips, mean in the range of sheared gouge. Over seed
+    # offsets 0-47 the second half (200 samples) stayed above zero at 46; at 4 and 37 one
+    # rearrangement let the wall overshoot: one dip at or below zero of 7 and 12 samples (3.5 % and
+    # 6 %, minimum -0.03 and -0.07); means 0.23-0.32
+    dips = np.count_nonzero(np.diff((tau <= 0.0).astype(int)) == 1) + int(tau[0] <= 0.0)
+    assert dips <= 2 and np.mean(tau <= 0.0) < 0.1
+    assert tau.min() > -0.2 and tau.max() < 0.8 and 0.15 < tau.mean() < 0.6
     assert s["max_overlap"].max() < 0.15
 
 
