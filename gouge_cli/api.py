@@ -699,7 +699,8 @@ def open_study(path: Path | str, main: str = "first") -> pd.DataFrame:
 
 
 def open_campaign(spec_or_folder: Path | str) -> pd.DataFrame:
-    """The campaign table of the finished pieces, from a campaign file or its output folder.
+    """The campaign table of the finished pieces (from their results records), from a campaign
+    file or its output folder.
 
     The rows are those of table.csv (``kind`` 'run' or 'pair', the point, its swept values, the
     run statistics or the pair columns) plus seed and permeability columns. The output folder
@@ -709,8 +710,7 @@ def open_campaign(spec_or_folder: Path | str) -> pd.DataFrame:
         >>> table = gouge.open_campaign("runs/sweep.yaml")  # doctest: +SKIP
         >>> table.groupby("loading.normal_stress")["stress_drop_mean"].mean()  # doctest: +SKIP
     """
-    from .analysis.campaign_table import campaign_table
-    from .workflows.campaign import done_points, survey
+    from .workflows.campaign import survey, table_rows
     from .workflows.campaign_spec import load_spec
 
     path = Path(spec_or_folder)
@@ -722,9 +722,8 @@ def open_campaign(spec_or_folder: Path | str) -> pd.DataFrame:
     else:
         spec_path, spec = path, load_spec(path)
     s = survey(spec, spec_path)
-    points = done_points(s)
-    rows, _ = campaign_table(points)
-    seeds = {p.name: s.point(p.name).config.seed for p in points}
+    rows = table_rows(s)
+    seeds = {p.name: p.config.seed for p in s.points}
     for row in rows:
         row.setdefault("seed", seeds[row["point"]])
         row.setdefault("permeability", _NAN)

@@ -9,14 +9,13 @@ the kappa_c [d^2] of its undrained branch.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from .catalog import catalog_table, read_catalog, summary_statistics
-from .forkpairs import classify_fork, ForkPair, PAIR_COLUMNS
+from .forkpairs import classify_fork, PAIR_COLUMNS
 from .report import _write_csv
 from .study import transient_slips
-from ..io.layout import RunLayout
 from ..io.runfile import RunReader
 
 PHASE_COLUMNS = ("x", "y", "n_pairs", "n_unclassified", "n_complex", "n_type_I", "n_type_II", "frac_complex",
@@ -25,49 +24,58 @@ RUN_STATS = ("stress_drop", "peak_velocity_over_Vs", "duration", "recurrence", "
 _NAN = float("nan")
 
 
-@dataclass
-class CampaignPoint:
-    """A finished point: its run directory, swept values, forked slips and study permeabilities."""
+def run_row(run_dir: Path) -> tuple[dict, list[int]]:
+    """A run's table row (status, n_slips and, per statistic of :data:`RUN_STATS`, its mean and
+    std over the run's slips: velocities over V_s, times [t0], slip [d]) and its transient slips
+    (:func:`~gouge_cli.analysis.study.transient_slips`)."""
+    with RunReader(run_dir) as reader:
+        catalog = read_catalog(reader)
+        table = catalog_table(reader, catalog)
+        status = reader.info.status
+    stats = summary_statistics(table, RUN_STATS)
+    row = {"status": status, "n_slips": len(table)}
+    for key in RUN_STATS:
+        row[f"{key}_mean"], row[f"{key}_std"] = stats[key]["mean"], stats[key]["std"]
+    return row, sorted(transient_slips(catalog))
 
-    name: str
-    run_dir: Path
-    values: dict
-    fork_slips: list[int] = field(default_factory=list)
-    permeabilities: list[float] = field(default_factory=list)
+
+def fork_rows(fork_dir: Path, permeabilities: list[float]) -> list[dict]:
+    """The pair rows (:data:`PAIR_COLUMNS` but ``run``) of one fork's undrained branches at the
+    listed permeabilities, classified by :func:`~gouge_cli.analysis.forkpairs.classify_fork`."""
+    return [{c: pair.row[c] for c in PAIR_COLUMNS if c != "run"} for pair in classify_fork(fork_dir)
+            if _listed(float(pair.row["permeability"]), permeabilities)]
+
+
+@dataclass(frozen=True)
+class RowPair:
+    """A classified pair rebuilt from its table row (what the campaign figures read: ``row`` and
+    a ``result`` with type, base_type, complex, undrained_event, criteria and the ratios)."""
+
+    row: dict
+
+    @property
+    def result(self):
+        from types import SimpleNamespace
+
+        from .pairs import CRITERIA, RATIOS
+
+        fired = set(str(self.row.get("criteria") or "").split(","))
+        return SimpleNamespace(type=self.row["type"], base_type=self.row["base_type"],
+                               complex=bool(self.row["complex"]), undrained_event=self.row["undrained_event"],
+                               criteria={c: c in fired for c in CRITERIA},
+                               **{r: float(self.row[r]) for r in RATIOS})
 
 
 def _listed(perm: float, perms: list[float]) -> bool:
     return any(math.isclose(perm, k, rel_tol=1e-9) for k in perms)
 
 
-def campaign_table(points: list[CampaignPoint]) -> tuple[list[dict], dict[float, list[ForkPair]]]:
-    """Rows (``kind`` 'run' or 'pair') and the classified pairs grouped by permeability.
-
-    Run rows: n_slips and, per statistic of :data:`RUN_STATS`, its mean and std over the run's
-    slips (velocities over V_s, times [t0], slip [d]). Pair rows: :data:`PAIR_COLUMNS` of
-    report.py (type, -C criteria, undrained/drained ratios, De at onset and largest) for each listed
-    permeability, and ``transient`` (the slip is transient by analysis.study.transient_slips)."""
-    rows, by_perm = [], {}
-    for p in points:
-        with RunReader(p.run_dir) as reader:
-            table = catalog_table(reader, read_catalog(reader))
-            status = reader.info.status
-            transient = transient_slips(read_catalog(reader))
-        stats = summary_statistics(table, RUN_STATS)
-        row = {"kind": "run", "point": p.name, **p.values, "status": status, "n_slips": len(table)}
-        for key in RUN_STATS:
-            row[f"{key}_mean"], row[f"{key}_std"] = stats[key]["mean"], stats[key]["std"]
-        rows.append(row)
-        for slip in p.fork_slips:
-            for pair in classify_fork(RunLayout(p.run_dir).fork(slip).root):
-                perm = float(pair.row["permeability"])
-                if not _listed(perm, p.permeabilities):
-                    continue
-                rows.append({"kind": "pair", "point": p.name, **p.values,
-                             **{c: pair.row[c] for c in PAIR_COLUMNS if c != "run"},
-                             "transient": int(pair.row["slip"]) in transient})
-                by_perm.setdefault(perm, []).append(pair)
-    return rows, by_perm
+def pairs_by_permeability(pair_rows: list[dict]) -> dict[float, list[RowPair]]:
+    """The pair rows grouped by kappa_c [d^2] (never pooled), as :class:`RowPair`."""
+    out: dict[float, list[RowPair]] = {}
+    for r in pair_rows:
+        out.setdefault(float(r["permeability"]), []).append(RowPair(r))
+    return out
 
 
 def _axis_value(row: dict, key: str | None):

@@ -22,6 +22,11 @@ def register(app: typer.Typer):
     def campaign(
         spec: Path = typer.Argument(..., help="campaign file (YAML: name, base, set, sweep, action, study, phase)"),
         status: bool = typer.Option(False, "--status", help="show what is done, running, failed and left; run nothing"),
+        tables: bool = typer.Option(False, "--tables", help="write the tables and figures from the results records; "
+                                    "run nothing"),
+        merge: Optional[Path] = typer.Option(None, "--merge", help="copy in the results records of another results "
+                                             "folder of this spec (refused, naming the key, where settings differ); "
+                                             "run nothing"),
         force: bool = typer.Option(False, "--force", help="run again the pieces whose settings changed (old results deleted)"),
         retry_failed: bool = typer.Option(False, "--retry-failed", help="run failed pieces again"),
         threads: int = typer.Option(1, "--threads", help="numba threads per task"),
@@ -44,11 +49,24 @@ def register(app: typer.Typer):
                                                  "this (default: the spec's max_points, 10,000 unless set)"),
     ):
         """Run a parameter sweep (runs, or studies = run + forks of every slip) on Dask; idempotent."""
-        from ..workflows.campaign import run_campaign, status_lines, survey
+        from ..workflows.campaign import results_root, run_campaign, status_lines, survey
+        from ..workflows.campaign_results import Results, merge as merge_results
         from ..workflows.campaign_spec import load_spec
         from ..workflows.executors import ClusterOptions
 
         try:
+            if merge is not None:
+                loaded = load_spec(spec, max_points)
+                written = merge_results(Results(results_root(loaded)), Results(merge), loaded.name)
+                out.print(f"{len(written)} results records copied from {merge} into {results_root(loaded)}; "
+                          f"`gouge campaign {spec} --tables` writes the tables", highlight=False)
+                return
+            if tables:
+                report = run_campaign(spec, max_points=max_points, tables_only=True,
+                                      log=lambda m: out.print(m, highlight=False))
+                for line in status_lines(report.survey):
+                    out.print(line, highlight=False)
+                return
             if status:
                 for line in status_lines(survey(load_spec(spec, max_points), spec)):
                     out.print(line, highlight=False)

@@ -7,6 +7,10 @@ Layout of ``<out>/<name>/``::
       point.yaml                state point: overrides, resolved config, base, reproducing command
       ledger/run.json           one record per piece: state (running | done | failed | error),
       ledger/fork_NNN.json      settings it ran with, host, pid (and slurm_job), attempts, cause, result
+      variants/<v>/forks/       the forks of a study variant other than the first (study.variants):
+                                its run.h5, config.yaml and checkpoints/ are links to the point's
+    results/<point>/*.json      one record per finished piece (workflows.campaign_results): what
+                                outlives the machine; the tables are built from these alone
     table.csv  phase_diagram.csv  figures/
     regime.csv  delay.csv       the regime map (two permeabilities or more; regime/<value>/ per swept value)
 
@@ -15,6 +19,13 @@ study's permeabilities" (:func:`advance_run`, :func:`advance_fork`). A run piece
 was lost resumes from ``checkpoints/latest.h5`` (at most one ``output.checkpoint_interval`` of
 work is repeated); a fork piece starts again from its slip checkpoint (forks are short). What a
 point does is an :class:`Action`; ``study`` = run, then fork every slip kept with a checkpoint.
+
+A campaign finishes points before it starts new ones: at most as many points are in flight as
+the cluster has task slots, and a point's forks go before any new loading. Each finished piece
+writes its results record before its ledger says done. A piece whose record holds the settings
+it would run with is done, whether or not its run folder is still there; a point whose forks are
+not all recorded and whose run folder is gone runs its loading again (bitwise the same: the
+record's final state hash is compared) and then only the missing forks.
 
 Size (~500 lines): sweep expansion lives in campaign_spec.py and the executors in executors.py;
 what is left (ledger, survey, Dask tasks, tables) is one workflow.
@@ -38,6 +49,7 @@ from ..errors import CampaignConflict
 from ..config import Config, build_config
 from ..io.layout import CONFIG_FILE, OWNED, RunLayout
 from ..io.rundir import pid_alive
+from .campaign_results import RUN_PIECE, PieceRecord, Results, diff_keys, fork_piece, settings_digest
 from .campaign_spec import CampaignSpec, Point, expand, load_spec
 
 
@@ -53,18 +65,7 @@ def run_settings(config: Config) -> dict:
     return data
 
 
-def digest(settings: dict) -> str:
-    return hashlib.sha256(json.dumps(settings, sort_keys=True).encode()).hexdigest()[:16]
-
-
-def _diff(old, new, prefix="") -> list[str]:
-    """Dotted keys whose values differ between two nested dicts, as 'key: old -> new'."""
-    if isinstance(old, dict) and isinstance(new, dict):
-        out = []
-        for key in sorted(set(old) | set(new), key=str):
-            out += _diff(old.get(key), new.get(key), f"{prefix}{key}.")
-        return out
-    return [] if old == new else [f"{prefix[:-1]}: {old!r} -> {new!r}"]
+digest = settings_digest      # the settings' hash (campaign_results owns it)
 
 
 def _write_json(path: Path, data: dict):
@@ -94,40 +95,76 @@ class Piece:
 
     @property
     def label(self) -> str:
-        return "run" if self.kind == "run" else f"fork_{self.slip:03d}"
+        return RUN_PIECE if self.kind == "run" else fork_piece(self.slip)
 
 
-def _task(ledger: Path, settings: dict, body) -> dict:
-    """Run ``body()`` with the piece's ledger kept: running -> done | failed (physics) | error."""
+@dataclass(frozen=True)
+class RecordTarget:
+    """Where a piece's results record goes: the results folder, the campaign, the point and its
+    swept values (picklable: it travels with the Dask task)."""
+
+    results: str
+    campaign: str
+    point: str
+    values: dict
+
+    def write(self, piece: str, settings: dict, result: dict, wall_seconds: float) -> Path:
+        return Results(self.results).write(PieceRecord(self.campaign, self.point, piece, settings, result,
+                                                       wall_seconds=wall_seconds))
+
+
+def _task(ledger: Path, settings: dict, body, record=None) -> dict:
+    """Run ``body()`` with the piece's ledger kept: running -> done | failed (physics) | error.
+    ``record(result, wall_seconds)``: writes the piece's results record, before the ledger says done."""
     from ..errors import PhysicsError
 
     previous = read_ledger(ledger) or {}
-    record = {"state": "running", "settings": settings, "host": socket.gethostname(), "pid": os.getpid(),
-              "attempts": int(previous.get("attempts", 0)) + 1, "started": time.time()}
+    entry = {"state": "running", "settings": settings, "host": socket.gethostname(), "pid": os.getpid(),
+             "attempts": int(previous.get("attempts", 0)) + 1, "started": time.time()}
     if os.environ.get("SLURM_JOB_ID"):      # a worker started as a SLURM job (--slurm)
-        record["slurm_job"] = os.environ["SLURM_JOB_ID"]
-    _write_json(ledger, record)
+        entry["slurm_job"] = os.environ["SLURM_JOB_ID"]
+    _write_json(ledger, entry)
     t0 = time.perf_counter()
     try:
         result = body()
     except PhysicsError as exc:
-        record.update(state="failed", cause=f"physics failure: {exc}".splitlines()[0], finished=time.time())
-        _write_json(ledger, record)
-        return {"state": "failed", "cause": record["cause"]}
+        entry.update(state="failed", cause=f"physics failure: {exc}".splitlines()[0], finished=time.time())
+        _write_json(ledger, entry)
+        return {"state": "failed", "cause": entry["cause"]}
     except BaseException as exc:
-        record.update(state="error", cause=f"{type(exc).__name__}: {exc}".splitlines()[0])
-        _write_json(ledger, record)
+        entry.update(state="error", cause=f"{type(exc).__name__}: {exc}".splitlines()[0])
+        _write_json(ledger, entry)
         raise
-    result["wall_seconds"] = time.perf_counter() - t0
-    record.update(state="done", result=result, finished=time.time())
-    _write_json(ledger, record)
+    wall = time.perf_counter() - t0
+    if record is not None:
+        record(result, wall)
+    result["wall_seconds"] = wall
+    entry.update(state="done", result=result, finished=time.time())
+    _write_json(ledger, entry)
     return {"state": "done", **result}
 
 
-def advance_run(run_dir: str, config: dict, settings: dict) -> dict:
+def run_result(run_dir: Path) -> dict:
+    """The results record's body of a finished loading run: its slips kept with checkpoints, its
+    transient slips, its table row (analysis.campaign_table.run_row) and its final state hash."""
+    from ..analysis.campaign_table import run_row
+    from ..io.runfile import RunReader, slip_catalog
+
+    catalog = slip_catalog(run_dir)
+    row, transient = run_row(run_dir)
+    with RunReader(run_dir) as reader:
+        final = str(reader.h5.attrs.get("final_state_hash", ""))
+    return {"n_slips": len(catalog), "slips": [int(e["number"]) for e in catalog if e.get("checkpoint")],
+            "transient": transient, "row": row, "final_state_hash": final}
+
+
+def advance_run(run_dir: str, config: dict, settings: dict, target: RecordTarget | None = None,
+                expect_hash: str | None = None) -> dict:
     """Dask task: bring the point's run to 'finished'. Resumes from checkpoints/latest.h5 when an
-    earlier attempt left one; starts afresh otherwise. Returns the slips kept with checkpoints."""
-    from ..io.runfile import run_status, slip_catalog
+    earlier attempt left one; starts afresh otherwise. Returns the slips kept with checkpoints and
+    writes the run's results record to ``target``. ``expect_hash``: the final state hash a record
+    of this run holds (a loading run again after its folder was lost); RuntimeError if it differs."""
+    from ..io.runfile import run_status
     from .run import resume_run, run_scene
 
     run_dir = Path(run_dir)
@@ -141,30 +178,95 @@ def advance_run(run_dir: str, config: dict, settings: dict) -> dict:
                 run_scene(build_config(config), run_dir, force=True, quiet=True)
             if result.status != "finished":
                 raise RuntimeError(f"{run_dir}: the run stopped with status {result.status!r}")
-        catalog = slip_catalog(run_dir)
-        return {"resumed": resumed, "n_slips": len(catalog),
-                "slips": [int(e["number"]) for e in catalog if e.get("checkpoint")]}
+        out = run_result(run_dir)
+        if expect_hash and out["final_state_hash"] != expect_hash:
+            raise RuntimeError(f"{run_dir}: the loading ran again ends in state {out['final_state_hash']}, its "
+                               f"results record in {expect_hash}: not the same run bit for bit")
+        return {"resumed": resumed, **out}
 
-    return _task(run_dir / "ledger" / "run.json", settings, body)
+    def record(result, wall):
+        if target is not None:
+            target.write(RUN_PIECE, settings, {"values": target.values, **result}, wall)
+
+    return _task(run_dir / "ledger" / "run.json", settings, body, record)
+
+
+VARIANTS = "variants"
+
+
+def variant_dir(run_dir: Path, name: str) -> Path:
+    """``<point>/variants/<name>``: a run directory whose run.h5, config.yaml and checkpoints/ are
+    links to the point's, so that a variant's forks (other fluid settings) start from the same
+    packing and sit in a fork layout of their own."""
+    vdir = Path(run_dir) / VARIANTS / name
+    (vdir / "ledger").mkdir(parents=True, exist_ok=True)
+    layout, target = RunLayout(vdir), RunLayout(run_dir)
+    for link, to in ((layout.run_file, target.run_file), (layout.config_file, target.config_file),
+                     (layout.checkpoints, target.checkpoints)):
+        if not link.is_symlink():
+            link.symlink_to(os.path.relpath(to, link.parent))
+    return vdir
+
+
+def _share_drained(base_fork: Path, fork: Path):
+    """The variant's fork gets the base fork's drained branch (a link: the drained twin has no
+    fluid, so it is the same for every variant) and loses its undrained branches (run afresh)."""
+    from ..io.layout import DRAINED
+
+    fork.mkdir(parents=True, exist_ok=True)
+    drained = fork / DRAINED
+    if drained.is_symlink() or drained.is_file():
+        drained.unlink()
+    elif drained.is_dir():
+        shutil.rmtree(drained)
+    drained.symlink_to(os.path.relpath(base_fork / DRAINED, fork))
+    for branch in fork.glob("perm_*"):
+        shutil.rmtree(branch)
 
 
 def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration: float | None,
-                 settings: dict) -> dict:
+                 settings: dict, target: RecordTarget | None = None,
+                 variants: list[tuple[str, dict]] | None = None) -> dict:
     """Dask task: drained + undrained branches of one slip (:func:`gouge_cli.workflows.fork.run_fork`),
     started afresh from the slip checkpoint (any partial branches of a lost attempt are replaced),
-    then the fork's pair.json (the one pair definition, :mod:`gouge_cli.workflows.pairs`)."""
+    then the fork's pair.json (the one pair definition, :mod:`gouge_cli.workflows.pairs`), once per
+    variant (name, fork overrides): the first in the point's forks/, the others in
+    variants/<name>/forks/ with the first's drained branch. Writes the fork's results record
+    (one pair row per variant and permeability) to ``target``."""
+    from ..analysis.campaign_table import fork_rows
+    from ..io.runfile import RunReader
     from .fork import ForkRequest, run_fork
     from .pairs import write_pair_json
 
     run_dir = Path(run_dir)
+    chosen = variants or [(None, {})]
 
     def body():
-        summary = run_fork(ForkRequest(run_dir, slip, tuple(permeabilities), duration=duration, force=True),
-                           quiet=True)
-        write_pair_json(RunLayout(run_dir).fork(slip).root)
-        return {"branches": {k: b["status"] for k, b in summary["branches"].items()}}
+        statuses, pairs, hashes = {}, [], {}
+        base_fork = RunLayout(run_dir).fork(slip).root
+        for i, (name, overrides) in enumerate(chosen):
+            vdir = run_dir if i == 0 else variant_dir(run_dir, name)
+            fork = RunLayout(vdir).fork(slip).root
+            if i:
+                _share_drained(base_fork, fork)
+            summary = run_fork(ForkRequest(vdir, slip, tuple(permeabilities), overrides, duration=duration,
+                                           force=(i == 0)), quiet=True)
+            write_pair_json(fork)
+            prefix = f"{name}/" if name else ""
+            statuses.update({prefix + k: b["status"] for k, b in summary["branches"].items()})
+            for row in fork_rows(fork, permeabilities):
+                pairs.append({"variant": name, **row} if name else row)
+            for branch in sorted(fork.iterdir()):
+                if (branch / "run.h5").is_file() and not (i and branch.is_symlink()):
+                    with RunReader(branch) as reader:
+                        hashes[prefix + branch.name] = str(reader.h5.attrs.get("final_state_hash", ""))
+        return {"branches": statuses, "pairs": pairs, "final_state_hashes": hashes}
 
-    return _task(run_dir / "ledger" / f"fork_{slip:03d}.json", settings, body)
+    def record(result, wall):
+        if target is not None:
+            target.write(fork_piece(slip), settings, {"slip": slip, **result}, wall)
+
+    return _task(run_dir / "ledger" / f"{fork_piece(slip)}.json", settings, body, record)
 
 
 class Action:
@@ -183,22 +285,27 @@ class Action:
 
 
 class StudyAction(Action):
-    """Run, then fork every slip kept with a checkpoint at the study's permeabilities. (The per-slip
-    step is :func:`advance_fork`; a `gouge study` workflow can replace it here.)"""
+    """Run, then fork every slip kept with a checkpoint (every non-transient one with
+    ``study.skip_transient``) at the study's permeabilities, once per variant. (The per-slip step
+    is :func:`advance_fork`; a `gouge study` workflow can replace it here.)"""
 
     name = "study"
 
     def after(self, point, piece, result):
         if piece.kind != "run" or result.get("state") != "done":
             return []
-        return [Piece(point, "fork", n) for n in result["slips"]]
+        skip = set(result.get("transient", ())) if self.spec.study.skip_transient else set()
+        return [Piece(point, "fork", n) for n in result["slips"] if n not in skip]
 
     def settings(self, piece, run):
         if piece.kind == "run":
             return run
         study = self.spec.study
-        return {"run": digest(run), "slip": piece.slip, "permeabilities": list(study.permeabilities),
-                "duration": study.duration}
+        out = {"run": digest(run), "slip": piece.slip, "permeabilities": list(study.permeabilities),
+               "duration": study.duration}
+        if study.variants:
+            out["variants"] = study.variants
+        return out
 
 
 def make_action(spec: CampaignSpec) -> Action:
@@ -210,10 +317,14 @@ def make_action(spec: CampaignSpec) -> Action:
 
 @dataclass
 class PieceState:
+    """Where one piece stands. ``record``: its ledger entry (or, for a piece known from its
+    results alone, one made from the results record); ``result``: its results record, if any."""
+
     piece: Piece
     state: str            # done | running | interrupted | failed | left | conflict
     detail: str = ""
     record: dict | None = None
+    result: PieceRecord | None = None
 
 
 @dataclass
@@ -223,6 +334,7 @@ class Survey:
     spec: CampaignSpec
     root: Path
     points: list[Point]
+    results: Results
     pieces: list[PieceState] = field(default_factory=list)
     unknown_forks: list[str] = field(default_factory=list)   # runs not done yet: forks to come
 
@@ -257,15 +369,22 @@ def slurm_job_alive(job: str) -> bool | None:
     return bool(out.stdout.strip())
 
 
-def _piece_state(piece: Piece, ledger: Path, settings: dict, output: Path) -> PieceState:
+def _piece_state(piece: Piece, ledger: Path, settings: dict, output: Path,
+                 result: PieceRecord | None = None) -> PieceState:
     record = read_ledger(ledger)
+    if result is not None and result.digest == settings_digest(settings):
+        entry = record if record and record.get("state") == "done" else \
+            {"state": "done", "settings": result.settings, "result": result.result, "finished": result.finished}
+        return PieceState(piece, "done", "" if entry is record else "from its results record", entry, result)
+    if record is None and result is not None:
+        record = {"state": "done", "settings": result.settings, "finished": result.finished}
     if record is None:
         if output.exists():
             return PieceState(piece, "conflict", f"{output} exists but was not made by this campaign")
         return PieceState(piece, "left")
     old = record.get("settings") or {}
-    changed = _diff(old, settings)
-    perms_only = piece.kind == "fork" and changed and not _diff(
+    changed = diff_keys(old, settings)
+    perms_only = piece.kind == "fork" and changed and not diff_keys(
         {k: v for k, v in old.items() if k != "permeabilities"},
         {k: v for k, v in settings.items() if k != "permeabilities"})
     state = record.get("state")
@@ -283,25 +402,41 @@ def _piece_state(piece: Piece, ledger: Path, settings: dict, output: Path) -> Pi
     if perms_only and state != "running":
         return PieceState(piece, "left", "permeabilities changed: forked again", record)
     if changed and state in ("done", "failed", "interrupted"):
-        return PieceState(piece, "conflict", "; ".join(changed), record)
-    return PieceState(piece, state, detail, record)
+        return PieceState(piece, "conflict", "; ".join(changed), record, result)
+    return PieceState(piece, state, detail, record, result)
+
+
+def results_root(spec: CampaignSpec) -> Path:
+    """The campaign's results folder: the spec's ``results``, else ``<out>/<name>/results``."""
+    return Path(spec.results).resolve() if spec.results else Path(spec.out).resolve() / spec.name / "results"
 
 
 def survey(spec: CampaignSpec, spec_path: Path) -> Survey:
     points = expand(spec, Path(spec_path))
     root = Path(spec.out).resolve() / spec.name
-    out = Survey(spec, root, points)
+    results = Results(results_root(spec))
+    records = results.records()
+    out = Survey(spec, root, points, results)
     action = make_action(spec)
     for point in points:
         pdir = root / point.name
         run = run_settings(point.config)
-        rs = _piece_state(Piece(point.name, "run"), pdir / "ledger" / "run.json", run, RunLayout(pdir).run_file)
+        rs = _piece_state(Piece(point.name, "run"), pdir / "ledger" / "run.json", run, RunLayout(pdir).run_file,
+                          records.get((point.name, RUN_PIECE)))
         out.pieces.append(rs)
         if rs.state == "done":
+            forks = []
             for piece in action.after(point.name, rs.piece, rs.record.get("result", {}) | {"state": "done"}):
                 ledger = pdir / "ledger" / f"{piece.label}.json"
                 pair_file = RunLayout(pdir).fork(piece.slip).pair_file
-                out.pieces.append(_piece_state(piece, ledger, action.settings(piece, run), pair_file))
+                forks.append(_piece_state(piece, ledger, action.settings(piece, run), pair_file,
+                                          records.get((point.name, piece.label))))
+            out.pieces += forks
+            missing = [f for f in forks if f.state in ("left", "interrupted")]
+            if missing and not RunLayout(pdir).run_file.is_file():
+                rs.state = "left"
+                rs.detail = (f"its run folder is gone and {len(missing)} forks are not recorded: the loading runs "
+                             "again (bitwise, checked against its record)")
         elif spec.action == "study":
             out.unknown_forks.append(point.name)
     return out
@@ -341,17 +476,21 @@ def _write_point(s: Survey, point: Point):
 
 
 def _wipe(s: Survey, ps: PieceState):
-    """Remove a conflicting piece's results (``--force``): a run takes its forks with it."""
+    """Remove a conflicting piece's results (``--force``): a run takes its forks with it, and its
+    results records."""
     pdir = s.point_dir(ps.piece.point)
     if ps.piece.kind == "run":
-        for name in [n for n in OWNED if n != CONFIG_FILE] + ["ledger"]:
+        for name in [n for n in OWNED if n != CONFIG_FILE] + ["ledger", VARIANTS]:
             target = pdir / name
             if target.is_dir():
                 shutil.rmtree(target)
             elif target.exists():
                 target.unlink()
+        for record in s.results.root.glob(f"{ps.piece.point}/*.json"):
+            record.unlink()
     else:
         (pdir / "ledger" / f"{ps.piece.label}.json").unlink(missing_ok=True)
+        s.results.path(ps.piece.point, ps.piece.label).unlink(missing_ok=True)
 
 
 @dataclass
@@ -364,13 +503,15 @@ class CampaignReport:
 
 
 def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = False,
-                 retry_failed: bool = False, max_points: int | None = None, log=print) -> CampaignReport:
+                 retry_failed: bool = False, max_points: int | None = None, tables_only: bool = False,
+                 log=print) -> CampaignReport:
     """Run what is left of a campaign on Dask and write its table and figures.
 
     ``client``: a ``distributed.Client`` to use; otherwise one is opened for ``cluster``
     (:class:`~gouge_cli.workflows.executors.ClusterOptions`, default a LocalCluster) only when
     something is left to run. Raises :class:`CampaignConflict` when results exist with other
     settings and ``force`` is not given. ``max_points``: overrides the spec's limit on the sweep's size.
+    ``tables_only``: run nothing; write the tables and figures from the results records.
     """
     from .executors import ClusterOptions, open_client
 
@@ -378,6 +519,9 @@ def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = Fa
     spec_path = Path(spec_path)
     spec = load_spec(spec_path, max_points)
     s = survey(spec, spec_path)
+    if tables_only:
+        _backfill(s, log)
+        return CampaignReport(s, 0, {}, time.perf_counter() - t_start, write_results(s, log))
     conflicts = s.by_state("conflict")
     if conflicts and not force:
         lines = [f"  {c.piece.point} {c.piece.label}: {c.detail}" for c in conflicts]
@@ -394,8 +538,9 @@ def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = Fa
         if not (s.point_dir(point.name) / "point.yaml").is_file() or any(
                 c.piece.point == point.name and c.piece.kind == "run" for c in conflicts):
             _write_point(s, point)
+    _backfill(s, log)
     todo_states = {"left", "interrupted", "conflict"} | ({"failed"} if retry_failed else set())
-    todo = [p.piece for p in s.pieces if p.state in todo_states]
+    todo = [p for p in s.pieces if p.state in todo_states]
     busy = s.by_state("running")
     for b in busy:
         log(f"skipping {b.piece.point} {b.piece.label}: already running ({b.detail})")
@@ -403,39 +548,112 @@ def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = Fa
     if todo:
         opts = cluster or ClusterOptions()
         if client is not None:
-            finished = _execute(s, todo, client, opts.retries, log)
+            finished = _execute(s, todo, client, opts, log)
         else:
             with open_client(opts) as c:
-                finished = _execute(s, todo, c, opts.retries, log)
+                finished = _execute(s, todo, c, opts, log)
     s = survey(spec, spec_path)
     outputs = write_results(s, log) if (finished or _results_stale(s)) else {}
     return CampaignReport(s, sum(finished.values()), finished, time.perf_counter() - t_start, outputs)
 
 
-def _submit(client, s: Survey, piece: Piece, retries: int, token: str):
+def _backfill(s: Survey, log):
+    """Write the missing results records of pieces whose ledger says done (a campaign run
+    before records existed), from their run folders."""
+    for ps in s.by_state("done"):
+        if ps.result is not None or ps.piece.kind != "run" and not ps.record.get("result"):
+            continue
+        point = s.point(ps.piece.point)
+        pdir = s.point_dir(point.name)
+        target = _target(s, point)
+        if not RunLayout(pdir).run_file.is_file():
+            continue
+        if ps.piece.kind == "run":
+            result = {"values": target.values, "resumed": ps.record.get("result", {}).get("resumed", False),
+                      **run_result(pdir)}
+        else:
+            from ..analysis.campaign_table import fork_rows
+
+            fork = RunLayout(pdir).fork(ps.piece.slip).root
+            if not fork.is_dir():
+                continue
+            result = {"slip": ps.piece.slip, "branches": ps.record["result"].get("branches", {}),
+                      "pairs": fork_rows(fork, list(s.spec.study.permeabilities)), "final_state_hashes": {}}
+        record = PieceRecord(s.spec.name, point.name, ps.piece.label, ps.record["settings"], result,
+                             wall_seconds=float(ps.record.get("result", {}).get("wall_seconds", 0.0)),
+                             finished=float(ps.record.get("finished", time.time())))
+        ps.result = record
+        s.results.write(record)
+        log(f"results record written for {point.name} {ps.piece.label} (from its run folder)")
+
+
+def _target(s: Survey, point: Point) -> RecordTarget:
+    return RecordTarget(str(s.results.root), s.spec.name, point.name,
+                        {k: _value(point.config, k) for k in s.spec.swept_keys()})
+
+
+def _variants(spec: CampaignSpec) -> list[tuple[str, dict]] | None:
+    study = spec.study
+    return list(study.variants.items()) if study and study.variants else None
+
+
+def _submit(client, s: Survey, ps: PieceState, retries: int, token: str):
+    piece = ps.piece
     point = s.point(piece.point)
     pdir = str(s.point_dir(piece.point))
     action = make_action(s.spec)
     run = run_settings(point.config)
     key = f"gouge-{s.spec.name}-{piece.point}-{piece.label}-{token}"
+    target = _target(s, point)
     if piece.kind == "run":
-        return client.submit(advance_run, pdir, point.config.to_dict(), run, key=key, retries=retries, pure=False)
+        expect = ps.result.result.get("final_state_hash") if ps.result is not None else None
+        return client.submit(advance_run, pdir, point.config.to_dict(), run, target, expect, key=key,
+                             retries=retries, pure=False)
     study = s.spec.study
     return client.submit(advance_fork, pdir, piece.slip, list(study.permeabilities), study.duration,
-                         action.settings(piece, run), key=key, retries=retries, pure=False)
+                         action.settings(piece, run), target, _variants(s.spec), key=key, retries=retries,
+                         pure=False, priority=1)       # a point's forks go before a new loading
 
 
-def _execute(s: Survey, todo: list[Piece], client, retries: int, log) -> dict[str, int]:
-    """Submit the pieces, add the pieces each finished one opens, until none is left."""
+def task_slots(client, opts) -> int:
+    """Tasks the cluster runs at once (its workers' threads); at least 1 (and, before SLURM
+    workers have joined, the local --workers given)."""
+    try:
+        n = sum(int(w.get("nthreads", 1)) for w in client.scheduler_info()["workers"].values())
+    except Exception:       # noqa: BLE001  a scheduler that cannot say: one at a time
+        n = 0
+    return max(1, n or (opts.workers or 0))
+
+
+def _execute(s: Survey, todo: list[PieceState], client, opts, log) -> dict[str, int]:
+    """Finish points before starting new ones: the forks of points whose run is done go first;
+    a new loading starts only while fewer points are in flight than the cluster has task slots.
+    Each finished piece opens the pieces that follow it (not those already recorded)."""
     from distributed import as_completed
 
     action = make_action(s.spec)
     token = os.urandom(3).hex()
-    futures = {}
-    for piece in todo:
-        futures[_submit(client, s, piece, retries, token)] = piece
+    known = {(p.piece.point, p.piece.label): p for p in s.pieces}
+    runs = [p for p in todo if p.piece.kind == "run"]
+    loading = {p.piece.point for p in runs}
+    futures, in_flight = {}, {}
+    queue = as_completed([])
+
+    def submit(ps: PieceState):
+        fut = _submit(client, s, ps, opts.retries, token)
+        futures[fut] = ps.piece
+        in_flight[ps.piece.point] = in_flight.get(ps.piece.point, 0) + 1
+        queue.add(fut)
+
+    def fill():
+        while runs and len(in_flight) < task_slots(client, opts):
+            submit(runs.pop(0))
+
+    for ps in todo:
+        if ps.piece.kind == "fork" and ps.piece.point not in loading:
+            submit(ps)
+    fill()
     done: dict[str, int] = {}
-    queue = as_completed(list(futures))
     n = 0
     for fut in queue:
         piece = futures.pop(fut)
@@ -451,14 +669,19 @@ def _execute(s: Survey, todo: list[Piece], client, retries: int, log) -> dict[st
             result = {"state": "failed", "cause": cause}
         state = result["state"]
         done[state] = done.get(state, 0) + 1
+        for nxt in action.after(piece.point, piece, result):
+            ps = known.get((nxt.point, nxt.label))
+            if ps is None or ps.state not in ("done", "running"):
+                submit(ps if ps is not None and ps.state != "conflict" else PieceState(nxt, "left"))
+        in_flight[piece.point] -= 1
+        if not in_flight[piece.point]:
+            del in_flight[piece.point]
         extra = f" ({result['wall_seconds']:.1f} s" + (", resumed" if result.get("resumed") else "") + \
             (f", {len(result['slips'])} slips to fork" if "slips" in result and s.spec.action == "study" else "") + ")" \
             if state == "done" else f": {result.get('cause', '')}"
-        log(f"[{n} finished, {len(futures)} queued] {piece.point} {piece.label}: {state}{extra}")
-        for nxt in action.after(piece.point, piece, result):
-            f = _submit(client, s, nxt, retries, token)
-            futures[f] = nxt
-            queue.add(f)
+        log(f"[{n} finished, {len(futures)} queued, {len(runs)} points waiting] {piece.point} {piece.label}: "
+            f"{state}{extra}" + ("" if piece.point in in_flight or state != "done" else "; point finished"))
+        fill()
     return done
 
 
@@ -473,45 +696,65 @@ def _results_stale(s: Survey) -> bool:
     return newest > table.stat().st_mtime
 
 
-def done_points(s: Survey) -> list:
-    """The points whose run is done, as analysis.campaign_table.CampaignPoint (swept values, the
-    slips whose fork is done, the study's permeabilities): the rows of table.csv and gouge_cli.api."""
-    from ..analysis.campaign_table import CampaignPoint
+def table_rows(s: Survey) -> list[dict]:
+    """The campaign table's rows, from the results records alone: per point whose run is
+    recorded, its run row (``kind`` 'run': swept values, the run statistics), then one row per
+    recorded pair (``kind`` 'pair': swept values, variant if the study has variants, the pair
+    columns, and ``transient``), in sweep then slip order."""
+    swept = s.spec.swept_keys()
+    records = {(p.piece.point, p.piece.label): p.result for p in s.pieces
+               if p.state == "done" and p.result is not None}
+    rows = []
+    for point in s.points:
+        run = records.get((point.name, RUN_PIECE))
+        if run is None:
+            continue
+        values = {k: run.result["values"].get(k) for k in swept}
+        rows.append({"kind": "run", "point": point.name, **values, **run.result["row"]})
+        transient = set(run.result.get("transient", ()))
+        forks = sorted((r for (name, label), r in records.items() if name == point.name and label != RUN_PIECE),
+                       key=lambda r: r.result["slip"])
+        for fork in forks:
+            for pair in fork.result["pairs"]:
+                rows.append({"kind": "pair", "point": point.name, **values, **pair,
+                             "transient": int(pair["slip"]) in transient})
+    return rows
 
-    done_runs = {p.piece.point for p in s.pieces if p.piece.kind == "run" and p.state == "done"}
-    forks: dict[str, list[int]] = {}
-    for p in s.pieces:
-        if p.piece.kind == "fork" and p.state == "done":
-            forks.setdefault(p.piece.point, []).append(p.piece.slip)
-    swept = [k for k in s.spec.swept_keys()]
-    perms = list(s.spec.study.permeabilities) if s.spec.study else []
-    return [CampaignPoint(p.name, s.point_dir(p.name), {k: _value(p.config, k) for k in swept},
-                          sorted(forks.get(p.name, [])), perms)
-            for p in s.points if p.name in done_runs]
+
+def done_points(s: Survey) -> list[str]:
+    """The points whose run is recorded (the rows of table.csv and gouge_cli.api.open_campaign)."""
+    return [p.piece.point for p in s.pieces if p.piece.kind == "run" and p.state == "done" and p.result is not None]
 
 
 def write_results(s: Survey, log=print) -> dict:
-    """table.csv (one row per run and per pair), phase_diagram.csv and the figures."""
-    from ..analysis.campaign_table import PHASE_COLUMNS, campaign_table, phase_cells, write_table
+    """table.csv (one row per run and per pair), phase_diagram.csv and the figures, from the
+    results records alone."""
+    from ..analysis.campaign_table import PHASE_COLUMNS, pairs_by_permeability, phase_cells, write_table
     from ..plots.phase import pair_histograms, phase_diagram_figure, sweep_figure
     from .campaign_spec import phase_axes
 
     swept = [k for k in s.spec.swept_keys()]
-    rows, pairs_by_perm = campaign_table(done_points(s))
+    rows = table_rows(s)
     out = {"table": write_table(rows, swept, s.root / "table.csv")}
     figs = s.root / "figures"
     pair_rows = [r for r in rows if r["kind"] == "pair"]
     if s.spec.action == "study":
         x, y = phase_axes(s.spec)
-        cells = phase_cells(pair_rows, x, y)
-        out["phase_csv"] = write_table(cells, [], s.root / "phase_diagram.csv", columns=list(PHASE_COLUMNS))
-        if cells:
-            out["phase_diagram"] = phase_diagram_figure(cells, x, y, figs / "phase_diagram.png", s.spec.name)
-        out["pair_histograms"] = pair_histograms(pairs_by_perm, figs)
-        for c in cells:
-            log(f"phase cell {x}={c['x']:g}" + (f", {y}={c['y']:g}" if y else "") +
-                f": {c['n_pairs']} pairs, complex fraction {c['frac_complex']:.3g}, Type II fraction "
-                f"{c['frac_type_II']:.3g}")
+        for variant, vrows in _by_variant(pair_rows, s.spec):
+            cells = phase_cells(vrows, x, y)
+            where = f"_{variant}" if variant else ""
+            out[f"phase_csv{where}"] = write_table(cells, [], s.root / f"phase_diagram{where}.csv",
+                                                   columns=list(PHASE_COLUMNS))
+            if cells:
+                out[f"phase_diagram{where}"] = phase_diagram_figure(
+                    cells, x, y, figs / f"phase_diagram{where}.png",
+                    s.spec.name + (f", variant {variant}" if variant else ""))
+            out[f"pair_histograms{where}"] = pair_histograms(pairs_by_permeability(vrows),
+                                                             figs / variant if variant else figs)
+            for c in cells:
+                log(f"phase cell{' ' + variant if variant else ''} {x}={c['x']:g}" + (f", {y}={c['y']:g}" if y else "") +
+                    f": {c['n_pairs']} pairs, complex fraction {c['frac_complex']:.3g}, Type II fraction "
+                    f"{c['frac_type_II']:.3g}")
     if s.spec.action == "study" and len(s.spec.study.permeabilities) >= 2:
         out.update(_regime_outputs(pair_rows, s, figs))
     sweep_keys = [k for k in swept if k != "seed"]
@@ -519,6 +762,12 @@ def write_results(s: Survey, log=print) -> dict:
         out["slip_statistics"] = sweep_figure([r for r in rows if r["kind"] == "run"], sweep_keys,
                                               figs / "slip_statistics.png", s.spec.name)
     return out
+
+
+def _by_variant(pair_rows: list[dict], spec: CampaignSpec) -> list[tuple[str, list[dict]]]:
+    """The pair rows per study variant (never pooled); one group named '' without variants."""
+    names = list(spec.study.variants) if spec.study and spec.study.variants else [None]
+    return [(name or "", [r for r in pair_rows if r.get("variant") == name]) for name in names]
 
 
 def _regime_outputs(pair_rows: list[dict], s: Survey, figs: Path) -> dict:
@@ -529,7 +778,7 @@ def _regime_outputs(pair_rows: list[dict], s: Survey, figs: Path) -> dict:
     from .campaign_spec import point_name
     from .regime_report import by_swept, write_regime
 
-    keys = [k for k in s.spec.swept_keys() if k != "seed"]
+    keys = [k for k in s.spec.swept_keys() if k != "seed"] + (["variant"] if _variants(s.spec) else [])
     if not keys:
         return write_regime(pair_rows, s.root, figs, s.spec.name)
     out = {}
@@ -550,5 +799,5 @@ def _value(config: Config, key: str) -> float:
     return node
 
 
-__all__ = ["Piece", "Survey", "advance_run", "advance_fork", "survey", "status_lines",
-           "run_campaign", "write_results", "done_points", "run_settings", "load_spec"]
+__all__ = ["Piece", "Survey", "advance_run", "advance_fork", "survey", "status_lines", "results_root",
+           "run_campaign", "write_results", "table_rows", "done_points", "run_settings", "load_spec"]

@@ -125,6 +125,22 @@ class Sweep(_Section):
 class Study(_Section):
     permeabilities: list[float] = Field(..., min_length=1, description="kappa_c [d^2] of the undrained branches")
     duration: Optional[float] = Field(None, gt=0, description="branch length [t0]; default: until its first slip ends")
+    skip_transient: bool = Field(False, description="fork only the slips after the run's transient "
+                                 "(analysis.study.transient_slips)")
+    variants: dict[str, dict[str, Any]] = Field(
+        default_factory=dict,
+        description="name -> dotted overrides of the undrained branches (e.g. {fluid.filter_width: 4}): every "
+                    "slip is forked once per variant from the same packing; the first variant's forks are the "
+                    "point's forks/, the others' under variants/<name>/ (the drained branch is shared)")
+
+    @field_validator("variants")
+    @classmethod
+    def _variants(cls, variants):
+        for name, overrides in variants.items():
+            if not re.fullmatch(r"[A-Za-z0-9_-]+", str(name)):
+                raise ValueError(f"study.variants: {name!r} is not a name (letters, digits, _ and -)")
+            _check_keys(overrides, f"study.variants.{name}")
+        return {str(k): {key: _plain(v) for key, v in o.items()} for k, o in variants.items()}
 
     @field_validator("permeabilities", mode="before")
     @classmethod
@@ -149,6 +165,8 @@ class CampaignSpec(_Section):
     action: Literal["run", "study"] = "run"
     study: Optional[Study] = None
     out: str = Field("campaigns", description="folder holding <name>/")
+    results: Optional[str] = Field(None, description="folder of the results records, one per finished piece "
+                                   "(default <out>/<name>/results): copy or commit it; the tables are built from it")
     phase: Phase = Phase()
 
     @field_validator("set")
@@ -204,7 +222,7 @@ def _format(err: ValidationError, path: Path) -> str:
             lines.append(f"{key}: {e['msg'].removeprefix('Value error, ')}")
     return (f"invalid campaign file {path}:\n  " + "\n  ".join(lines) +
             "\n  (keys: name, base, set, sweep {grid, points, seeds}, max_points, action, "
-            "study {permeabilities, duration}, out, phase {x, y})")
+            "study {permeabilities, duration, skip_transient, variants}, out, results, phase {x, y})")
 
 
 def check_size(spec: CampaignSpec, path: Path, max_points: int | None = None) -> int:
@@ -294,9 +312,25 @@ def expand(spec: CampaignSpec, spec_path: Path) -> list[Point]:
                 Scene(config)       # the preflight checks
             except ConfigError as exc:
                 raise SpecError(f"sweep point {overrides} (base {base}): {exc}") from None
+            _check_variants(spec, config, overrides)
             points.append(Point(name, overrides, config, base, dict(spec.set)))
     phase_axes(spec)
     return points
+
+
+def _check_variants(spec: CampaignSpec, config: Config, overrides: dict):
+    """Each study variant's overrides on an undrained branch of the point (SpecError naming the variant)."""
+    from ..config import build_config
+
+    if not (spec.study and spec.study.variants):
+        return
+    data = config.to_dict()
+    data["fluid"] = dict(data.get("fluid") or {}, permeability=spec.study.permeabilities[0])
+    for name, changes in spec.study.variants.items():
+        try:
+            build_config(data, changes)
+        except ConfigError as exc:
+            raise SpecError(f"study.variants.{name} at sweep point {overrides}: {exc}") from None
 
 
 def phase_axes(spec: CampaignSpec) -> tuple[str, str | None]:
