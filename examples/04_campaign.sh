@@ -36,6 +36,28 @@ gouge campaign runs/sweep.yaml --status
 # %%
 cut -d, -f1-8 runs/campaigns/sigma_sweep/table.csv
 # %% [markdown]
+# ## Results that outlive the machine
+#
+# As each piece finishes, it also writes a small record, `results/<point>/run.json` (and
+# `fork_NNN.json` for each forked slip of a study): the settings it ran with and their digest,
+# gouge's commit, the CPU and numba target, its table row or its pairs, and the final state hash
+# ({ref}`ref-campaign-results`). The tables are built from these records alone. Copy or commit
+# the results folder: a campaign started again on another machine, with the records but without
+# the run folders, runs only what is not recorded. Here the run folders are deleted, and the tables
+# are written again from the records (`--tables` runs nothing):
+# %%
+du -sh runs/campaigns/sigma_sweep/results
+rm -rf runs/campaigns/sigma_sweep/normal_stress-*
+gouge campaign runs/sweep.yaml --tables
+# %% [markdown]
+# Two results folders of one spec (say, half the seeds run on a laptop, half on a cluster)
+# merge: `gouge campaign SPEC --merge OTHER/results` copies in the records this folder lacks and
+# refuses, naming the key, a record of the same piece made with other settings. A campaign
+# finishes points before it starts new ones (no more points in flight than the cluster has task
+# slots, a point's forks before any new loading), so a lost machine costs at most the points in
+# flight; a point whose forks are not all recorded runs its loading again, bit for bit (checked
+# against the recorded final state hash), and then only the missing forks.
+#
 # ## The phase diagram
 #
 # `examples/campaign_phase.yaml` sweeps the demo scene over 2 normal stresses x 2 permeabilities

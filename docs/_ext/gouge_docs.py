@@ -219,6 +219,11 @@ def file_layout(name: str) -> str:
                 + ", ".join(f"``{c}``" for c in ct.RUN_STATS) + " (mean and std); pair rows hold the pair columns "
                 "(:ref:`ref-pair`). ``phase_diagram.csv`` columns: "
                 + ", ".join(f"``{c}``" for c in ct.PHASE_COLUMNS) + ".\n")
+    if name == "campaign-results":
+        from gouge_cli.workflows import campaign_results as cr
+
+        return (_literal(textwrap.dedent(cr.__doc__.split("\n", 1)[1])) + "\nFields of each record:\n\n"
+                + _literal(textwrap.dedent(cr.PieceRecord.__doc__.split("\n", 1)[1])) + "\n")
     raise ValueError(f"gouge-file: unknown layout {name!r}")
 
 

@@ -1,7 +1,10 @@
 """The campaign table: one row per run and per drained/undrained pair, and the phase-diagram cells.
 
-Reads run files only (through :mod:`gouge_cli.io.runfile`); pairs are classified by
-:func:`~gouge_cli.analysis.forkpairs.classify_fork` (thesis Sections 4.2-4.3: Type I / II, -C).
+A run's row (:func:`run_row`) and a fork's pair rows (:func:`fork_rows`) are read from run files
+(through :mod:`gouge_cli.io.runfile`) once, when the piece finishes, into its results record;
+the table is assembled from those records (:func:`gouge_cli.workflows.campaign.table_rows`).
+Pairs are classified by :func:`~gouge_cli.analysis.forkpairs.classify_fork` (thesis Sections
+4.2-4.3: Type I / II, -C).
 Swept values are the resolved (dimensionless) config values; ``permeability`` of a pair row is
 the kappa_c [d^2] of its undrained branch.
 """

@@ -25,7 +25,9 @@ PAIR_COLUMNS = (
     "strength_difference", "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
     "undrained_peak_over_Vs", "n_undrained_slips", "n_subevents", "drained_onset", "drained_end",
     "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_verdict",
-    "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "note", "status",
+    "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "deborah_drained",
+    "drained_dilation", "undrained_dilation", "pressure_peak", "undrained_pressure", "diffusion_time",
+    "onset_window", "note", "status",
 )
 FAILED = "failed"       # type and base_type of a pair whose branch failed (status 'failed: <physics message>')
 
@@ -81,6 +83,43 @@ def deborah_during(time, deborah, slip) -> tuple[float, float]:
 
 
 
+def slip_deborah(time, deborah, wall_vx, slip, drained_peak: float) -> tuple[float, float]:
+    """(De of the slip, l/D [t0/d]): De = l u0 / D (Eq. 4) with u0 the drained twin's peak wall
+    speed ``drained_peak`` [v0] (grid-free, the same for every undrained branch of the slip) and
+    l/D the undrained branch's, read off its ``deborah`` series where its wall is fastest during
+    ``slip`` (De / |wall_vx| there). NaNs without a slip, a fluid or a moving wall."""
+    if slip is None or deborah is None or len(deborah) == 0 or not np.isfinite(drained_peak):
+        return _NAN, _NAN
+    inside = (time >= slip.onset_time) & (time <= slip.end_time) & np.isfinite(deborah)
+    if not inside.any():
+        return _NAN, _NAN
+    speed = np.where(inside, np.abs(wall_vx), -1.0)
+    i = int(np.argmax(speed))
+    if not speed[i] > 0:
+        return _NAN, _NAN
+    l_over_d = float(deborah[i] / speed[i])
+    return l_over_d * abs(drained_peak), l_over_d
+
+
+def dilation_before(time, thickness, onset: float) -> float:
+    """Volumetric strain of the layer from the fork (the first sample) to ``onset`` [t0, stored
+    clock]: (h(onset) - h(fork)) / h(fork), positive for dilation (2D, fixed width: the area
+    strain is the thickness strain); NaN without an onset."""
+    if thickness is None or len(thickness) == 0 or not np.isfinite(onset):
+        return _NAN
+    i = min(int(np.searchsorted(time, onset, side="left")), len(thickness) - 1)
+    return float((thickness[i] - thickness[0]) / thickness[0])
+
+
+def pressure_before(time, pressure_mean, onset: float) -> float:
+    """The layer-mean pore pressure of largest magnitude from the fork to ``onset`` [E, signed]."""
+    if pressure_mean is None or len(pressure_mean) == 0 or not np.isfinite(onset):
+        return _NAN
+    i = max(1, min(int(np.searchsorted(time, onset, side="right")), len(pressure_mean)))
+    window = pressure_mean[:i][np.isfinite(pressure_mean[:i])]
+    return float(window[np.argmax(np.abs(window))]) if window.size else _NAN
+
+
 def pair_definition(info: RunInfo, main: str = "first") -> PairDefinition:
     """The pair definition with this run's detector thresholds."""
     return PairDefinition.for_run(info.slip_rule, main=main)
@@ -113,12 +152,13 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
         _refuse_interrupted(info, fork_dir)
         origin = d.time_offset()           # the branches carry the parent's loading clock on
         drained = wall_series(d)
+        d_extra = d.series(["time", "thickness"])
         definition = pair_definition(info, main)
         for udir in undrained_dirs:
             with RunReader(udir) as u:
                 _refuse_interrupted(u.info, fork_dir)
                 undrained = wall_series(u)
-                ds = u.series(["time", "deborah"])
+                ds = u.series(["time", "deborah", "wall_vx", "thickness", "pressure_mean", "porosity"])
                 uinfo = u.info
             result = classify_pair(drained, undrained, info.V_s, info.k, info.m_b, info.sigma, definition)
             failure = next((f"{name} branch {st}" for name, st in (("drained", info.status), ("undrained", uinfo.status))
@@ -135,6 +175,9 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 de_slip = nan_mean(ds["deborah"][inside])
             de_mean = nan_mean(ds["deborah"])
             de = de_slip if math.isfinite(de_slip) else de_mean
+            de_drained, l_over_d = slip_deborah(ds["time"], ds["deborah"], ds["wall_vx"], u_main,
+                                                result.drained_peak_over_Vs * info.V_s)
+            mech = _mechanism(d_extra, ds, d_main, u_main, uinfo, l_over_d)
             parent = str(info.parent_dir)      # parent_run is stored relative to the branch
             row = {
                 "run": parent,
@@ -175,12 +218,38 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 "regime": regime(de),
                 "deborah_onset": de_onset,
                 "deborah_max": de_max,
+                "deborah_drained": de_drained,
+                **mech,
                 "note": result.note,
                 "status": FAILED if failure else "finished",
             }
             pairs.append(ForkPair(row, result, drained_dir, udir))
     return pairs
 
+
+
+def _mechanism(drained: dict, undrained: dict, d_main, u_main, uinfo: RunInfo, l_over_d: float) -> dict:
+    """The pair's test of the pressure equation (undrained limit P = -eps_v / (beta phi)):
+    drained_dilation / undrained_dilation (eps_v of each branch from the fork to its onset [-]),
+    pressure_peak (the undrained layer-mean pressure of largest magnitude before its onset [E]),
+    undrained_pressure (|eps_v| / (beta phi) of the drained twin's strain, phi the porosity at the
+    fork [E]), diffusion_time (t_D = l^2 / D [t0], l half the layer thickness) and onset_window
+    (t_w, the fork to the undrained onset [t0])."""
+    fork_time = float(undrained["time"][0]) if undrained["time"] is not None and len(undrained["time"]) else _NAN
+    d_onset = float(d_main.onset_time) if d_main is not None else _NAN
+    u_onset = float(u_main.onset_time) if u_main is not None else _NAN
+    eps_d = dilation_before(drained["time"], drained["thickness"], d_onset)
+    eps_u = dilation_before(undrained["time"], undrained["thickness"], u_onset)
+    fluid = (uinfo.config or {}).get("fluid") or {}
+    beta = float(fluid.get("compressibility", _NAN))
+    por = undrained["porosity"]
+    phi = float(por[0]) if por is not None and len(por) else _NAN
+    half = 0.5 * float(undrained["thickness"][0]) if undrained["thickness"] is not None else _NAN
+    return {"drained_dilation": eps_d, "undrained_dilation": eps_u,
+            "pressure_peak": pressure_before(undrained["time"], undrained["pressure_mean"], u_onset),
+            "undrained_pressure": abs(eps_d) / (beta * phi) if beta * phi > 0 else _NAN,
+            "diffusion_time": l_over_d * half if np.isfinite(l_over_d) else _NAN,
+            "onset_window": u_onset - fork_time}
 
 
 def _slip_number(fork_dir: Path) -> int:

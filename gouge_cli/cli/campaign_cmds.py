@@ -66,6 +66,8 @@ def register(app: typer.Typer):
                                       log=lambda m: out.print(m, highlight=False))
                 for line in status_lines(report.survey):
                     out.print(line, highlight=False)
+                for name, path in report.outputs.items():
+                    out.print(f"{name}: {path}", highlight=False, markup=False)
                 return
             if status:
                 for line in status_lines(survey(load_spec(spec, max_points), spec)):
@@ -82,7 +84,7 @@ def register(app: typer.Typer):
         for line in status_lines(report.survey):
             out.print(line, highlight=False)
         for name, path in report.outputs.items():
-            out.print(f"{name}: {path}", highlight=False)
+            out.print(f"{name}: {path}", highlight=False, markup=False)
         out.print(f"{report.submitted} pieces run in {report.wall_seconds:.1f} s", highlight=False)
         if report.survey.by_state("failed"):
             raise typer.Exit(EXIT_PHYSICS)
