@@ -10,8 +10,10 @@ for each group:
 * the shares of pairs whose undrained branch is slower (peak velocity ratio < 1) and has the
   smaller stress drop (stress-drop ratio < 1);
 * the medians of the peak-velocity, stress-drop and duration ratios;
-* the median Deborah number of the undrained branches at the compared slip's onset and the
-  largest during it (columns ``deborah_onset`` / ``deborah_max`` of the pair table).
+* the median Deborah number of the slip (``deborah_drained``: Eq. 4 with u0 the drained twin's
+  peak wall speed, the same for every undrained branch of the slip and free of the grid: the
+  map's abscissa, :func:`abscissa`), and, as diagnostics, the undrained branches' own at the
+  compared slip's onset and the largest during it (``deborah_onset`` / ``deborah_max``).
 
 Two kinds of 95 % interval. The *per-pair* view treats every pair as independent: Wilson score
 intervals for fractions (columns ``<key>_lo`` / ``<key>_hi``) and percentile-bootstrap intervals
@@ -37,9 +39,11 @@ from .seedboot import seed_fraction, seed_median
 
 __all__ = ["wilson", "bootstrap_median", "regime_rows", "thesis_point", "REGIME_COLUMNS",
            "RATIO_MEDIANS", "FRACTIONS", "ThesisPoint", "delay_rows", "onset_delay", "DELAY_COLUMNS",
-           "DELAY_EDGES", "delay_points"]
+           "DELAY_EDGES", "delay_points", "abscissa", "DEBORAH_COLUMNS"]
 
 Z95 = 1.959963984540054
+#: the Deborah numbers of a group (median, min, max of each): the slip's, then the undrained branches'
+DEBORAH_COLUMNS = ("deborah_drained", "deborah_onset", "deborah_max", "deborah_mean")
 RATIO_MEDIANS = ("peak_velocity_ratio", "stress_drop_ratio", "duration_ratio")
 _NAN = float("nan")
 
@@ -128,7 +132,7 @@ def _group_stats(rows: list[dict]) -> dict:
     for col in RATIO_MEDIANS:
         m, lo, hi = bootstrap_median(oc[col])
         out[f"{col}_median"], out[f"{col}_lo"], out[f"{col}_hi"] = m, lo, hi
-    for col in ("deborah_onset", "deborah_max", "deborah_mean"):
+    for col in DEBORAH_COLUMNS:
         vals = [_num(r, col) for r in rows]
         vals = [v for v in vals if np.isfinite(v)]
         out[f"{col}_median"] = statistics.median(vals) if vals else _NAN
@@ -178,6 +182,12 @@ def regime_rows(pair_rows: list[dict], seed_key: str = "seed") -> list[dict]:
                 out.append({"kappa_c": perm, "seed": seed, **_group_stats(group), **_seed_stats([group])})
         out.append({"kappa_c": perm, "seed": "all", **_group_stats(at), **_seed_stats(by_seed)})
     return out
+
+
+def abscissa(row: dict) -> str:
+    """The De column a regime row is placed at: the slip's (``deborah_drained``), or, for a table
+    made before it existed, the undrained branches' largest (``deborah_max``)."""
+    return "deborah_drained" if np.isfinite(_num(row, "deborah_drained_median")) else "deborah_max"
 
 
 #: columns of regime.csv (the keys of a group's statistics, after kappa_c and seed)

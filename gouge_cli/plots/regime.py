@@ -3,7 +3,8 @@ and the "undrained slower" shares against the onset delay.
 
 :func:`regime_figure`: one panel per quantity (Type I, Type II, tie, Type I by sign, -C, slower,
 smaller drop, and the medians of the three undrained/drained ratios) over De (log axis, the median
-``deborah_max`` of each permeability's undrained branches; the grey line its range). At each
+De of the slips at each permeability, ``analysis.regime.abscissa``: Eq. 4 with the drained twin's
+peak wall speed; the grey line its range). At each
 permeability: the pooled value (filled) with its seed-level 95 % interval (thick bar: seeds
 resampled, then pairs within them) and, just left, its per-pair interval (thin bar: Wilson for
 fractions, pair bootstrap for medians); just right, each seed's own value as a dot (a strip plot:
@@ -22,7 +23,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..analysis.regime import ThesisPoint
+from ..analysis.regime import ThesisPoint, abscissa
 from .style import DPI, save
 
 _COLOURS = {"type_I": "#d62728", "type_II": "#1f5fbf", "tie": "0.5", "type_I_sign": "#ff7f0e",
@@ -51,13 +52,14 @@ def _seed_value(rows: list[dict], perm: float, seed: str, key: str):
 
 def _panel(ax, rows: list[dict], key: str, thesis: ThesisPoint | None, legend: bool):
     c = _COLOURS[key]
-    pooled = sorted((r for r in rows if r["seed"] == "all" and np.isfinite(r["deborah_max_median"])),
-                    key=lambda r: r["deborah_max_median"])
+    pooled = sorted((r for r in rows if r["seed"] == "all" and np.isfinite(r[f"{abscissa(r)}_median"])),
+                    key=lambda r: r[f"{abscissa(r)}_median"])
     seeds = sorted({r["seed"] for r in rows if r["seed"] != "all"})
     for i, r in enumerate(pooled):
-        de, m = r["deborah_max_median"], _mid(r, key)
+        x = abscissa(r)
+        de, m = r[f"{x}_median"], _mid(r, key)
         first = legend and i == 0
-        ax.plot([r["deborah_max_min"], r["deborah_max_max"]], [m, m], color="0.75", lw=0.8, zorder=1)
+        ax.plot([r[f"{x}_min"], r[f"{x}_max"]], [m, m], color="0.75", lw=0.8, zorder=1)
         lo, hi = r[f"{key}_lo"], r[f"{key}_hi"]
         if np.isfinite(lo):
             ax.errorbar([de * _WIDE], [m], yerr=[[max(m - lo, 0)], [max(hi - m, 0)]], fmt="none", ecolor="0.35",
@@ -96,8 +98,10 @@ def regime_figure(rows: list[dict], thesis: ThesisPoint | None, path: Path, titl
         _panel(ax, rows, key, thesis, legend=i == 0)
         if i % 5 == 0:
             ax.set_ylabel("fraction of pairs" if i == 0 else "share of pairs / ratio")
+    slip_de = any(abscissa(r) == "deborah_drained" for r in rows)
     for ax in axes[1]:
-        ax.set_xlabel("De = l u₀ / D (undrained, largest in the slip)")
+        ax.set_xlabel("De = l u₀ / D of the slip (u₀: drained twin's peak wall speed)" if slip_de
+                      else "De = l u₀ / D (undrained, largest in the slip)")
     axes.flat[0].legend(fontsize=6.5, loc="upper left")
     n_seeds = len({r["seed"] for r in rows if r["seed"] != "all"}) or 1
     note = (f"{n_seeds} seed(s); pooled ● with 95 % intervals: thick = seed level, thin = per pair; "

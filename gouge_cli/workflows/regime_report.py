@@ -52,9 +52,13 @@ def by_swept(pair_rows: list[dict], keys: list[str]) -> list[tuple[dict, list[di
 
 
 def write_regime(pair_rows: list[dict], root: Path, figs: Path, title: str = "") -> dict:
-    """regime.csv and delay.csv under ``root``, regime_map.png and regime_delay.png under ``figs``."""
+    """regime.csv, delay.csv and, where the pairs carry the mechanism's columns, mechanism.csv
+    under ``root``; regime_map.png, regime_delay.png, mechanism_sign.png and mechanism_collapse.png
+    under ``figs``."""
     from ..analysis.campaign_table import write_table
+    from ..analysis.mechanism import MECHANISM_COLUMNS, mechanism_rows
     from ..analysis.regime import DELAY_COLUMNS, REGIME_COLUMNS, delay_rows, regime_rows, thesis_point
+    from ..plots.mechanism import collapse_figure, sign_figure
     from ..plots.regime import delay_figure, regime_figure
 
     root, figs = Path(root), Path(figs)
@@ -69,4 +73,15 @@ def write_regime(pair_rows: list[dict], root: Path, figs: Path, title: str = "")
         out["regime_delay"] = delay_figure(pair_rows, delay, figs / "regime_delay.png",
                                            f"{title}: undrained slower, smaller drop against the onset delay"
                                            if title else "")
+    if pair_rows and "drained_dilation" in pair_rows[0]:
+        mech = mechanism_rows(pair_rows)
+        out["mechanism_csv"] = write_table(mech, [], root / "mechanism.csv", columns=list(MECHANISM_COLUMNS))
+        if any(m["n_signed"] for m in mech):
+            out["mechanism_sign"] = sign_figure(pair_rows, mech, figs / "mechanism_sign.png",
+                                                f"{title}: S_u − S_d against the drained twin's dilation"
+                                                if title else "")
+        if any(m["n_collapse"] for m in mech):
+            out["mechanism_collapse"] = collapse_figure(pair_rows, mech, figs / "mechanism_collapse.png",
+                                                        f"{title}: the undrained pressure against t_D / t_w"
+                                                        if title else "")
     return out
