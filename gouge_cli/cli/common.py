@@ -4,6 +4,7 @@ codes: 0 done, 2 bad input, 3 physics failure or full disk, 130 interrupted)."""
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import sys
@@ -75,14 +76,40 @@ def _with_next_step(exc, name: str, kwargs: dict):
     return NoSpaceError(path, step)
 
 
+@contextlib.contextmanager
+def stop_signals():
+    """SIGTERM and SIGHUP act as Ctrl-C while a command runs (KeyboardInterrupt: the run stops
+    cleanly, with a checkpoint, status 'interrupted' and no temporary file; inside the step loop
+    the first one is deferred to the end of the chunk, driver.phases.deferred_interrupt)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum, frame):
+        raise KeyboardInterrupt(f"stopped by {signal.Signals(signum).name}")
+
+    sigs = [getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n)]
+    previous = {s: signal.signal(s, stop) for s in sigs}
+    try:
+        yield
+    finally:
+        for s, old in previous.items():
+            signal.signal(s, old)
+
+
 def guarded(command):
     """Run a command with the exit-code mapping of gouge_cli.errors.describe: bad input 2,
-    physics failure or a full disk 3, Ctrl-C 130, each with a short message naming the key or path."""
+    physics failure or a full disk 3, Ctrl-C, SIGTERM or SIGHUP 130, each with a short message
+    naming the key or path."""
 
     @functools.wraps(command)
     def wrapper(*args, **kwargs):
         try:
-            return command(*args, **kwargs)
+            with stop_signals():
+                return command(*args, **kwargs)
         except (InputError, PhysicsFailure, OSError, RuntimeError, KeyboardInterrupt) as e:
             where = next((kwargs[k] for k in ("run_dir", "out_dir", "config", "run_dirs") if kwargs.get(k)), None)
             if isinstance(e, (OSError, RuntimeError)):

@@ -9,7 +9,7 @@ from typing import List, Optional
 import typer
 
 from ..config import build_config, dump_config, load_config, parse_overrides
-from .common import fail, guarded, out
+from .common import err, fail, guarded, out
 from ..errors import EXIT_INTERRUPTED
 
 __all__ = ["app", "main"]
@@ -53,7 +53,15 @@ def run(
     result = run_scene(cfg, target, force=force, quiet=quiet, confirm=confirm_long(yes))
     out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s, "
               f"{result.grain_steps_per_second / 1e6:.2f} M grain-steps/s)", highlight=False)
+    _stopped(result)
+
+
+def _stopped(result):
+    """An interrupted run (Ctrl-C, SIGTERM, SIGHUP): one line naming the command that continues it
+    (on stderr, --quiet or not), exit 130."""
     if result.status == "interrupted":
+        err.print(f"interrupted: the checkpoint is written; `gouge resume {result.out_dir}` continues the run",
+                  highlight=False, markup=False)
         raise typer.Exit(EXIT_INTERRUPTED)
 
 
@@ -107,8 +115,7 @@ def resume(
     result = resume_run(_run_dir(run_dir), quiet=quiet)
     out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s)",
               highlight=False)
-    if result.status == "interrupted":
-        raise typer.Exit(EXIT_INTERRUPTED)
+    _stopped(result)
 
 
 @app.command()

@@ -207,28 +207,39 @@ class CheckpointKeeper(Callback):
         write_checkpoint(self.layout.latest, snapshot_of(sim, extra, attached))
 
 
+#: the signals that stop a run cleanly: Ctrl-C, and what schedulers, `timeout` and systemd send
+#: (SLURM at a job's wall-time limit) or a closed terminal
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
 @contextmanager
 def deferred_interrupt():
-    """Ctrl-C (SIGINT) sets a flag that the step loop reads between chunks, after every
-    callback of the current step has run, so that the checkpoint written on stopping lines up
-    with the series (an interrupt inside a callback could lose a row). A second Ctrl-C
-    interrupts at once. Yields a function telling whether Ctrl-C was pressed."""
+    """Ctrl-C (SIGINT), SIGTERM or SIGHUP sets a flag that the step loop reads between chunks,
+    after every callback of the current step has run, so that the checkpoint written on stopping
+    lines up with the series (an interrupt inside a callback could lose a row). A second signal
+    acts at once (its previous handler: KeyboardInterrupt under the CLI, cli.common.stop_signals).
+    Yields a function telling whether a stop was asked for."""
     flag = {"set": False}
     if threading.current_thread() is not threading.main_thread():
         yield lambda: False
         return
-    previous = signal.getsignal(signal.SIGINT)
-    previous = signal.default_int_handler if previous is None else previous
+    previous = {}
+    for sig in STOP_SIGNALS:
+        old = signal.getsignal(sig)
+        previous[sig] = signal.default_int_handler if old is None and sig == signal.SIGINT else old
 
     def handler(signum, frame):
         flag["set"] = True
-        signal.signal(signal.SIGINT, previous)
+        for sig, old in previous.items():
+            signal.signal(sig, old if old is not None else signal.SIG_DFL)
 
-    signal.signal(signal.SIGINT, handler)
+    for sig in STOP_SIGNALS:
+        signal.signal(sig, handler)
     try:
         yield lambda: flag["set"]
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for sig, old in previous.items():
+            signal.signal(sig, old if old is not None else signal.SIG_DFL)
 
 
 def guarded_run(sim: Simulation, duration: float, interval: float | None = None, compact: bool = True,

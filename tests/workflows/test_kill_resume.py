@@ -130,7 +130,8 @@ def kill_and_resume(reference, out: Path, kind: str, rng: random.Random) -> dict
     _wait_for(out / "run.h5", proc)
     # (compaction: within the first half of the reference's, whatever the packing's compaction length)
     delay = {"compaction": rng.uniform(0.0, 0.5) * compaction / span, "write": rng.uniform(0.0, 0.8),
-             "random": rng.uniform(0.0, 0.85), "ctrl-c": rng.uniform(0.0, 0.85)}[kind] * span
+             "random": rng.uniform(0.0, 0.85), "ctrl-c": rng.uniform(0.0, 0.85), "sigterm": rng.uniform(0.2, 0.85),
+             "sighup": rng.uniform(0.2, 0.85)}[kind] * span
     time.sleep(delay)
     tmp_seen = False
     if kind == "write":
@@ -143,13 +144,18 @@ def kill_and_resume(reference, out: Path, kind: str, rng: random.Random) -> dict
                     break
             except FileNotFoundError:
                 pass
-    proc.send_signal(signal.SIGINT if kind == "ctrl-c" else signal.SIGKILL)
+    sig = {"ctrl-c": signal.SIGINT, "sigterm": signal.SIGTERM, "sighup": signal.SIGHUP}.get(kind, signal.SIGKILL)
+    proc.send_signal(sig)
     proc.wait()
     assert proc.returncode in (0, -signal.SIGKILL, 130), proc.stderr.read().decode()
     with h5py.File(out / "run.h5", "r") as h5:
         if h5.attrs["status"] == "finished":     # ended (or was killed while exiting) first: not a trial
             assert_identical(ref, out)
             return None
+        if sig != signal.SIGKILL:               # a clean stop: said, recorded, nothing half-written
+            assert proc.returncode == 130 and h5.attrs["status"] == "interrupted"
+            assert "gouge resume" in proc.stderr.read().decode()
+            assert not [p for p in out.rglob("*") if ".tmp" in p.name]
     latest = out / "checkpoints" / "latest.h5"
     phase = read_checkpoint(latest).extra.get("phase") if latest.exists() else "none"
     leftovers = [p.name for p in (out / "checkpoints").glob(".*tmp*")] if (out / "checkpoints").exists() else []
@@ -175,6 +181,14 @@ def test_kill_9_then_resume_is_bitwise(reference, tmp_path):
     hits = trials(reference, tmp_path, ["compaction", "write", "random"], 17)
     assert len(hits) == 3
     assert hits[0]["phase"] in ("compaction", "none")      # killed before loading began
+
+
+def test_sigterm_and_sighup_stop_cleanly_and_resume_bitwise(reference, tmp_path):
+    """SIGTERM (SLURM at the wall-time limit, `timeout`, systemd) and SIGHUP stop a run as Ctrl-C
+    does: exit 130, status 'interrupted', a message naming `gouge resume`, no temporary file; the
+    resumed run ends in the uninterrupted run's bits."""
+    hits = trials(reference, tmp_path, ["sigterm", "sighup"], 23)
+    assert len(hits) == 2
 
 
 @pytest.mark.validation
