@@ -70,7 +70,8 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     status = "finished"
     try:
         with deferred_interrupt() as interrupted:
-            if sim.state.time < end_time:       # stick scaling changes the step: callbacks rebuilt
+            if end_time - sim.state.time > 0.5 * sim.dt:     # (a run resumed at its end: no step more;
+                # stick scaling changes the step: callbacks rebuilt)
                 sim.run(end_time - sim.state.time, build if scaling is not None else build(),
                         should_stop=lambda: series.stopped or interrupted())
             if interrupted():

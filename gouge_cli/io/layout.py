@@ -195,6 +195,10 @@ class ForkLayout:
         """The run files of this fork's branches present, sorted."""
         return sorted(self.root.glob(f"*/{RUN_FILE}"))
 
+    def undrained_dirs(self) -> list[Path]:
+        """Every ``perm_*`` folder present, finished or not, sorted by name."""
+        return sorted(p for p in self.root.glob(f"{_PERM}*") if p.is_dir())
+
 
 def runs_under(runs_root: Path) -> list[Path]:
     """Run directories directly under runs_root (those holding a run file)."""

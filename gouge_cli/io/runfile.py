@@ -50,6 +50,7 @@ import hashlib
 import json
 import math
 import os
+import shutil
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -61,7 +62,7 @@ import yaml
 from .. import __version__
 from . import provenance
 from ..config import Config, dump_config
-from ..errors import DamagedFileError, NotARunError, RunStillRunningError
+from ..errors import DamagedFileError, NoSpaceError, NotARunError, RunStillRunningError
 from ..model.slip_rule import SlipRule
 from ..model.timestep import half_period
 from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, document_analysis, document_run_file,
@@ -221,8 +222,9 @@ class RunFile:
     """Append-only writer of one run file."""
 
     def __init__(self, path: Path, config: Config, dt: float, extra_attrs: dict | None = None,
-                 flush_rows: int = 200, mode: str = "w", threads: int | None = None):
+                 flush_rows: int = 200, mode: str = "w", threads: int | None = None, safe_close: bool = True):
         self.path = Path(path)
+        self.safe_close = safe_close        # False: the file is a temporary, renamed once closed (forks)
         self.flush_rows = flush_rows
         self._rows: list[dict] = []
         self._allocated = 0         # the end of the blocks allocated past HDF5's end (_room) [bytes]
@@ -424,27 +426,60 @@ class RunFile:
             seal(h5)
 
     def _close(self, status: str, final_state_hash: str | None):
-        if self.h5.id.valid:
-            self.flush(room=False)
-            if final_state_hash is not None:
-                self.h5.attrs["final_state_hash"] = final_state_hash
-            if "deborah" in self.h5["series"]:
-                deborah = self.h5["series/deborah"][...]
-                if deborah.size:
-                    self.h5.attrs["deborah_mean"] = float(np.nanmean(deborah))
-                    self.h5.attrs["deborah_max"] = float(np.nanmax(deborah))
-            self.h5.attrs["status"] = status
-            document_run_file(self.h5)
-            for name in ("series", "snapshots", "slips"):      # described here the first time
-                if name in self.h5:
-                    seal(self.h5[name])
-            self.h5.visititems(lambda _, obj: None if SEAL in obj.attrs else seal(obj))   # from before seals
-            seal(self.h5)
+        """Flush the rows, then write the closing attributes (status, final state hash, De summary,
+        descriptions, seals) into a copy of the flushed file that is renamed over run.h5 once
+        complete (``safe_close``): a kill or power loss at any moment leaves either the file as its
+        last flush left it (status 'running': `gouge resume` closes it from the final checkpoint)
+        or the closed file, never a file whose closing metadata HDF5 wrote only in part. Where the
+        copy finds no room (or the file is already a temporary, ``safe_close=False``), in place."""
+        if not self.h5.id.valid:
+            return
+        self.flush(room=False)
+        if not self.safe_close:
+            self._closing_attrs(self.h5, status, final_state_hash)
             self.h5.close()
-            try:        # opened and closed again, HDF5 trims the file to its end (the reserve past it: _room)
-                h5py.File(self.path, "a", rdcc_nbytes=0).close()
-            except (OSError, RuntimeError):
-                pass
+            _trim(self.path)
+            return
+        self.h5.flush()
+        self.h5.close()
+        try:
+            with temporary(self.path) as tmp:
+                require_space(self.path.parent, self.path.stat().st_size + RESERVE_BYTES, "the run file's close")
+                shutil.copyfile(self.path, tmp)
+                with h5py.File(tmp, "r+", rdcc_nbytes=0) as h5:
+                    self._closing_attrs(h5, status, final_state_hash)
+                _trim(tmp)
+        except (OSError, RuntimeError) as exc:
+            if not (isinstance(exc, NoSpaceError) or is_no_space(exc)):
+                raise
+            with h5py.File(self.path, "r+", rdcc_nbytes=0) as h5:        # no room for a copy: in place
+                self._closing_attrs(h5, status, final_state_hash)
+            _trim(self.path)
+
+    @staticmethod
+    def _closing_attrs(h5, status: str, final_state_hash: str | None):
+        if final_state_hash is not None:
+            h5.attrs["final_state_hash"] = final_state_hash
+        if "deborah" in h5["series"]:
+            deborah = h5["series/deborah"][...]
+            if deborah.size:
+                h5.attrs["deborah_mean"] = float(np.nanmean(deborah))
+                h5.attrs["deborah_max"] = float(np.nanmax(deborah))
+        h5.attrs["status"] = status
+        document_run_file(h5)
+        for name in ("series", "snapshots", "slips"):      # described here the first time
+            if name in h5:
+                seal(h5[name])
+        h5.visititems(lambda _, obj: None if SEAL in obj.attrs else seal(obj))   # from before seals
+        seal(h5)
+
+
+def _trim(path: Path):
+    """Opened and closed again, HDF5 trims the file to its end (the reserve past it: RunFile._room)."""
+    try:
+        h5py.File(path, "a", rdcc_nbytes=0).close()
+    except (OSError, RuntimeError):
+        pass
 
 
 def _checked(group, name: str, data: np.ndarray, **options):

@@ -47,7 +47,7 @@ import yaml
 
 from ..errors import CampaignConflict
 from ..config import Config, build_config
-from ..io.layout import CONFIG_FILE, OWNED, RunLayout
+from ..io.layout import CONFIG_FILE, OWNED, ForkLayout, RunLayout
 from ..io.rundir import pid_alive
 from .campaign_results import RUN_PIECE, PieceRecord, Results, diff_keys, fork_piece, settings_digest
 from .campaign_spec import CampaignSpec, Point, expand, load_spec
@@ -220,7 +220,7 @@ def _share_drained(base_fork: Path, fork: Path):
     elif drained.is_dir():
         shutil.rmtree(drained)
     drained.symlink_to(os.path.relpath(base_fork / DRAINED, fork))
-    for branch in fork.glob("perm_*"):
+    for branch in ForkLayout(fork).undrained_dirs():
         shutil.rmtree(branch)
 
 
@@ -257,7 +257,7 @@ def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration:
             for row in fork_rows(fork, permeabilities):
                 pairs.append({"variant": name, **row} if name else row)
             for branch in sorted(fork.iterdir()):
-                if (branch / "run.h5").is_file() and not (i and branch.is_symlink()):
+                if RunLayout(branch).run_file.is_file() and not (i and branch.is_symlink()):
                     with RunReader(branch) as reader:
                         hashes[prefix + branch.name] = str(reader.h5.attrs.get("final_state_hash", ""))
         return {"branches": statuses, "pairs": pairs, "final_state_hashes": hashes}

@@ -191,7 +191,7 @@ def _run_branch(run_dir: Path, slip: int, entry: dict, ck: Checkpoint, scene: Sc
             "parent_run": os.path.relpath(run_dir, out_dir), "parent_checkpoint": str(entry["checkpoint"]),
             "fork_slip": slip, "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
             "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
-            "end_time": ck.time + duration}, threads=sim.threads)
+            "end_time": ck.time + duration}, threads=sim.threads, safe_close=False)
         try:
             writer.append(sim.observe())
             status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,

@@ -21,7 +21,7 @@ from ..model.scene import Scene
 from ..driver.compaction import compaction_phase
 from ..driver.phases import load_phase
 from ..errors import RunDirError
-from ..io.outputs import is_no_space, require_space
+from ..io.outputs import is_no_space, remove_temps, require_space
 from ..io.rundir import SPACE_MARGIN, check_run_dir, open_run_file, prepare_run_dir, restart_command, RunLock
 from ..driver.simulation import Simulation
 from ..errors import PhysicsError
@@ -154,6 +154,7 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
     with RunLock(run_dir, "gouge resume"):
         latest = layout.latest
         remove_stale_temps(latest)
+        remove_temps(layout.run_file)       # of a close cut short (RunFile._close: a copy renamed when complete)
         if not latest.is_file():
             _refuse_branch(run_dir)
             if not layout.config_file.is_file():
