@@ -3,8 +3,8 @@
 # # Your first stick-slip run
 #
 # This tutorial runs the tutorial scene, reads its slip catalog and draws its figures. The scene
-# (`configs/tutorial.yaml`) is the demo of `make demo` (`configs/demo.yaml`) loaded for 60,000 t0
-# instead of 150,000, so that it slips about three times in a third of the demo's time: a layer of 1,000 dry grains, 30 d wide and about 26 d thick, under a
+# (`configs/tutorial.yaml`) is the demo of `make demo` (`configs/demo.yaml`) loaded for 90,000 t0
+# instead of 150,000, so that it slips the demo's first three slips in 60 % of its time: a layer of 1,000 dry grains, 30 d wide and about 26 d thick, under a
 # normal stress of 3e-4 E (24 MPa with the thesis's material), pulled through a stiff spring
 # (k = 1e-4 E/d) at V_s = 4e-5 v0. Everything is in the dimensionless units of
 # {doc}`../physics/units`: lengths in grain diameters d, stresses in Young's modulus E, times in

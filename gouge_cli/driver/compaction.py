@@ -16,6 +16,8 @@ resumed from any step checks, and ends, on the steps where it would have.
 
 from __future__ import annotations
 
+import sys
+
 from pathlib import Path
 
 from ..io.checkpoint import Checkpoint, snapshot_of, state_bytes, write_checkpoint
@@ -143,6 +145,9 @@ def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False, res
         settling.restore(resume_from)
     checks = max(1, int(round(sim.config.output.checkpoint_interval / CHECK_INTERVAL)))
     keeper = CompactionCheckpoint(settling, out_dir, checks, 2.0 * state_bytes(sim))
+    note = None if quiet else sim.compile_note()
+    if note:
+        print(note, file=sys.stderr, flush=True)
     report = None if quiet else SettleReport(sim.config.compaction.max_time, sim.state.n, live=live)
     callbacks = ([SettleProgress(settling, report)] if report else []) + [keeper]
     try:

@@ -57,6 +57,9 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     if resume_from is not None:
         restore([recorder, guards], resume_from.extra, resume_from.attached)
     companions = [guards] if scaling is not None else []     # stick scaling: kept with the ring states
+    note = None if quiet else sim.compile_note()
+    if note:
+        print(note, file=sys.stderr, flush=True)
     progress = None if quiet else ProgressReport(label, end_time - sim.state.time, sim.state.n, live=live)
     need = 2.0 * (config.slips.ring + 2) * state_bytes(sim)
     series = SeriesWriter(writer, recorder, scaling, companions, progress, out_dir, need, sim.state.time,

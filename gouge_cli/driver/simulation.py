@@ -156,6 +156,24 @@ class Simulation:
             elif status == L.FLUID_FAILED:
                 raise PhysicsError(*self.fluid.failure(int(self._fluid_status[0])), s.time)
 
+    def compile_note(self) -> str | None:
+        """A line to show before the first step when its kernel is not compiled for this CPU yet
+        (a fresh environment: numba compiles it once, then loads it from its cache)."""
+        from ..kernels import cached_for_this_cpu
+
+        if self.gpu and self.fluid is None:
+            return None
+        if self.fluid is not None:
+            from ..kernels.coupled import advance_fluid
+
+            kernel, what, how_long = advance_fluid, "the coupled grain-fluid step", "2-4 minutes"
+        else:
+            kernel, what, how_long = K.advance, "the grain step", "20-60 s"
+        if cached_for_this_cpu(kernel):
+            return None
+        return (f"note: compiling {what} for this CPU (once per environment, about {how_long}; later runs load "
+                "it from the cache)")
+
     def _gpu_layers(self):
         """The scene as a one-layer GPU ensemble (model.gpu_layers: the same bits as K.advance)."""
         if self._layers is None:

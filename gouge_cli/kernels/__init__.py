@@ -28,3 +28,15 @@ if NUMBA_CACHE and "NUMBA_CACHE_DIR" not in os.environ:
     os.environ["NUMBA_CACHE_DIR"] = _cache
     if "numba" in sys.modules:
         sys.modules["numba"].config.CACHE_DIR = _cache
+
+
+def cached_for_this_cpu(dispatcher) -> bool:
+    """Whether numba's on-disk cache holds `dispatcher` compiled for this CPU's target (an index
+    entry with this machine's triple, CPU name and features); False: its first call compiles it.
+    True where the cache cannot tell (then nothing is announced)."""
+    try:
+        index = dispatcher._cache._cache_file._load_index()
+        magic = dispatcher.targetctx.codegen().magic_tuple()
+    except Exception:        # noqa: BLE001  (numba internals moved: say nothing rather than fail)
+        return True
+    return any(len(key) > 1 and key[1] == magic for key in index)

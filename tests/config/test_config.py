@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import pytest
 
@@ -196,3 +197,17 @@ def test_dt_bound():
     assert stability_bound(high).bound < stability_bound(cfg).bound
     with pytest.raises(ConfigError, match=f"{stability_bound(high).bound:.4g}"):
         choose_dt(high)
+
+
+def test_tutorial_scene_is_the_demo_cut_short():
+    """configs/tutorial.yaml is the demo but for its name and a shorter run: the same trajectory
+    (same grains, seed, loading, wall mass, numerics), so the tutorials' slips are the demo's."""
+    from gouge_cli.config import load_config
+
+    root = Path(__file__).resolve().parents[2] / "configs"
+    demo, tutorial = load_config(root / "demo.yaml").to_dict(), load_config(root / "tutorial.yaml").to_dict()
+    assert tutorial["run"]["duration"] < demo["run"]["duration"]
+    for d in (demo, tutorial):
+        d.pop("name")
+        d["run"].pop("duration")
+    assert tutorial == demo
