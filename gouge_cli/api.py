@@ -47,7 +47,7 @@ from .analysis.catalog import CATALOG_COLUMNS, catalog_table, fit_slip, read_cat
 from .analysis.forkpairs import PAIR_COLUMNS, classify_fork, fork_branches, fork_dirs, run_pairs
 from .analysis.study import transient_slips
 from .config import Config, build_config, load_config, parse_overrides
-from .errors import AnalysisError, ConfigError, SlipNotFoundError
+from .errors import AnalysisError, ConfigError, RunDirError, SlipNotFoundError
 from .io.filedoc import ANALYSIS_UNITS, SLIP_ATTRS, TIME_ORIGIN
 from .io.layout import RunLayout
 from .io.runfile import RunInfo, RunReader, read_series_items
@@ -828,8 +828,11 @@ def restart(run: Run | Path | str, slip: int, perm=(), overrides=None, duration:
 
     run_dir = _run_dir(run)
     perms = (perm,) if isinstance(perm, (int, float)) else tuple(perm)
-    run_restart(ForkRequest(run_dir, slip, perms, _overrides(overrides), duration, force=force, main=main),
-                quiet=quiet)
+    try:
+        run_restart(ForkRequest(run_dir, slip, perms, _overrides(overrides), duration, force=force, main=main),
+                    quiet=quiet)
+    except RunDirError as exc:          # the CLI's words, said in Python's
+        raise RunDirError(str(exc).replace("pass --force", "pass force=True")) from None
     return Fork(RunLayout(run_dir).fork(slip).root)
 
 

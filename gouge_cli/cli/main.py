@@ -110,9 +110,15 @@ def resume(
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
 ):
     """Continue an interrupted run (Ctrl-C, kill -9, power loss) from its latest checkpoint."""
+    from ..io.layout import RunLayout
+    from ..io.runfile import run_status
     from ..workflows.run import resume_run
 
-    result = resume_run(_run_dir(run_dir), quiet=quiet)
+    target = _run_dir(run_dir)
+    if run_status(RunLayout(target).run_file) == "finished":
+        out.print(f"{target} finished already: nothing to resume", highlight=False)
+        return
+    result = resume_run(target, quiet=quiet)
     out.print(f"{result.status}: {result.out_dir} ({result.steps} steps, {result.wall_seconds:.1f} s)",
               highlight=False)
     _stopped(result)

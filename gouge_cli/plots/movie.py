@@ -261,12 +261,54 @@ def make_movie(run_dir: Path | str, slip: int, perm: float | None = None, out: P
                         write(renderer.render(float(tau)))
                 finally:
                     close()
+                _check_complete(tmp, final)
         finally:
             renderer.close()
     finally:
         drained.reader.close()
         undrained.reader.close()
     return final, len(taus)
+
+
+def mp4_complete(path: Path) -> bool:
+    """Whether an MP4 file is whole: its top-level boxes tile the file exactly and include the
+    header ('ftyp') and the index ('moov', which ffmpeg writes last). An encoder whose disk
+    filled leaves a file without it that no player decodes."""
+    try:
+        size = path.stat().st_size
+        seen, at = set(), 0
+        with open(path, "rb") as fh:
+            while at < size:
+                fh.seek(at)
+                head = fh.read(16)
+                if len(head) < 8:
+                    return False
+                length, kind = int.from_bytes(head[:4], "big"), head[4:8]
+                if length == 1:
+                    length = int.from_bytes(head[8:16], "big")
+                elif length == 0:
+                    length = size - at
+                if length < 8 or at + length > size:
+                    return False
+                seen.add(kind)
+                at += length
+    except OSError:
+        return False
+    return {b"ftyp", b"moov"} <= seen
+
+
+def _check_complete(encoded: Path, final: Path):
+    """Raise where the encoder left an incomplete movie: ENOSPC (a disk that filled while it
+    encoded: io.outputs.temporary names what to free), else a RuntimeError."""
+    import errno
+
+    from ..io.outputs import SPACE_MARGIN, free_bytes
+
+    if final.suffix == ".gif" or mp4_complete(encoded):
+        return
+    if free_bytes(final.parent) < SPACE_MARGIN:
+        raise OSError(errno.ENOSPC, "no space left on device (the encoder stopped)", str(final))
+    raise RuntimeError(f"the MP4 encoder left an incomplete file for {final} (ffmpeg failed); nothing was written")
 
 
 def _encoded_path(path: Path) -> Path:

@@ -179,6 +179,8 @@ def pair_verdict(row: dict) -> str:
     base = row["base_type"]
     if base == "none":
         return "no pair: one branch did not slip"
+    if base == "failed":
+        return f"no pair: {row.get('note') or 'a branch failed'}"
     what = {"I": "undrained weaker before slip", "II": "undrained stronger before slip",
             "tie": "same strength before slip"}[base]
     what = f"{'Type ' if base != 'tie' else ''}{row['type']} ({what}"

@@ -36,6 +36,7 @@ from .pairs import branch_status
 from .run import stopped_by_os_error
 
 
+MAX_BRANCH_DURATION = 1e7  # [t0] the longest branch a fork runs (--duration)
 FORK_SLIP_FRAMES = 30     # snapshots per predicted slip duration while a fork slips (output.slip_frames)
 
 
@@ -125,8 +126,10 @@ class ForkRequest:
         object.__setattr__(self, "perms", tuple(float(p) for p in self.perms))
         object.__setattr__(self, "overrides", dict(self.overrides or {}))
         check_perms(self.perms)
-        if self.duration is not None and not (self.duration > 0 and math.isfinite(self.duration)):
-            raise ConfigError(f"--duration = {self.duration:g}: give a positive, finite time [t0]")
+        if self.duration is not None and not (0 < self.duration <= MAX_BRANCH_DURATION):
+            raise ConfigError(f"--duration = {self.duration:g}: give a positive time [t0] of at most "
+                              f"{MAX_BRANCH_DURATION:g} (a branch runs one slip's checkpoint through that slip and "
+                              "what follows; the study scene's whole loading is 2.5e6 t0)")
         check_main(self.main)
 
     def command(self) -> str:

@@ -176,3 +176,12 @@ def test_export_from_another_directory_lands_in_the_run(two_perms, tmp_path, mon
     assert result.exit_code == 0, result.output
     assert (out / "export" / f"slip_{n:03d}_perm_1e-03.vtkhdf").is_file()
     assert not (tmp_path / "export").exists() and not any(elsewhere.iterdir())
+
+
+def test_pair_verdict_of_a_failed_branch():
+    """A fork whose branch failed is drawn as failed, with the branch's message (a KeyError before)."""
+    from gouge_cli.plots.series import pair_verdict
+
+    row = {"base_type": "failed", "type": "failed", "note": "undrained branch failed: pressure not finite",
+           "strength_difference": float("nan"), "criteria": ""}
+    assert pair_verdict(row) == "no pair: undrained branch failed: pressure not finite"

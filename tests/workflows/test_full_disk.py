@@ -230,6 +230,43 @@ def test_movie_on_a_full_disk(forked, small_fs):
     assert (small_fs / "m.mp4").stat().st_size > 0 and not temp_files(small_fs)
 
 
+MOVIE_WHILE_FILLING = """
+from gouge_cli.errors import NoSpaceError
+from gouge_cli.plots import movie
+render = movie.FrameRenderer.render
+count = {"frames": 0}
+def render_then_fill(self, tau):
+    count["frames"] += 1
+    if count["frames"] == 3:         # the disk fills while the encoder writes (another writer)
+        fill_now()
+    return render(self, tau)
+movie.FrameRenderer.render = render_then_fill
+try:
+    movie.make_movie(sys.argv[2], int(sys.argv[3]), 1e-3, out=Path(sys.argv[1]) / "m.mp4", progress=False)
+    print("written")
+except NoSpaceError as exc:
+    print("full", exc)
+"""
+
+
+def test_movie_whose_disk_fills_while_it_encodes(forked, small_fs):
+    """The disk fills after the space check, while ffmpeg encodes: an incomplete MP4 (no index
+    box) is never left under the movie's name (exit 0 with a 4 KB file no player decodes before);
+    the command stops on the full disk, with no temporary file."""
+    pytest.importorskip("imageio_ffmpeg")
+    run, slip, _ = forked
+    target = _copy(run, small_fs)
+    done = subprocess.run([sys.executable, "-c", FILL_AFTER + MOVIE_WHILE_FILLING, str(small_fs), str(target), str(slip)],
+                          capture_output=True, text=True, timeout=300)
+    assert done.stdout.startswith("full"), done.stdout + done.stderr[-3000:]
+    assert not (small_fs / "m.mp4").exists() and not temp_files(small_fs)
+    (small_fs / "filler-now").unlink()
+    from gouge_cli.plots.movie import make_movie, mp4_complete
+
+    path, _ = make_movie(target, slip, 1e-3, out=small_fs / "m.mp4", progress=False, max_frames=5)
+    assert mp4_complete(path)
+
+
 @pytest.mark.parametrize("command", ["analyze", "plot"])
 def test_analyze_and_plot_on_a_full_disk(forked, small_fs, command):
     """They advise running themselves again (not `gouge resume`: the run is finished), and that works."""
@@ -402,6 +439,8 @@ def test_failed_branch_reported_as_failed(forked, tmp_path):
     frame = api.open_study(target)
     failed = frame[frame["branch"] == "perm_1e-02"]
     assert list(failed["type"]) == ["failed"] and list(failed["status"]) == ["failed"]
+    done = gouge("plot", target, "--slip", slip)         # drawn, marked failed (a KeyError before)
+    assert done.returncode == 0 and "Traceback" not in done.stderr, done.stderr[-2000:]
 
 
 def test_advice_of_a_held_lock_and_ctrl_c_continues_the_restart(forked, tmp_path):

@@ -150,6 +150,8 @@ def test_drained_fork_retraces_the_original(tiny):
     (["--slip", 99, "--perm", "1e-5"], ["no checkpoint for slip 99", "KEPT"]),
     (["--slip", "N", "--perm", "-1e-5"], ["--perm", "positive"]),
     (["--slip", "N", "--perm", "1e-5", "--duration", "-5"], ["--duration"]),
+    (["--slip", "N", "--perm", "1e-5", "--duration", "1e308"], ["--duration", "at most"]),     # OverflowError before
+    (["--slip", "N", "--perm", "1e-5", "--duration", "1e30"], ["--duration", "at most"]),      # ran without bound
 ])
 def test_restart_bad_input(tiny, args, words):
     """N: a slip kept with its checkpoint; KEPT: the list of those the message offers."""
