@@ -92,7 +92,9 @@ def register(app: typer.Typer):
     @app.command()
     @guarded
     def regime(
-        pairs: Path = typer.Argument(..., help="a pair table: a campaign's table.csv or a pairs.csv (rows of kind 'pair')"),
+        pairs: Path = typer.Argument(..., help="a pair table (a campaign's table.csv or a pairs.csv: rows of kind "
+                                     "'pair'), or a campaign file (its results records; one map per variant and "
+                                     "swept value)"),
         out_dir: Path = typer.Option(..., "--out", help="folder for regime.csv, delay.csv, regime_map.png and regime_delay.png"),
         title: str = typer.Option("", "--title", help="title line of the figures"),
         where: List[str] = typer.Option([], "--where", help="KEY=VALUE: only the pairs whose swept column KEY holds "
@@ -101,7 +103,7 @@ def register(app: typer.Typer):
         """Write the regime map (per seed, pooled, seed-level and per-pair intervals) and the onset-delay
         view from a table of pairs; nothing is simulated."""
         from ..errors import InputError
-        from ..workflows.regime_report import read_pairs, select, write_regime
+        from ..workflows.regime_report import read_pairs, select, spec_pairs, write_groups, write_regime
 
         conditions = {}
         for item in where:
@@ -109,8 +111,14 @@ def register(app: typer.Typer):
             if not sep or not key.strip():
                 raise InputError(f"--where {item!r}: give KEY=VALUE, e.g. loading.normal_stress=3e-4")
             conditions[key.strip()] = value.strip()
-        rows = select(read_pairs(pairs), conditions)
+        keys: list[str] = []
+        if pairs.suffix in (".yaml", ".yml") and pairs.is_file():
+            rows, keys = spec_pairs(pairs)
+        else:
+            rows = read_pairs(pairs)
+        rows = select(rows, conditions)
         if not rows:
             raise InputError(f"{pairs}: no pair rows" + (f" with {', '.join(where)}" if where else ""))
-        for name, path in write_regime(rows, out_dir, out_dir, title).items():
-            out.print(f"{name}: {path}", highlight=False)
+        written = write_groups(rows, keys, out_dir, title) if keys else write_regime(rows, out_dir, out_dir, title)
+        for name, path in written.items():
+            out.print(f"{name}: {path}", highlight=False, markup=False)

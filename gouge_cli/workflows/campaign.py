@@ -771,24 +771,16 @@ def _by_variant(pair_rows: list[dict], spec: CampaignSpec) -> list[tuple[str, li
 
 
 def _regime_outputs(pair_rows: list[dict], s: Survey, figs: Path) -> dict:
-    """regime.csv, delay.csv and their figures (workflows.regime_report), for a study campaign with
-    two permeabilities or more; a campaign that sweeps more than seeds gets one set per value of
-    its swept keys, under regime/<key>-<value>_.../ (permeabilities and other swept values are
-    never pooled)."""
-    from .campaign_spec import point_name
-    from .regime_report import by_swept, write_regime
+    """regime.csv, delay.csv, mechanism.csv and their figures (workflows.regime_report), for a study
+    campaign with two permeabilities or more; a campaign that sweeps more than seeds, or has study
+    variants, gets one set per value of those keys under regime/<key>-<value>_.../, with its
+    pairs.csv (permeabilities, variants and other swept values are never pooled)."""
+    from .regime_report import write_groups, write_regime
 
     keys = [k for k in s.spec.swept_keys() if k != "seed"] + (["variant"] if _variants(s.spec) else [])
     if not keys:
         return write_regime(pair_rows, s.root, figs, s.spec.name)
-    out = {}
-    for values, rows in by_swept(pair_rows, keys):
-        name = point_name(values)
-        where = ", ".join(f"{k} = {v}" for k, v in values.items())
-        for key, path in write_regime(rows, s.root / "regime" / name, s.root / "regime" / name,
-                                      f"{s.spec.name}, {where}").items():
-            out[f"{key}[{name}]"] = path
-    return out
+    return write_groups(pair_rows, keys, s.root / "regime", s.spec.name)
 
 
 def _value(config: Config, key: str) -> float:
