@@ -120,3 +120,31 @@ def guarded(command):
             fail(*described)
 
     return wrapper
+
+
+def restart_lines(summary: dict, run_dir) -> list[str]:
+    """`gouge restart`'s one-screen result: one line per branch (status, onset, strength, drop,
+    peak velocity of its first slip), one per pair (its type, S_u - S_d, the two onsets and what
+    made it complex), and where the whole record is. Times in t0 since loading began."""
+    from ..io.layout import RunLayout
+
+    lines = [f"slip {summary['slip']} forked from t = {summary['start_time']:,.1f} t0 (since loading began)"]
+    for name, b in summary["branches"].items():
+        f = b.get("first_slip")
+        slip = (f"onset {f['onset_time']:,.1f} t0, S {f['static_strength']:.4f}, drop {f['stress_drop']:.4f} tau/sigma, "
+                f"peak {f['peak_velocity_over_Vs']:.3g} V_s" if f else "no slip in its window")
+        lines.append(f"  {name:<12} {b['status']:<18} {slip}")
+    for row in (summary.get("pair") or {}).get("pairs", []):
+        diff = row.get("strength_difference")
+        said = f"Type {row['type']}" if row["base_type"] in ("I", "II") else row["type"]
+        onsets = (f"onsets {row['drained_onset']:,.1f} / {row['undrained_onset']:,.1f} t0"
+                  if row.get("undrained_onset") is not None else "")
+        complex_ = f"; complex: {row['criteria']}" if row.get("criteria") else ""
+        lines.append(f"  pair drained vs {row['branch']}: {said}"
+                     + (f" (S_u - S_d = {diff:+.4f} tau/sigma; {onsets})"
+                        if isinstance(diff, float) and diff == diff else "") + complex_)
+    fork = RunLayout(run_dir).fork(summary["slip"])
+    if summary.get("pair"):
+        lines.append(f"record: {fork.pair_file} (the whole of it: --json; `gouge plot {run_dir} --slip "
+                     f"{summary['slip']}` draws it)")
+    return lines

@@ -86,6 +86,7 @@ def restart(
     main: str = typer.Option("first", "--main", help="compared event of each branch in pair.json: first "
                              "(the forked slip) or largest"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
+    as_json: bool = typer.Option(False, "--json", help="print the whole record (branches and pairs) as JSON"),
 ):
     """Fork drained and undrained branches from the packing kept just before slip N (no --perm:
     the drained branch alone); with --perm, writes pair.json. On a slip forked before, --perm K adds
@@ -94,13 +95,18 @@ def restart(
 
     from ..io.filedoc import json_safe
     from ..workflows.fork import ForkRequest, restart as run_restart
+    from .common import restart_lines
 
     target = _run_dir(run_dir)
     if duration is None and not until_slip_ends:
         fail("--full needs --duration")
     request = ForkRequest(target, slip, tuple(perm), parse_overrides(set_), duration, force=force, main=main)
     summary = run_restart(request, quiet=quiet)
-    out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
+    if as_json:
+        out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
+        return
+    for line in restart_lines(summary, target):
+        out.print(line, highlight=False, markup=False)
 
 
 @app.command()

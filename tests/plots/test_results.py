@@ -42,8 +42,21 @@ def two_perms(tmp_path_factory):
     first = gouge("restart", out, "--slip", n, "--perm", K1, "--quiet")
     assert first.exit_code == 0, first.output
     drained_hash = _sha(out / "forks" / f"slip_{n:03d}" / "drained" / "run.h5")
-    second = gouge("restart", out, "--slip", n, "--perm", K2, "--quiet")
+    second = gouge("restart", out, "--slip", n, "--perm", K2, "--quiet", "--json")
     return out, first, second, drained_hash, n
+
+
+def test_restart_prints_one_screen(two_perms):
+    """`gouge restart` prints a short result (issue 60): a line per branch, one per pair with its
+    type, S_u - S_d and the onsets it compares, and where the record is; the JSON behind --json."""
+    out, first, _, _, n = two_perms
+    lines = first.output.strip().splitlines()
+    assert 4 <= len(lines) <= 15 and "{" not in first.output, first.output
+    assert lines[0].startswith(f"slip {n} forked from t = ")
+    assert any(line.strip().startswith("drained ") for line in lines)
+    pair = next(line for line in lines if "pair drained vs perm_1e-03" in line)
+    assert "onsets" in pair or "no pair" in pair or "none" in pair
+    assert lines[-1].startswith("record: ") and "pair.json" in lines[-1]
 
 
 def test_restart_perm_adds_a_branch(two_perms):
