@@ -8,6 +8,8 @@ dimensionless number (scales of docs/physics/units.md) or an SI string such as
 
 from __future__ import annotations
 
+import sys
+
 import copy
 import math
 from pathlib import Path
@@ -456,7 +458,8 @@ def find_config(name: str | Path) -> Path:
     kind = not_a_file(path)
     if kind is not None:
         raise ConfigError(f"config file {str(path)!r} is {kind}, not a file; give a YAML config file")
-    roots = [Path.cwd() / "configs", Path(__file__).resolve().parents[1] / "configs"]
+    roots = [Path.cwd() / "configs", Path(__file__).resolve().parents[1] / "configs",
+             Path(sys.prefix) / "share" / "gouge" / "configs"]          # (a wheel's: pyproject data-files)
     for root in roots:
         for candidate in (root / f"{name}.yaml", root / "thesis" / f"{name}.yaml", root / f"{name}"):
             if candidate.is_file():

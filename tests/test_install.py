@@ -111,3 +111,8 @@ def test_wheel_installs_into_a_clean_venv_and_runs_a_tiny_scene(tmp_path):
                             str(tmp_path / "run")], cwd=tmp_path, capture_output=True, text=True, env=env)
     assert check.returncode == 0 and check.stdout.startswith("finished"), check.stdout + check.stderr
     assert str(ROOT) not in check.stdout
+    # the named scenes travel with the wheel (issue 60: "scene names are looked up in .../site-packages/configs")
+    demo = subprocess.run([str(venv / "bin" / "gouge"), "run", "demo", "--set", "run.duration=20000", "--out",
+                           str(tmp_path / "demo"), "--quiet"], cwd=tmp_path, capture_output=True, text=True, env=env,
+                          timeout=1200)
+    assert demo.returncode == 0, demo.stdout + demo.stderr
