@@ -33,6 +33,8 @@ Errors are gouge_cli.errors exceptions with the CLI's message; ``exc.exit_code``
 
 from __future__ import annotations
 
+import re
+
 import json
 import math
 from pathlib import Path
@@ -81,8 +83,13 @@ class _SeriesArray(BackendArray):
         return np.asarray(read_series_items(self.h5_path, self.name, key), dtype=np.float64)
 
 
-def _attrs(unit: str, description: str) -> dict:
-    return {"units": pint_unit(unit), "long_name": description, "description": description}
+def _attrs(unit: str, description: str, name: str | None = None) -> dict:
+    """xarray attributes: units, a short ``long_name`` for plot labels (``name`` in words, or the
+    description up to its first comma or parenthesis, at most 40 characters) and the whole sentence
+    as ``description``."""
+    short = name.replace("_", " ") if name else re.split(r"[,(;]", description, maxsplit=1)[0].strip()
+    return {"units": pint_unit(unit), "long_name": short if len(short) <= 40 else short[:39] + "…",
+            "description": description}
 
 
 def to_si(obj, scales: dict, V_s: float = _NAN, sigma: float = _NAN, m_b: float = _NAN):
@@ -259,7 +266,7 @@ class Run:
             if name == "time":
                 continue
             lazy = indexing.LazilyIndexedArray(_SeriesArray(self.info.h5_path, name, n))
-            data[name] = xr.Variable(("time",), lazy, attrs=_attrs(unit, description))
+            data[name] = xr.Variable(("time",), lazy, attrs=_attrs(unit, description, name))
         info = self.info
         attrs = {"run": str(info.run_dir), "status": info.status, "k": info.k, "V_s": info.V_s,
                  "sigma": info.sigma, "m_b": info.m_b, "permeability": info.permeability or _NAN,
@@ -358,7 +365,7 @@ class Run:
                 dims = ("x_cell", "z_cell")
             else:
                 dims = ("grain",)
-            data[key] = xr.Variable(dims, value, attrs=_attrs(unit, description))
+            data[key] = xr.Variable(dims, value, attrs=_attrs(unit, description, key))
         if grid is not None:
             nx, nz = snap["pressure"].shape
             (x0, z0), (dx, dz) = grid["origin"], grid["spacing"]
