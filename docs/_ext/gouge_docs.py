@@ -222,8 +222,9 @@ def file_layout(name: str) -> str:
     if name == "campaign-results":
         from gouge_cli.workflows import campaign_results as cr
 
-        return (_literal(textwrap.dedent(cr.__doc__.split("\n", 1)[1])) + "\nFields of each record:\n\n"
-                + _literal(textwrap.dedent(cr.PieceRecord.__doc__.split("\n", 1)[1])) + "\n")
+        return (_roles_to_literals(textwrap.dedent(cr.__doc__.split("\n", 1)[1])) + "\n\nFields of each record "
+                "(``PieceRecord``; the JSON adds ``digest`` and ``schema``)::\n\n"
+                + textwrap.indent(textwrap.dedent(cr.PieceRecord.__doc__.split("\n", 1)[1]).strip("\n"), "    ") + "\n")
     raise ValueError(f"gouge-file: unknown layout {name!r}")
 
 
