@@ -27,7 +27,7 @@ PAIR_COLUMNS = (
     "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_verdict",
     "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "deborah_drained",
     "drained_dilation", "undrained_dilation", "pressure_peak", "undrained_pressure", "diffusion_time",
-    "onset_window", "note", "status",
+    "onset_window", "pressure_from_rate", "note", "status",
 )
 FAILED = "failed"       # type and base_type of a pair whose branch failed (status 'failed: <physics message>')
 
@@ -118,6 +118,29 @@ def pressure_before(time, pressure_mean, onset: float) -> float:
     i = max(1, min(int(np.searchsorted(time, onset, side="right")), len(pressure_mean)))
     window = pressure_mean[:i][np.isfinite(pressure_mean[:i])]
     return float(window[np.argmax(np.abs(window))]) if window.size else _NAN
+
+
+def rate_pressure(time, thickness, pressure_mean, onset: float, diffusion_time: float,
+                  beta_phi: float) -> float:
+    """The layer-mean pressure that the undrained branch's own strain rate sustains where the
+    pressure drains faster than it builds, at the time of the peak (pressure_before):
+    -(t_D / 3) eps_v' / (beta phi) [E] (the mean of the 1D diffusion equation with a uniform
+    source, drained at both walls, in its quasi-steady limit), eps_v' = h'/h from a centred
+    difference over max(t_D, 5 samples). NaN without an onset, a fluid or a thickness."""
+    if pressure_mean is None or thickness is None or not (np.isfinite(onset) and diffusion_time > 0 and beta_phi > 0):
+        return _NAN
+    n = max(1, min(int(np.searchsorted(time, onset, side="right")), len(pressure_mean)))
+    window = np.where(np.isfinite(pressure_mean[:n]), np.abs(pressure_mean[:n]), -1.0)
+    i = int(np.argmax(window))
+    if window[i] < 0:
+        return _NAN
+    half = max(0.5 * diffusion_time, 2.5 * float(np.median(np.diff(time))) if len(time) > 1 else 0.0)
+    a = int(np.searchsorted(time, time[i] - half, side="left"))
+    b = min(int(np.searchsorted(time, time[i] + half, side="right")) - 1, n - 1)
+    if b <= a:
+        return _NAN
+    rate = (thickness[b] - thickness[a]) / (time[b] - time[a]) / thickness[i]
+    return float(-diffusion_time / 3.0 * rate / beta_phi)
 
 
 def pair_definition(info: RunInfo, main: str = "first") -> PairDefinition:
@@ -234,7 +257,9 @@ def _mechanism(drained: dict, undrained: dict, d_main, u_main, uinfo: RunInfo, l
     pressure_peak (the undrained layer-mean pressure of largest magnitude before its onset [E]),
     undrained_pressure (|eps_v| / (beta phi) of the drained twin's strain, phi the porosity at the
     fork [E]), diffusion_time (t_D = l^2 / D [t0], l half the layer thickness) and onset_window
-    (t_w, the fork to the undrained onset [t0])."""
+    (t_w, the fork to the undrained onset [t0]); pressure_from_rate (:func:`rate_pressure`: what
+    the undrained branch's own strain rate at the peak sustains where the pressure drains quickly
+    [E])."""
     fork_time = float(undrained["time"][0]) if undrained["time"] is not None and len(undrained["time"]) else _NAN
     d_onset = float(d_main.onset_time) if d_main is not None else _NAN
     u_onset = float(u_main.onset_time) if u_main is not None else _NAN
@@ -245,11 +270,13 @@ def _mechanism(drained: dict, undrained: dict, d_main, u_main, uinfo: RunInfo, l
     por = undrained["porosity"]
     phi = float(por[0]) if por is not None and len(por) else _NAN
     half = 0.5 * float(undrained["thickness"][0]) if undrained["thickness"] is not None else _NAN
+    t_d = l_over_d * half if np.isfinite(l_over_d) else _NAN
     return {"drained_dilation": eps_d, "undrained_dilation": eps_u,
             "pressure_peak": pressure_before(undrained["time"], undrained["pressure_mean"], u_onset),
             "undrained_pressure": abs(eps_d) / (beta * phi) if beta * phi > 0 else _NAN,
-            "diffusion_time": l_over_d * half if np.isfinite(l_over_d) else _NAN,
-            "onset_window": u_onset - fork_time}
+            "diffusion_time": t_d, "onset_window": u_onset - fork_time,
+            "pressure_from_rate": rate_pressure(undrained["time"], undrained["thickness"], undrained["pressure_mean"],
+                                                u_onset, t_d, beta * phi)}
 
 
 def _slip_number(fork_dir: Path) -> int:

@@ -18,6 +18,11 @@ so holds more shear stress. Two predictions follow, each checked per pair of a c
   accelerates toward the onset leaves less time to drain and lies above the curve (at most 1).
   Scatter beyond a factor ~3 points at the coupling (the pressure is not the one of the mean
   strain) or at a strain localised in a band (the mean strain understates it).
+* **Rate.** Where t_D << t_w the pressure drains as fast as it builds, and the pressure equation
+  ties it to the strain rate of the moment: P = -(t_D / 3) eps_v' / (beta phi) (the same
+  equation's quasi-steady limit), with eps_v' the undrained branch's own rate at the time of
+  its peak (``pressure_from_rate``). :func:`rate_point` compares the two: the sign, and the
+  ratio, which is 1 where the layer-mean strain rate is what drives the pressure.
 
 :func:`mechanism_rows` gives both per permeability, per seed and pooled, with Wilson (per pair)
 and seed-level (``analysis.seedboot``) intervals for the sign fraction.
@@ -32,7 +37,8 @@ import numpy as np
 from .regime import _flag, _num, wilson
 from .seedboot import seed_fraction
 
-__all__ = ["layer_response", "sign_outcome", "collapse_point", "mechanism_rows", "MECHANISM_COLUMNS", "SCATTER_FACTOR"]
+__all__ = ["layer_response", "sign_outcome", "collapse_point", "rate_point", "rate_agrees", "mechanism_rows",
+           "MECHANISM_COLUMNS", "SCATTER_FACTOR"]
 
 _NAN = float("nan")
 #: the factor around :func:`layer_response` within which a pair counts as on the curve
@@ -70,6 +76,17 @@ def collapse_point(row: dict) -> tuple[float, float]:
     return (x, y) if x > 0 and math.isfinite(x) and math.isfinite(y) and y > 0 else (_NAN, _NAN)
 
 
+def rate_point(row: dict) -> tuple[float, float]:
+    """(|P predicted from the strain rate|, |P measured|) [E] of a pair, and NaNs where missing;
+    :func:`rate_agrees` says whether their signs agree."""
+    pred, meas = _num(row, "pressure_from_rate"), _num(row, "pressure_peak")
+    return (abs(pred), abs(meas)) if math.isfinite(pred) and math.isfinite(meas) and pred and meas else (_NAN, _NAN)
+
+
+def rate_agrees(row: dict) -> bool:
+    return _num(row, "pressure_from_rate") * _num(row, "pressure_peak") > 0
+
+
 def _group(rows: list[dict]) -> dict:
     outcomes = [sign_outcome(r) for r in rows]
     counted = [v for v in outcomes if math.isfinite(v)]
@@ -89,7 +106,21 @@ def _group(rows: list[dict]) -> dict:
             "collapse_within_factor": float(np.mean((ratio <= SCATTER_FACTOR) & (ratio >= 1 / SCATTER_FACTOR)))
             if ratio.size else _NAN,
             "collapse_log10_p10": float(np.quantile(log_r, 0.1)) if ratio.size else _NAN,
-            "collapse_log10_p90": float(np.quantile(log_r, 0.9)) if ratio.size else _NAN}
+            "collapse_log10_p90": float(np.quantile(log_r, 0.9)) if ratio.size else _NAN,
+            **_rate_stats(rows)}
+
+
+def _rate_stats(rows: list[dict]) -> dict:
+    """The rate test over a group: pairs with both pressures, those whose signs agree, the median
+    measured / predicted and the share within SCATTER_FACTOR (same sign)."""
+    pts = [(r, *rate_point(r)) for r in rows]
+    pts = [(r, p, m) for r, p, m in pts if math.isfinite(p)]
+    ratio = np.array([m / p for _, p, m in pts]) if pts else np.array([])
+    agree = np.array([rate_agrees(r) for r, _, _ in pts], dtype=bool)
+    within = (ratio <= SCATTER_FACTOR) & (ratio >= 1 / SCATTER_FACTOR) & agree if ratio.size else ratio
+    return {"n_rate": int(ratio.size), "rate_sign_agrees": int(agree.sum()) if ratio.size else 0,
+            "rate_ratio_median": float(np.median(ratio)) if ratio.size else _NAN,
+            "rate_within_factor": float(np.mean(within)) if ratio.size else _NAN}
 
 
 def mechanism_rows(pair_rows: list[dict], seed_key: str = "seed") -> list[dict]:

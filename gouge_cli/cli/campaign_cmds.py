@@ -24,6 +24,8 @@ def register(app: typer.Typer):
         status: bool = typer.Option(False, "--status", help="show what is done, running, failed and left; run nothing"),
         tables: bool = typer.Option(False, "--tables", help="write the tables and figures from the results records; "
                                     "run nothing"),
+        reanalyse: bool = typer.Option(False, "--reanalyse", help="with --tables: first analyse again, with this "
+                                       "gouge, every recorded piece whose run folder is here, and rewrite its record"),
         merge: Optional[Path] = typer.Option(None, "--merge", help="copy in the results records of another results "
                                              "folder of this spec (refused, naming the key, where settings differ); "
                                              "run nothing"),
@@ -61,8 +63,8 @@ def register(app: typer.Typer):
                 out.print(f"{len(written)} results records copied from {merge} into {results_root(loaded)}; "
                           f"`gouge campaign {spec} --tables` writes the tables", highlight=False)
                 return
-            if tables:
-                report = run_campaign(spec, max_points=max_points, tables_only=True,
+            if tables or reanalyse:
+                report = run_campaign(spec, max_points=max_points, tables_only=True, reanalysed=reanalyse,
                                       log=lambda m: out.print(m, highlight=False))
                 for line in status_lines(report.survey):
                     out.print(line, highlight=False)

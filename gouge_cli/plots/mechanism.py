@@ -5,8 +5,11 @@ the fork to the onset, one colour per permeability; the quadrants where the sign
 (dilation and Type II, compaction and Type I) are shaded, and the legend gives each
 permeability's fraction predicted with its seed-level interval.
 
-:func:`collapse_figure`: peak |P| / (|eps_v| / (beta phi)) against t_D / t_w (log-log), one colour
-per permeability, with the drained layer's response to a steady strain rate (analysis.mechanism.layer_response) and the factor-3 band around it.
+:func:`collapse_figure`: (a) peak |P| / (|eps_v| / (beta phi)) against t_D / t_w (log-log), one
+colour per permeability, with the drained layer's response to a steady strain rate
+(analysis.mechanism.layer_response) and the factor-3 band around it; (b) the measured peak |P|
+against the pressure the undrained branch's own strain rate sustains (the rate test), with the
+1:1 line and the same band.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..analysis.mechanism import SCATTER_FACTOR, collapse_point, layer_response
+from ..analysis.mechanism import SCATTER_FACTOR, collapse_point, layer_response, rate_agrees, rate_point
 from ..analysis.regime import _flag, _num
 from ..io.layout import perm_text
 from .series import branch_colors
@@ -74,7 +77,8 @@ def sign_figure(pair_rows: list[dict], mech_rows: list[dict], path: Path, title:
 def collapse_figure(pair_rows: list[dict], mech_rows: list[dict], path: Path, title: str = "") -> Path:
     groups = _by_perm(pair_rows)
     colors = branch_colors(list(groups))
-    fig, ax = plt.subplots(figsize=(7.2, 5.0), dpi=DPI)
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(13.0, 5.0), dpi=DPI)
+    _rate_panel(ax2, groups, colors, mech_rows)
     xs = []
     for perm, rows in groups.items():
         pts = np.array([collapse_point(r) for r in rows], dtype=float).reshape(-1, 2)
@@ -95,9 +99,42 @@ def collapse_figure(pair_rows: list[dict], mech_rows: list[dict], path: Path, ti
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("t_D / t_w  (diffusion time l²/D over fork → undrained onset)")
-    ax.set_ylabel("peak |P| / (|ε_v| / (β φ))")
+    ax.set_ylabel("peak |P| / (|ε_v| / (β φ)), ε_v the drained twin's, fork → onset")
     ax.legend(fontsize=7, loc="lower right")
     ax.grid(True, which="both", color="0.92", lw=0.6)
+    ax.set_title("(a) the drained twin's mean strain over the window", fontsize=9, loc="left")
     if title:
-        ax.set_title(title, fontsize=9, loc="left")
+        fig.suptitle(title, fontsize=10)
     return save(fig, path)
+
+
+def _rate_panel(ax, groups: dict, colors: dict, mech_rows: list[dict]):
+    """Measured peak |P| against the undrained branch's own strain rate's quasi-steady pressure;
+    filled where the signs agree, open where not."""
+    lo, hi = np.inf, 0.0
+    for perm, rows in groups.items():
+        pts = [(rate_point(r), rate_agrees(r)) for r in rows]
+        pts = [(p, a) for p, a in pts if np.isfinite(p[0])]
+        if not pts:
+            continue
+        xy = np.array([p for p, _ in pts])
+        agree = np.array([a for _, a in pts], dtype=bool)
+        lo, hi = min(lo, xy.min()), max(hi, xy.max())
+        m = _pooled(mech_rows, perm)
+        label = f"κ_c = {perm_text(perm)} d²"
+        if m is not None and m["n_rate"]:
+            label += (f": same sign {m['rate_sign_agrees']}/{m['n_rate']}, median measured / predicted "
+                      f"{m['rate_ratio_median']:.2f}, {100 * m['rate_within_factor']:.0f} % within ×{SCATTER_FACTOR:g}")
+        ax.scatter(xy[agree, 0], xy[agree, 1], s=16, color=colors[perm], alpha=0.85, label=label)
+        ax.scatter(xy[~agree, 0], xy[~agree, 1], s=16, facecolors="none", edgecolors=colors[perm], alpha=0.85)
+    if hi > 0:
+        x = np.array([lo / 3, hi * 3])
+        ax.plot(x, x, color="k", lw=1.0, label="measured = predicted")
+        ax.fill_between(x, x / SCATTER_FACTOR, x * SCATTER_FACTOR, color="0.5", alpha=0.12, lw=0)
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("|P| predicted: (t_D / 3) |ε_v'| / (β φ), the undrained branch's rate at the peak  [E]")
+    ax.set_ylabel("peak |P| measured, fork → undrained onset  [E]")
+    ax.legend(fontsize=7, loc="upper left")
+    ax.grid(True, which="both", color="0.92", lw=0.6)
+    ax.set_title("(b) the strain rate of the moment (open: signs differ)", fontsize=9, loc="left")

@@ -233,8 +233,6 @@ def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration:
     variant (name, fork overrides): the first in the point's forks/, the others in
     variants/<name>/forks/ with the first's drained branch. Writes the fork's results record
     (one pair row per variant and permeability) to ``target``."""
-    from ..analysis.campaign_table import fork_rows
-    from ..io.runfile import RunReader
     from .fork import ForkRequest, run_fork
     from .pairs import write_pair_json
 
@@ -242,7 +240,7 @@ def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration:
     chosen = variants or [(None, {})]
 
     def body():
-        statuses, pairs, hashes = {}, [], {}
+        statuses = {}
         base_fork = RunLayout(run_dir).fork(slip).root
         for i, (name, overrides) in enumerate(chosen):
             vdir = run_dir if i == 0 else variant_dir(run_dir, name)
@@ -254,19 +252,34 @@ def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration:
             write_pair_json(fork)
             prefix = f"{name}/" if name else ""
             statuses.update({prefix + k: b["status"] for k, b in summary["branches"].items()})
-            for row in fork_rows(fork, permeabilities):
-                pairs.append({"variant": name, **row} if name else row)
-            for branch in sorted(fork.iterdir()):
-                if RunLayout(branch).run_file.is_file() and not (i and branch.is_symlink()):
-                    with RunReader(branch) as reader:
-                        hashes[prefix + branch.name] = str(reader.h5.attrs.get("final_state_hash", ""))
-        return {"branches": statuses, "pairs": pairs, "final_state_hashes": hashes}
+        return {"branches": statuses, **fork_result(run_dir, slip, permeabilities, variants)}
 
     def record(result, wall):
         if target is not None:
             target.write(fork_piece(slip), settings, {"slip": slip, **result}, wall)
 
     return _task(run_dir / "ledger" / f"{fork_piece(slip)}.json", settings, body, record)
+
+
+def fork_result(run_dir: Path, slip: int, permeabilities: list[float],
+                variants: list[tuple[str, dict]] | None) -> dict:
+    """The results record's pairs and branch hashes of slip ``slip``'s forks (every variant), read
+    from the run folder: ``{"pairs": [pair rows, with 'variant' where the study has variants],
+    "final_state_hashes": {variant/branch: hash}}`` (a variant's linked drained branch once)."""
+    from ..analysis.campaign_table import fork_rows
+    from ..io.runfile import RunReader
+
+    pairs, hashes = [], {}
+    for i, (name, _) in enumerate(variants or [(None, {})]):
+        fork = RunLayout(run_dir if i == 0 else Path(run_dir) / VARIANTS / name).fork(slip).root
+        prefix = f"{name}/" if name else ""
+        for row in fork_rows(fork, permeabilities):
+            pairs.append({"variant": name, **row} if name else row)
+        for branch in sorted(fork.iterdir()):
+            if RunLayout(branch).run_file.is_file() and not (i and branch.is_symlink()):
+                with RunReader(branch) as reader:
+                    hashes[prefix + branch.name] = str(reader.h5.attrs.get("final_state_hash", ""))
+    return {"pairs": pairs, "final_state_hashes": hashes}
 
 
 class Action:
@@ -504,14 +517,15 @@ class CampaignReport:
 
 def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = False,
                  retry_failed: bool = False, max_points: int | None = None, tables_only: bool = False,
-                 log=print) -> CampaignReport:
+                 reanalysed: bool = False, log=print) -> CampaignReport:
     """Run what is left of a campaign on Dask and write its table and figures.
 
     ``client``: a ``distributed.Client`` to use; otherwise one is opened for ``cluster``
     (:class:`~gouge_cli.workflows.executors.ClusterOptions`, default a LocalCluster) only when
     something is left to run. Raises :class:`CampaignConflict` when results exist with other
     settings and ``force`` is not given. ``max_points``: overrides the spec's limit on the sweep's size.
-    ``tables_only``: run nothing; write the tables and figures from the results records.
+    ``tables_only``: run nothing; write the tables and figures from the results records
+    (``reanalysed``: after :func:`reanalyse`).
     """
     from .executors import ClusterOptions, open_client
 
@@ -521,6 +535,9 @@ def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = Fa
     s = survey(spec, spec_path)
     if tables_only:
         _backfill(s, log)
+        if reanalysed:
+            reanalyse(s, log)
+            s = survey(spec, spec_path)
         return CampaignReport(s, 0, {}, time.perf_counter() - t_start, write_results(s, log))
     conflicts = s.by_state("conflict")
     if conflicts and not force:
@@ -572,19 +589,44 @@ def _backfill(s: Survey, log):
             result = {"values": target.values, "resumed": ps.record.get("result", {}).get("resumed", False),
                       **run_result(pdir)}
         else:
-            from ..analysis.campaign_table import fork_rows
-
-            fork = RunLayout(pdir).fork(ps.piece.slip).root
-            if not fork.is_dir():
+            if not RunLayout(pdir).fork(ps.piece.slip).root.is_dir():
                 continue
             result = {"slip": ps.piece.slip, "branches": ps.record["result"].get("branches", {}),
-                      "pairs": fork_rows(fork, list(s.spec.study.permeabilities)), "final_state_hashes": {}}
+                      **fork_result(pdir, ps.piece.slip, list(s.spec.study.permeabilities), _variants(s.spec))}
         record = PieceRecord(s.spec.name, point.name, ps.piece.label, ps.record["settings"], result,
                              wall_seconds=float(ps.record.get("result", {}).get("wall_seconds", 0.0)),
                              finished=float(ps.record.get("finished", time.time())))
         ps.result = record
         s.results.write(record)
         log(f"results record written for {point.name} {ps.piece.label} (from its run folder)")
+
+
+def reanalyse(s: Survey, log=print) -> int:
+    """Rewrite the results of every recorded piece whose run folder is on this machine with this
+    gouge's analysis (a run's row and transient slips, a fork's pair rows), keeping the settings,
+    machine and wall time of the run and adding ``reanalysed`` (commit, time): how a new pair
+    column reaches the records while the folders exist. Returns the number rewritten."""
+    from dataclasses import replace
+
+    from ..io import provenance
+
+    n = 0
+    for ps in s.by_state("done"):
+        pdir = s.point_dir(ps.piece.point)
+        if ps.result is None or not RunLayout(pdir).run_file.is_file():
+            continue
+        if ps.piece.kind == "run":
+            result = {**ps.result.result, **run_result(pdir)}
+        elif RunLayout(pdir).fork(ps.piece.slip).root.is_dir():
+            result = {**ps.result.result, **fork_result(pdir, ps.piece.slip, list(s.spec.study.permeabilities),
+                                                        _variants(s.spec))}
+        else:
+            continue
+        result["reanalysed"] = {"git_commit": provenance.git_commit(), "time": time.time()}
+        s.results.write(replace(ps.result, result=result))
+        n += 1
+    log(f"{n} results records analysed again from their run folders")
+    return n
 
 
 def _target(s: Survey, point: Point) -> RecordTarget:

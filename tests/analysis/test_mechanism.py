@@ -103,3 +103,21 @@ def test_pair_quantities_on_known_series():
     value, l_over_d = slip_deborah(t, de, vx, slip, 5e-3)
     assert l_over_d == pytest.approx(40.0) and value == pytest.approx(0.2)
     assert all(math.isnan(v) for v in slip_deborah(t, de, vx, None, 5e-3))
+
+
+def test_rate_pressure_is_the_quasi_steady_mean():
+    """A layer thinning at a steady rate (compaction): the quasi-steady mean pressure
+    (t_D / 3) |h'/h| / (beta phi), positive, read at the time of the pressure peak."""
+    from gouge_cli.analysis.forkpairs import rate_pressure
+    from gouge_cli.analysis.mechanism import rate_agrees, rate_point
+
+    t = np.arange(0.0, 5000.0, 20.0)
+    h = 11.0 - 2e-5 * t                                    # compaction, 2e-5 d / t0
+    p = 1e-5 * np.exp(-((t - 3000.0) / 400.0) ** 2)        # the peak at t = 3000
+    got = rate_pressure(t, h, p, onset=4000.0, diffusion_time=300.0, beta_phi=36 * 0.16)
+    want = 300.0 / 3.0 * 2e-5 / (11.0 - 2e-5 * 3000.0) / (36 * 0.16)
+    assert got == pytest.approx(want, rel=1e-9) and got > 0
+    row = {"pressure_from_rate": got, "pressure_peak": 1e-5}
+    assert rate_point(row) == pytest.approx((got, 1e-5)) and rate_agrees(row)
+    assert not rate_agrees({"pressure_from_rate": -got, "pressure_peak": 1e-5})
+    assert math.isnan(rate_pressure(t, h, p, onset=float("nan"), diffusion_time=300.0, beta_phi=5.76))

@@ -174,3 +174,22 @@ def test_tables_only_from_results(reference, tmp_path):
         report = run_campaign(spec, tables_only=True, log=lambda m: None)
     assert report.submitted == 0 and not list((fresh / "campaigns" / "durable").glob("seed-*"))
     assert _tables(fresh) == _tables(ref_root)
+
+
+def test_reanalyse_brings_a_new_column_to_the_records(reference, tmp_path):
+    """A record written before a pair column existed gets it from its run folder (--reanalyse),
+    keeping its settings and wall time; the table then equals the reference's."""
+    ref_root, ref = reference
+    copy = tmp_path / "copy"
+    shutil.copytree(ref_root, copy, symlinks=True)
+    results = Results(copy / "campaigns" / "durable" / "results")
+    key, old = next((k, r) for k, r in results.records().items() if r.piece != "run")
+    stripped = [{k: v for k, v in row.items() if k != "pressure_from_rate"} for row in old.result["pairs"]]
+    results.write(PieceRecord(**{**old.__dict__, "result": {**old.result, "pairs": stripped}}))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(copy)
+        run_campaign(copy / "spec.yaml", tables_only=True, reanalysed=True, log=lambda m: None)
+    again = results.read(*key)
+    assert again.result["pairs"] == old.result["pairs"] and again.wall_seconds == old.wall_seconds
+    assert again.digest == old.digest and "reanalysed" in again.result
+    assert _tables(copy) == _tables(ref_root)
