@@ -96,13 +96,9 @@ def collapse_figure(pair_rows: list[dict], mech_rows: list[dict], path: Path, ti
     ax.plot(x, ref, color="k", lw=1.2, label="layer drained at both walls, steady strain rate over t_w")
     ax.fill_between(x, ref / SCATTER_FACTOR, ref * SCATTER_FACTOR, color="0.5", alpha=0.12, lw=0,
                     label=f"factor {SCATTER_FACTOR:g}")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel("t_D / t_w  (diffusion time l²/D over fork → undrained onset)")
-    ax.set_ylabel("peak |P| / (|ε_v| / (β φ)), ε_v the drained twin's, fork → onset")
-    ax.legend(fontsize=7, loc="lower right")
-    ax.grid(True, which="both", color="0.92", lw=0.6)
-    ax.set_title("(a) the drained twin's mean strain over the window", fontsize=9, loc="left")
+    _log_panel(ax, "t_D / t_w  (diffusion time l²/D over fork → undrained onset)",
+               "peak |P| / (|ε_v| / (β φ)), ε_v the drained twin's, fork → onset",
+               "(a) the drained twin's mean strain over the window", "lower right")
     if title:
         fig.suptitle(title, fontsize=10)
     return save(fig, path)
@@ -131,10 +127,16 @@ def _rate_panel(ax, groups: dict, colors: dict, mech_rows: list[dict]):
         x = np.array([lo / 3, hi * 3])
         ax.plot(x, x, color="k", lw=1.0, label="measured = predicted")
         ax.fill_between(x, x / SCATTER_FACTOR, x * SCATTER_FACTOR, color="0.5", alpha=0.12, lw=0)
+    _log_panel(ax, "|P| predicted: (t_D / 3) |ε_v'| / (β φ), the undrained branch's rate at the peak  [E]",
+               "peak |P| measured, fork → undrained onset  [E]",
+               "(b) the strain rate of the moment (open: signs differ)", "upper left")
+
+
+def _log_panel(ax, xlabel: str, ylabel: str, title: str, legend: str):
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("|P| predicted: (t_D / 3) |ε_v'| / (β φ), the undrained branch's rate at the peak  [E]")
-    ax.set_ylabel("peak |P| measured, fork → undrained onset  [E]")
-    ax.legend(fontsize=7, loc="upper left")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.legend(fontsize=7, loc=legend)
     ax.grid(True, which="both", color="0.92", lw=0.6)
-    ax.set_title("(b) the strain rate of the moment (open: signs differ)", fontsize=9, loc="left")
+    ax.set_title(title, fontsize=9, loc="left")
