@@ -67,7 +67,7 @@ def sign_figure(pair_rows: list[dict], mech_rows: list[dict], path: Path, title:
             color="#d62728")
     ax.set_xlabel("drained twin's volumetric strain, fork → onset  [-]")
     ax.set_ylabel("S_u − S_d  [τ/σ]")
-    ax.legend(fontsize=7, loc="upper left")
+    ax.legend(fontsize=7, loc="best")
     ax.grid(True, color="0.92", lw=0.6)
     if title:
         ax.set_title(title, fontsize=9, loc="left")
