@@ -232,25 +232,27 @@ class RunFile:
         # raises there (handled: the file closed on its reserve) and not later, when a
         # dataset handle is freed, where HDF5's error is ignored and the file's state is lost
         # (a segmentation fault followed)
-        self.h5 = h5py.File(self.path, mode, rdcc_nbytes=0)
-        if mode == "w":
-            a = self.h5.attrs
-            a["config"] = dump_config(config)
-            a["scales"] = json.dumps(config.scales.scales().as_dict())
-            a["version"] = __version__
-            a["seed"] = config.seed
-            a["dt"] = dt
-            a["status"] = "running"
-            a["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
-            a["units"] = "dimensionless: length d, stress E, time t0 = d/sqrt(E/rho_s); see scales"
-            a["provenance"] = provenance.dumps(provenance.collect(threads))
-            for key, value in (extra_attrs or {}).items():
-                a[key] = value
-            seal(self.h5.create_group("series"))
-            seal(self.h5.create_group("snapshots"))
+        if mode == "w":     # created whole under a temporary name: no moment leaves a half-written run.h5
+            with temporary(self.path) as tmp, h5py.File(tmp, "w", rdcc_nbytes=0) as h5:
+                a = h5.attrs
+                a["config"] = dump_config(config)
+                a["scales"] = json.dumps(config.scales.scales().as_dict())
+                a["version"] = __version__
+                a["seed"] = config.seed
+                a["dt"] = dt
+                a["status"] = "running"
+                a["created"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+                a["units"] = "dimensionless: length d, stress E, time t0 = d/sqrt(E/rho_s); see scales"
+                a["provenance"] = provenance.dumps(provenance.collect(threads))
+                for key, value in (extra_attrs or {}).items():
+                    a[key] = value
+                seal(h5.create_group("series"))
+                seal(h5.create_group("snapshots"))
+                seal(h5)
+            self.h5 = h5py.File(self.path, "a", rdcc_nbytes=0)
         else:
-            self.h5.attrs["provenance_resumed"] = provenance.dumps(provenance.collect(threads))
-        seal(self.h5)
+            self.h5 = h5py.File(self.path, mode, rdcc_nbytes=0)
+            self.set_attr("provenance_resumed", provenance.dumps(provenance.collect(threads)))
 
     def append(self, row: dict):
         self._rows.append(row)
@@ -396,8 +398,42 @@ class RunFile:
         self.h5.flush()
 
     def set_attr(self, key: str, value):
-        self.h5.attrs[key] = value
-        seal(self.h5)
+        self.set_attrs({key: value})
+
+    def set_attrs(self, attrs: dict):
+        """Root attributes, written so that a kill at any moment leaves run.h5 whole: the rows
+        flushed, the attributes written into a copy of the file renamed over it once complete
+        (HDF5 grows the root's header for a new attribute, and a kill between those writes left
+        the file unopenable), then the file reopened to append. In place where the file is itself
+        a temporary (``safe_close=False``) or the disk has no room for the copy."""
+        if self.safe_close:
+            self.flush(room=False)
+            self.h5.flush()
+            self.h5.close()
+            try:
+                self._in_a_copy(lambda h5: self._write_attrs(h5, attrs))
+                return
+            except (OSError, RuntimeError) as exc:
+                if not (isinstance(exc, NoSpaceError) or is_no_space(exc)):
+                    raise
+            finally:
+                self.h5 = h5py.File(self.path, "a", rdcc_nbytes=0)
+        self._write_attrs(self.h5, attrs)
+
+    @staticmethod
+    def _write_attrs(h5, attrs: dict):
+        for key, value in attrs.items():
+            h5.attrs[key] = value
+        seal(h5)
+
+    def _in_a_copy(self, write):
+        """``write(h5)`` into a copy of the closed run file, renamed over it when complete."""
+        with temporary(self.path) as tmp:
+            require_space(self.path.parent, self.path.stat().st_size + RESERVE_BYTES, "a copy of the run file")
+            shutil.copyfile(self.path, tmp)
+            with h5py.File(tmp, "r+", rdcc_nbytes=0) as h5:
+                write(h5)
+            _trim(tmp)
 
     def close(self, status: str = "finished", final_state_hash: str | None = None, full_disk: bool = False):
         """Write the final attributes and close. ``full_disk``: the rows not yet written are
@@ -443,12 +479,7 @@ class RunFile:
         self.h5.flush()
         self.h5.close()
         try:
-            with temporary(self.path) as tmp:
-                require_space(self.path.parent, self.path.stat().st_size + RESERVE_BYTES, "the run file's close")
-                shutil.copyfile(self.path, tmp)
-                with h5py.File(tmp, "r+", rdcc_nbytes=0) as h5:
-                    self._closing_attrs(h5, status, final_state_hash)
-                _trim(tmp)
+            self._in_a_copy(lambda h5: self._closing_attrs(h5, status, final_state_hash))
         except (OSError, RuntimeError) as exc:
             if not (isinstance(exc, NoSpaceError) or is_no_space(exc)):
                 raise

@@ -61,8 +61,7 @@ def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=
                       file=sys.stderr, flush=True)
             if sim.gpu_fallback:
                 print(f"note: {sim.gpu_fallback}", file=sys.stderr, flush=True)
-            writer.set_attr("load_start_time", sim.state.time)
-            writer.set_attr("end_time", sim.state.time + config.run.duration)
+            writer.set_attrs({"load_start_time": sim.state.time, "end_time": sim.state.time + config.run.duration})
             writer.append(sim.observe())
             writer.snapshot(sim)
             resume_from = None
