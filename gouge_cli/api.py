@@ -717,7 +717,7 @@ def open_campaign(spec_or_folder: Path | str) -> pd.DataFrame:
         >>> table = gouge.open_campaign("runs/sweep.yaml")  # doctest: +SKIP
         >>> table.groupby("loading.normal_stress")["stress_drop_mean"].mean()  # doctest: +SKIP
     """
-    from .workflows.campaign import survey, table_rows
+    from .workflows.campaign import backfill, survey, table_rows
     from .workflows.campaign_spec import load_spec
 
     path = Path(spec_or_folder)
@@ -729,6 +729,7 @@ def open_campaign(spec_or_folder: Path | str) -> pd.DataFrame:
     else:
         spec_path, spec = path, load_spec(path)
     s = survey(spec, spec_path)
+    backfill(s, log=lambda m: None)        # a campaign run before results records: written from its folders
     rows = table_rows(s)
     seeds = {p.name: p.config.seed for p in s.points}
     for row in rows:

@@ -534,7 +534,7 @@ def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = Fa
     spec = load_spec(spec_path, max_points)
     s = survey(spec, spec_path)
     if tables_only:
-        _backfill(s, log)
+        backfill(s, log)
         if reanalysed:
             reanalyse(s, log)
             s = survey(spec, spec_path)
@@ -555,7 +555,7 @@ def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = Fa
         if not (s.point_dir(point.name) / "point.yaml").is_file() or any(
                 c.piece.point == point.name and c.piece.kind == "run" for c in conflicts):
             _write_point(s, point)
-    _backfill(s, log)
+    backfill(s, log)
     todo_states = {"left", "interrupted", "conflict"} | ({"failed"} if retry_failed else set())
     todo = [p for p in s.pieces if p.state in todo_states]
     busy = s.by_state("running")
@@ -574,7 +574,7 @@ def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = Fa
     return CampaignReport(s, sum(finished.values()), finished, time.perf_counter() - t_start, outputs)
 
 
-def _backfill(s: Survey, log):
+def backfill(s: Survey, log=print):
     """Write the missing results records of pieces whose ledger says done (a campaign run
     before records existed), from their run folders."""
     for ps in s.by_state("done"):
@@ -833,5 +833,5 @@ def _value(config: Config, key: str) -> float:
     return node
 
 
-__all__ = ["Piece", "Survey", "advance_run", "advance_fork", "survey", "status_lines", "results_root",
+__all__ = ["Piece", "Survey", "advance_run", "advance_fork", "survey", "status_lines", "results_root", "backfill",
            "run_campaign", "write_results", "table_rows", "done_points", "run_settings", "load_spec"]

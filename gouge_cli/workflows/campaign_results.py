@@ -90,7 +90,8 @@ class PieceRecord:
         return settings_digest(self.settings)
 
     def to_json(self) -> str:
-        return json.dumps({**asdict(self), "digest": self.digest}, indent=1, sort_keys=True, allow_nan=True)
+        return json.dumps({**asdict(self), "digest": self.digest}, indent=1, allow_nan=True)     # (key order kept:
+        # the table's columns follow it, read back or not)
 
     @classmethod
     def from_json(cls, text: str, where: Path | str = "") -> PieceRecord:

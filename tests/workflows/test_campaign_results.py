@@ -193,3 +193,17 @@ def test_reanalyse_brings_a_new_column_to_the_records(reference, tmp_path):
     assert again.result["pairs"] == old.result["pairs"] and again.wall_seconds == old.wall_seconds
     assert again.digest == old.digest and "reanalysed" in again.result
     assert _tables(copy) == _tables(ref_root)
+
+
+def test_a_campaign_without_records_gets_them_from_its_folders(reference, tmp_path):
+    """A campaign folder made before results records existed (ledgers and run folders only): the
+    records are written from its folders (backfill) and the tables are the same."""
+    ref_root, _ = reference
+    copy = tmp_path / "old"
+    shutil.copytree(ref_root, copy, symlinks=True)
+    shutil.rmtree(copy / "campaigns" / "durable" / "results")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(copy)
+        report = run_campaign(copy / "spec.yaml", tables_only=True, log=lambda m: None)
+    assert len(report.survey.results.records()) == len(Results(ref_root / "campaigns" / "durable" / "results").records())
+    assert _tables(copy) == _tables(ref_root)
