@@ -100,8 +100,7 @@ def regime_figure(rows: list[dict], thesis: ThesisPoint | None, path: Path, titl
             ax.set_ylabel("fraction of pairs" if i == 0 else "share of pairs / ratio")
     slip_de = any(abscissa(r) == "deborah_drained" for r in rows)
     for ax in axes[1]:
-        ax.set_xlabel("De = l u₀ / D of the slip (u₀: drained twin's peak wall speed)" if slip_de
-                      else "De = l u₀ / D (undrained, largest in the slip)")
+        ax.set_xlabel("De of the slip (u₀: drained peak)" if slip_de else "De = l u₀ / D (undrained, largest in the slip)")
     axes.flat[0].legend(fontsize=6.5, loc="upper left")
     n_seeds = len({r["seed"] for r in rows if r["seed"] != "all"}) or 1
     note = (f"{n_seeds} seed(s); pooled ● with 95 % intervals: thick = seed level, thin = per pair; "
