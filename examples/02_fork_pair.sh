@@ -12,11 +12,15 @@ test -f runs/first/run.h5 || gouge run configs/tutorial.yaml --out runs/first --
 # Fork slip 2 with an undrained branch at kappa_c = 1e-5 d^2 (the thesis's "Permeability 1e-5";
 # {doc}`../physics/fluid`). The drained branch is the dry model: it retraces the loading run's slip
 # bit for bit. Each branch stops when its first slip ends. With `--perm`, the fork also writes
-# `pair.json`, the verdict on the pair; the command prints a summary of both as JSON, of which
-# the cell shows the pair's entry.
+# `pair.json`, the verdict on the pair. The command prints one line per branch (its first slip's
+# onset, strength, stress drop and peak velocity) and one per pair (its type, S_u - S_d and the two
+# onsets it compares):
 # %%
-gouge restart runs/first --slip 2 --perm 1e-5 \
-  | python -c "import json, sys; r = json.load(sys.stdin); print(json.dumps(r['pair']['pairs'][0], indent=1)[:1500])"
+gouge restart runs/first --slip 2 --perm 1e-5 --quiet
+# %% [markdown]
+# The whole record is in `pair.json` (`--json` prints it too); the pair's entry:
+# %%
+python -c "import json; r = json.load(open('runs/first/forks/slip_002/pair.json')); print(json.dumps(r['pairs'][0], indent=1)[:1500])"
 # %% [markdown]
 # ## Reading the pair
 #

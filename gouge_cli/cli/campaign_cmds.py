@@ -105,7 +105,8 @@ def register(app: typer.Typer):
         """Write the regime map (per seed, pooled, seed-level and per-pair intervals) and the onset-delay
         view from a table of pairs; nothing is simulated."""
         from ..errors import InputError
-        from ..workflows.regime_report import read_pairs, select, spec_pairs, write_groups, write_regime
+        from ..workflows.campaign import spec_pairs
+        from ..workflows.regime_report import read_pairs, select, write_groups, write_regime
 
         conditions = {}
         for item in where:

@@ -763,6 +763,19 @@ def table_rows(s: Survey) -> list[dict]:
     return rows
 
 
+def spec_pairs(spec_path: Path) -> tuple[list[dict], list[str]]:
+    """(pair rows, the keys they are never pooled over: the swept keys but the seed, and the study
+    variant) of a campaign, from its results records."""
+    spec = load_spec(spec_path)
+    rows = [r for r in table_rows(survey(spec, spec_path)) if r["kind"] == "pair"]
+    for r in rows:
+        r.setdefault("seed", "")
+    keys = [k for k in spec.swept_keys() if k != "seed"]
+    if spec.study and spec.study.variants:
+        keys.append("variant")
+    return rows, keys
+
+
 def done_points(s: Survey) -> list[str]:
     """The points whose run is recorded (the rows of table.csv and gouge_cli.api.open_campaign)."""
     return [p.piece.point for p in s.pieces if p.piece.kind == "run" and p.state == "done" and p.result is not None]
@@ -834,4 +847,5 @@ def _value(config: Config, key: str) -> float:
 
 
 __all__ = ["Piece", "Survey", "advance_run", "advance_fork", "survey", "status_lines", "results_root", "backfill",
+           "spec_pairs",
            "run_campaign", "write_results", "table_rows", "done_points", "run_settings", "load_spec"]

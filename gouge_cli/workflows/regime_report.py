@@ -13,13 +13,11 @@ from ..errors import InputError
 
 
 def read_pairs(path: str | Path) -> list[dict]:
-    """The pair rows (``kind == 'pair'``) of a campaign table, of a file of pairs, or of a campaign
-    spec (``.yaml``: from its results records alone, :func:`gouge_cli.workflows.campaign.table_rows`)."""
+    """The pair rows (``kind == 'pair'``) of a campaign table or of a file of pairs (a campaign
+    file's: :func:`gouge_cli.workflows.campaign.spec_pairs`)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file (give a campaign's table.csv, a pairs.csv or a campaign file)")
-    if path.suffix in (".yaml", ".yml"):
-        return spec_pairs(path)[0]
     with open(path, newline="") as f:
         rows = list(csv.DictReader(f))
     need = {"kind", "permeability", "base_type", "peak_velocity_ratio", "stress_drop_ratio", "deborah_max"}
@@ -27,22 +25,6 @@ def read_pairs(path: str | Path) -> list[dict]:
     if missing:
         raise InputError(f"{path}: not a pair table; missing column(s) {', '.join(sorted(missing))}")
     return [r for r in rows if r["kind"] == "pair"]
-
-
-def spec_pairs(spec_path: Path) -> tuple[list[dict], list[str]]:
-    """(pair rows, the keys they are never pooled over: the swept keys but the seed, and the study
-    variant) of a campaign, from its results records."""
-    from .campaign import survey, table_rows
-    from .campaign_spec import load_spec
-
-    spec = load_spec(spec_path)
-    rows = [r for r in table_rows(survey(spec, spec_path)) if r["kind"] == "pair"]
-    for r in rows:
-        r.setdefault("seed", "")
-    keys = [k for k in spec.swept_keys() if k != "seed"]
-    if spec.study and spec.study.variants:
-        keys.append("variant")
-    return rows, keys
 
 
 def write_groups(pair_rows: list[dict], keys: list[str], root: Path, title: str = "") -> dict:
