@@ -224,6 +224,6 @@ def pint_registry(scales: "Scales | dict", V_s: float = _NAN, sigma: float = _NA
         import pint
     except ImportError as err:
         raise ImportError("pint_registry needs pint (pip install pint); pint_definitions() gives the text") from err
-    registry = pint.UnitRegistry(on_redefinition="ignore")
+    registry = pint.UnitRegistry(on_redefinition="ignore", force_ndarray_like=True)     # (pint-xarray needs it)
     registry.load_definitions(pint_definitions(scales, V_s, sigma, m_b).splitlines())
     return registry

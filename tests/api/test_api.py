@@ -203,6 +203,12 @@ def test_pint_reads_every_unit_written_with_the_runs_definitions(forked, tmp_pat
     own.load_definitions(pint_definitions(run.scales).splitlines())
     assert own.Quantity(2.0, "E d^2").to("N").magnitude == pytest.approx(2 * run.scales["stress_pa"] * run.scales["length_m"] ** 2)
     assert "V_s" not in pint_definitions(run.scales) and math.isnan(unit_sizes(run.scales)["sigma"])
+    try:                                   # the units page's recipe, with pint-xarray where it is installed
+        import pint_xarray  # noqa: F401
+    except ImportError:
+        return
+    quantified = run.series.pint.quantify(unit_registry=registry)
+    assert quantified["wall_x"].data.units == registry.Unit("d")
 
 
 def test_slips_equal_cli_json_and_analyze_csv(forked, tmp_path):
