@@ -175,13 +175,14 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
         _refuse_interrupted(info, fork_dir)
         origin = d.time_offset()           # the branches carry the parent's loading clock on
         drained = wall_series(d)
-        d_extra = d.series(["time", "thickness"])
+        d_extra = {"time": drained.t, **d.series(["thickness"])}       # (time read once, with the wall)
         definition = pair_definition(info, main)
         for udir in undrained_dirs:
             with RunReader(udir) as u:
                 _refuse_interrupted(u.info, fork_dir)
                 undrained = wall_series(u)
-                ds = u.series(["time", "deborah", "wall_vx", "thickness", "pressure_mean", "porosity"])
+                ds = {"time": undrained.t, "wall_vx": undrained.v_wall, "porosity": undrained.porosity,
+                      **u.series(["deborah", "thickness", "pressure_mean"])}
                 uinfo = u.info
             result = classify_pair(drained, undrained, info.V_s, info.k, info.m_b, info.sigma, definition)
             failure = next((f"{name} branch {st}" for name, st in (("drained", info.status), ("undrained", uinfo.status))
