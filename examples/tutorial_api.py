@@ -99,7 +99,7 @@ print(run.slips[columns].to_string(float_format=lambda v: f"{v:.4g}"))
 
 # %% [markdown]
 # The table is indexed by the slip number; `df.attrs["units"]` gives each column's unit (`1` for a
-# dimensionless one, as pint spells it; `t0`, `d`, `E`, `v0` the scales of the docs' *Units and scales* page).
+# dimensionless one, as pint spells it; `t0`, `d_grain`, `E`, `v0` the scales of the docs' *Units and scales* page).
 # `run.to_si` converts a table or a series to SI units in one call, by the run's scales:
 
 # %%

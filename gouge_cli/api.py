@@ -20,12 +20,12 @@ Opening and reading never write a byte of a run (analyze, figures and the launch
 their commands write). A run in progress opens (its status says 'running') and shows the rows
 flushed so far.
 
-Units are the dimensionless scales of the run file (length d, stress E, time t0, velocity v0,
-density rho_s; V_s and sigma the run's loading velocity and normal stress); every variable carries
-``units``, ``long_name`` and ``description``, and a dimensionless one has ``units`` '1'. These
-scale names are not pint's own units (pint reads ``d`` as a day): convert with :func:`to_si`
-(``run.to_si(obj)``), whose results carry SI units, or quantify as they are with the run's
-registry (``ds.pint.quantify(unit_registry=run.pint_registry())``; definitions as text:
+Units are the dimensionless scales of the run file (length d, written ``d_grain``; stress E,
+time t0, velocity v0, density rho_s; V_s and sigma, written ``sigma_n``, the run's loading velocity
+and normal stress); every variable carries ``units``, ``long_name`` and ``description``, and a
+dimensionless one has ``units`` '1'. A plain pint registry refuses these names (none reads as one
+of pint's own units): convert with :func:`to_si` (``run.to_si(obj)``), whose results carry SI
+units, or quantify as they are with the run's registry (``ds.pint.quantify(unit_registry=run.pint_registry())``; definitions as text:
 ``run.pint_definitions()``, :mod:`gouge_cli.units`). Every time is counted from the start of
 loading unless its name says ``clock`` (the stored clock, which also counts the compaction).
 Errors are gouge_cli.errors exceptions with the CLI's message; ``exc.exit_code`` is the CLI's code.
@@ -95,7 +95,7 @@ def _attrs(unit: str, description: str, name: str | None = None) -> dict:
 def to_si(obj, scales: dict, V_s: float = _NAN, sigma: float = _NAN, m_b: float = _NAN):
     """A copy of ``obj`` in SI units: an xarray DataArray or Dataset (each variable and coordinate by
     its ``units`` attribute) or a pandas DataFrame (each column by ``df.attrs["units"]``). Values in
-    units made of the scales (d, E, t0, v0, rho_s; V_s, sigma and m_b of the run) are multiplied by their
+    units made of the scales (d_grain, E, t0, v0, rho_s; V_s, sigma_n and m_b of the run) are multiplied by their
     SI size and their unit becomes the SI one ('E d^3' -> 'Pa * m**3'); the rest is left as it is.
     ``scales``: :attr:`Run.scales`. :meth:`Run.to_si` and :meth:`Pair.to_si` fill in the run's."""
     sizes = unit_sizes(scales, V_s, sigma, m_b)
@@ -217,11 +217,11 @@ class Run:
         return to_si(obj, self.scales, float(self.info.V_s), float(self.info.sigma), float(self.info.m_b))
 
     def pint_definitions(self) -> str:
-        """pint definitions of this run's unit symbols (d, E, t0, ..., V_s, sigma, m_b; :mod:`gouge_cli.units`).
+        """pint definitions of this run's unit symbols (d_grain, E, t0, ..., V_s, sigma_n, m_b; :mod:`gouge_cli.units`).
 
         Example:
             >>> print(run.pint_definitions().splitlines()[1])
-            d = 0.0005 * m  # mean grain diameter (not pint's day)
+            d_grain = 0.0005 * m  # mean grain diameter d
         """
         return pint_definitions(self.scales, float(self.info.V_s), float(self.info.sigma), float(self.info.m_b))
 
@@ -341,7 +341,7 @@ class Run:
         Example:
             >>> snap = run.snapshot(-1)
             >>> snap["x"].dims, snap["x"].attrs["units"]
-            (('grain',), 'd')
+            (('grain',), 'd_grain')
         """
         if not self._snapshot_names:
             raise AnalysisError(f"{self.info.describe()} has no snapshots (output.snapshot_interval)")
@@ -658,8 +658,9 @@ class Pair:
 def _pair_frame(rows: list[dict], extra: tuple = ()) -> pd.DataFrame:
     df = pd.DataFrame(rows, columns=list(extra) + list(PAIR_COLUMNS))
     df.attrs["units"] = {c: pint_unit(ANALYSIS_UNITS.get(c, "-")) for c in df.columns}
-    df.attrs["units"].update(permeability="d^2", drained_onset="t0", drained_end="t0", undrained_onset="t0",
-                             undrained_end="t0", k="E/d", V_s="v0", sigma="E")
+    df.attrs["units"].update({c: pint_unit(u) for c, u in dict(
+        permeability="d^2", drained_onset="t0", drained_end="t0", undrained_onset="t0", undrained_end="t0", k="E/d",
+        V_s="v0", sigma="E").items()})
     return df
 
 

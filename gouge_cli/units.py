@@ -86,7 +86,8 @@ def to_dimensionless(value, dimension: str, scales: Scales) -> float:
     allowed = sorted(u for u, (_, dim) in _UNITS.items() if dim == dimension)
     if unit not in _UNITS or _UNITS[unit][1] != dimension:
         hint = ", ".join(allowed) if allowed else "none (give a plain dimensionless number)"
-        raise ValueError(f"unit {unit!r} does not measure {dimension}; allowed units: {hint}")
+        what = f"does not measure {dimension}" if unit in _UNITS else "is not a unit gouge knows"
+        raise ValueError(f"unit {unit!r} {what}; allowed units: {hint}")
     factor, _ = _UNITS[unit]
     return number * factor / scales.si(dimension)
 
@@ -131,8 +132,8 @@ class ResultUnits:
     def as_dict(self) -> dict:
         """The units and their SI sizes (for summary.json and figure captions)."""
         return {"time": "t0", "t0_s": self.t0_s, "wall_velocity": "V_s", "V_s_m_s": self.V_s_m_s,
-                "stress": "sigma", "sigma_MPa": self.sigma_MPa, "slip": "d", "d_m": self.d_m,
-                "permeability": "d^2", "d2_m2": self.d_m ** 2}
+                "stress": pint_unit("sigma"), "sigma_MPa": self.sigma_MPa, "slip": pint_unit("d"), "d_m": self.d_m,
+                "permeability": pint_unit("d^2"), "d2_m2": self.d_m ** 2}
 
     def caption(self) -> str:
         """One line for a figure: the SI size of each unit."""
@@ -142,34 +143,40 @@ class ResultUnits:
 
 # --- unit strings in outputs ---------------------------------------------------------------
 # The one table of the non-SI unit symbols gouge writes into run files, analysis tables and the
-# Python API's attrs: symbol -> (key of its SI size in :func:`unit_sizes`, SI unit, meaning).
-# A unit string is a product of symbols with powers ('E d^2', 'rho_s d^2', '1/t0'); '1' is
-# dimensionless; a vector with mixed units lists one unit per element ('d, v0, E d^2').
+# Python API's attrs: symbol as written -> (key of its SI size in :func:`unit_sizes`, SI unit, meaning).
+# A unit string is a product of symbols with powers ('E d_grain^2', 'rho_s d_grain^2', '1/t0'); '1'
+# is dimensionless; a vector with mixed units lists one unit per element ('d_grain, v0, E d_grain^2').
+# Every symbol is a name that a plain pint registry refuses rather than misreads (pint reads a bare
+# 'd' as a day and 'sigma' as the Stefan-Boltzmann constant).
 SCALE_UNITS: dict[str, tuple[str, str, str]] = {
-    "d": ("length_m", "m", "mean grain diameter (not pint's day)"),
+    "d_grain": ("length_m", "m", "mean grain diameter d"),
     "E": ("stress_pa", "Pa", "Young's modulus of the grains"),
     "rho_s": ("density_kg_m3", "kg / m**3", "grain density"),
     "t0": ("time_s", "s", "time unit d / sqrt(E / rho_s)"),
     "v0": ("velocity_m_s", "m / s", "velocity unit d / t0"),
     "V_s": ("V_s", "m / s", "the run's loading velocity"),
-    "sigma": ("sigma", "Pa", "the run's normal stress"),
+    "sigma_n": ("sigma", "Pa", "the run's normal stress sigma"),
     "m_b": ("m_b", "kg / m", "the run's top-wall mass per unit length"),
 }
+#: the physics notation that gouge's own unit tables use -> the symbol written (pint_unit translates)
+NOTATION: dict[str, str] = {"d": "d_grain", "sigma": "sigma_n"}
 #: SI symbols that outputs use as they are (pint knows them)
 SI_SYMBOLS: tuple[str, ...] = ("1", "m", "s", "kg", "Pa", "MPa")
 _BASE = {"m": {"m": 1}, "Pa": {"Pa": 1}, "s": {"s": 1}, "m / s": {"m": 1, "s": -1},
          "kg / m**3": {"kg": 1, "m": -3}, "kg / m": {"kg": 1, "m": -1}}
 _NAN = float("nan")
+_NOTATION = re.compile(r"\b(" + "|".join(NOTATION) + r")\b")
 
 
 def pint_unit(unit: str) -> str:
-    """A unit as written into outputs: the dimensionless '-' (or '') is pint's '1', per element of a list."""
+    """A unit as written into outputs: the dimensionless '-' (or '') is pint's '1', per element of a
+    list, and the notation's d and sigma are spelled d_grain and sigma_n (:data:`NOTATION`)."""
     parts = [p.strip() for p in str(unit).split(",")]
-    return ", ".join("1" if p in ("-", "") else p for p in parts)
+    return ", ".join("1" if p in ("-", "") else _NOTATION.sub(lambda m: NOTATION[m.group(1)], p) for p in parts)
 
 
 def unit_factors(unit: str) -> list[tuple[str, float]] | None:
-    """(symbol, power) of each factor of one unit string ('E d^3/t0'); None if it is not one such product."""
+    """(symbol, power) of each factor of one unit string ('E d^3/t0', symbols as written); None if it is not one such product."""
     unit = pint_unit(unit.strip())
     if "," in unit:
         return None
@@ -209,7 +216,6 @@ def si_of(unit: str, sizes: dict[str, float]) -> tuple[float, str] | None:
 
 def pint_definitions(scales: "Scales | dict", V_s: float = _NAN, sigma: float = _NAN, m_b: float = _NAN) -> str:
     """pint definition lines of the SCALE_UNITS symbols of one run (unknown sizes left out; docs/physics/units.md)."""
-    # load into pint.UnitRegistry(on_redefinition="ignore"): gouge's d replaces pint's day symbol
     sizes = unit_sizes(scales, V_s, sigma, m_b)
     lines = ["# gouge's units for one run (gouge_cli.units.SCALE_UNITS; docs/physics/units.md)"]
     for symbol, (_, si, meaning) in SCALE_UNITS.items():
@@ -224,6 +230,6 @@ def pint_registry(scales: "Scales | dict", V_s: float = _NAN, sigma: float = _NA
         import pint
     except ImportError as err:
         raise ImportError("pint_registry needs pint (pip install pint); pint_definitions() gives the text") from err
-    registry = pint.UnitRegistry(on_redefinition="ignore", force_ndarray_like=True)     # (pint-xarray needs it)
+    registry = pint.UnitRegistry(force_ndarray_like=True)     # (pint-xarray needs it)
     registry.load_definitions(pint_definitions(scales, V_s, sigma, m_b).splitlines())
     return registry

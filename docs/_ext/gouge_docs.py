@@ -179,11 +179,15 @@ class ConfigDirective(Directive):
 # ---------------------------------------------------------------- file layouts
 
 def _unit_table(table: dict, what: str = "name") -> str:
-    return list_table([what, "unit", "meaning"], [[k, u, d] for k, (u, d) in table.items()], "25 12 63")
+    """The table's units as the files write them (pint_unit: d_grain, sigma_n, '1')."""
+    from gouge_cli.units import pint_unit
+
+    return list_table([what, "unit", "meaning"], [[k, pint_unit(u), d] for k, (u, d) in table.items()], "25 12 63")
 
 
 def file_layout(name: str) -> str:
     from gouge_cli.io import filedoc, rundir, runfile
+    from gouge_cli.units import pint_unit
 
     if name == "run":
         return _literal(runfile.__doc__.split("Layout of ``run.h5``::", 1)[1].split("\n\n\n")[0]) + "\n" + \
@@ -201,7 +205,7 @@ def file_layout(name: str) -> str:
                 + _unit_table(filedoc.CHECKPOINT_ATTRS, "attribute"))
     if name == "analysis":
         return (_unit_table(filedoc.ANALYSIS_ATTRS, "attribute") + "\nColumn units:\n\n"
-                + list_table(["column", "unit"], [[k, u] for k, u in filedoc.ANALYSIS_UNITS.items()], "40 60"))
+                + list_table(["column", "unit"], [[k, pint_unit(u)] for k, u in filedoc.ANALYSIS_UNITS.items()], "40 60"))
     if name == "rundir":
         return (_roles_to_literals(textwrap.dedent(rundir.__doc__)) + "\n\nWritten by a run (what ``--force`` may remove): "
                 + ", ".join(f"``{o}``" for o in rundir.OWNED) + "; lock file ``" + rundir.LOCK_NAME + "``.\n")

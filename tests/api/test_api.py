@@ -185,9 +185,10 @@ def test_every_unit_written_is_made_of_the_units_table(forked, tmp_path):
 
 
 def test_pint_reads_every_unit_written_with_the_runs_definitions(forked, tmp_path):
-    """With pint (optional): the run's registry parses every unit string written, and a quantity
-    converts to SI as to_si does."""
-    pint = pytest.importorskip("pint")
+    """pint (test extra): the run's registry parses every unit string written, a quantity converts to
+    SI as to_si does, and pint-xarray quantifies the series with it (the units page's recipe)."""
+    import pint
+    import pint_xarray  # noqa: F401  (registers the .pint accessor)
     from gouge_cli.units import pint_definitions
 
     run = gouge.open_run(forked[0])
@@ -197,18 +198,38 @@ def test_pint_reads_every_unit_written_with_the_runs_definitions(forked, tmp_pat
             assert isinstance(registry.parse_units(part.strip()), pint.Unit), where
     for unit in ("E d^3", "1/t0", "rho_s d^2", "V_s", "sigma", "m_b", "d^2"):
         factor, si = si_of(unit, unit_sizes(run.scales, run.info.V_s, run.info.sigma, run.info.m_b))
-        assert registry.Quantity(1.0, unit).to(si).magnitude == pytest.approx(factor, rel=1e-12), unit
-    assert registry.Quantity(1.0, "d").to("mm").magnitude == pytest.approx(run.scales["length_m"] * 1e3)
-    own = pint.UnitRegistry(on_redefinition="ignore")           # the text alone, in a registry of one's own
+        assert registry.Quantity(1.0, pint_unit(unit)).to(si).magnitude == pytest.approx(factor, rel=1e-12), unit
+    assert registry.Quantity(1.0, "d_grain").to("mm").magnitude == pytest.approx(run.scales["length_m"] * 1e3)
+    assert registry.Quantity(1.0, "d").to("h").magnitude == 24          # pint's day is left alone
+    own = pint.UnitRegistry()                                   # the text alone, in a registry of one's own
     own.load_definitions(pint_definitions(run.scales).splitlines())
-    assert own.Quantity(2.0, "E d^2").to("N").magnitude == pytest.approx(2 * run.scales["stress_pa"] * run.scales["length_m"] ** 2)
-    assert "V_s" not in pint_definitions(run.scales) and math.isnan(unit_sizes(run.scales)["sigma"])
-    try:                                   # the units page's recipe, with pint-xarray where it is installed
-        import pint_xarray  # noqa: F401
-    except ImportError:
-        return
+    assert own.Quantity(2.0, "E d_grain^2").to("N").magnitude == pytest.approx(2 * run.scales["stress_pa"] * run.scales["length_m"] ** 2)
+    assert "V_s" not in pint_definitions(run.scales) and math.isnan(unit_sizes(run.scales)["sigma_n"])
     quantified = run.series.pint.quantify(unit_registry=registry)
-    assert quantified["wall_x"].data.units == registry.Unit("d")
+    assert quantified["wall_x"].data.units == registry.Unit("d_grain")
+    assert quantified["wall_x"].pint.to("m").data.magnitude[-1] == pytest.approx(
+        float(run.series["wall_x"][-1]) * run.scales["length_m"], rel=1e-12)
+
+
+def test_plain_pint_never_misreads_a_unit_written(forked, tmp_path):
+    """Every unit string gouge writes is refused by a plain pint registry or read with the dimension
+    of gouge's registry: none silently becomes another quantity (a bare 'd' read as a day, 'sigma'
+    as the Stefan-Boltzmann constant)."""
+    import pint
+
+    plain, own = pint.UnitRegistry(), gouge.open_run(forked[0]).pint_registry()
+    refused = 0
+    for where, unit in _written_units(forked[0], tmp_path).items():
+        for part in unit.split(","):
+            try:
+                read = plain.parse_units(part.strip())
+            except (pint.errors.UndefinedUnitError, pint.errors.DefinitionSyntaxError, ValueError):
+                refused += 1
+                continue
+            assert read.dimensionality == own.parse_units(part.strip()).dimensionality, (where, part)
+    assert refused > 10                                 # the scale units themselves are refused, not misread
+    for notation in ("d", "sigma"):                     # what the tables say, and what pint would make of it
+        assert plain.parse_units(notation).dimensionality != own.parse_units(pint_unit(notation)).dimensionality
 
 
 def test_slips_equal_cli_json_and_analyze_csv(forked, tmp_path):
@@ -375,7 +396,7 @@ def test_plot_helpers_return_axes(forked):
     ax = series(run, ["tau_over_sigma"])
     np.testing.assert_array_equal(ax.get_lines()[0].get_ydata(), run.series["tau_over_sigma"].values)
     ax = table_scatter(gouge.open_study(out), "permeability", "stress_drop_ratio")
-    assert ax.get_xscale() == "log" and ax.get_xlabel() == "permeability [d^2]"
+    assert ax.get_xscale() == "log" and ax.get_xlabel() == "permeability [d_grain^2]"
     plt.close("all")
 
 

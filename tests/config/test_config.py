@@ -110,6 +110,13 @@ def test_wrong_unit_refused_naming_allowed_units(text):
         assert unit in msg
 
 
+def test_unknown_unit_is_not_said_to_measure_something_else():
+    """'24 psi' is a stress in a unit gouge does not read: the message says so, not 'does not measure stress'."""
+    msg = error_of({"loading": {"normal_stress": "24 psi"}})
+    assert "'psi' is not a unit gouge knows" in msg and "does not measure" not in msg
+    assert "'m/s' does not measure stress" in error_of({"loading": {"normal_stress": "24 m/s"}})
+
+
 def test_unit_on_dimensionless_field_refused():
     msg = error_of({"material": {"friction": "0.5 Pa"}})
     assert "material.friction" in msg
