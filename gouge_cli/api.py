@@ -634,7 +634,9 @@ class Pair:
     def fit_curve(self, branch: str = "drained", points: int = 200) -> xr.DataArray | None:
         """The Eq. 3 fit V(t) = A sin(omega (t - t_0)) of a branch's compared slip over its half period.
 
-        Time since loading [t0], velocity [v0]; None when there is no fit.
+        Time since loading [t0], velocity [v0]; None when there is no fit. A curve is returned
+        whatever the fit's verdict (its ``description`` says it); the figures draw only fits whose
+        ``pair.fits[branch].verdict`` is "holds" (docs/physics/block_slider.md).
 
         Example:
             >>> curve = pair.fit_curve("drained")
@@ -649,7 +651,7 @@ class Pair:
         return xr.DataArray(v, coords={"time": ("time", clock - self.time_offset, _attrs("t0", TIME_DOC))},
                             dims="time", name=f"{branch}_fit",
                             attrs=_attrs("v0", f"Eq. 3 block-slider fit of the {branch} compared slip "
-                                               f"(R^2 {fit.r2:.3g}, passes the fit bar: {fit.success})"))
+                                               f"(R^2 {fit.r2:.3g}, verdict: {fit.verdict})"))
 
     def __repr__(self) -> str:
         return f"<gouge Pair slip {self.row['slip']} drained vs {self.branch}: Type {self.type}>"

@@ -26,8 +26,9 @@ def _axes(ax):
 
 def wall_velocity(pair, ax=None, fit: bool = True, since_onset: bool = True, shade: bool = True):
     """Top-wall velocity v_w / V_s of both branches of a pair on one time axis, with the Eq. 3
-    block-slider fit of each branch's compared slip (thesis Figs. 6-12). Time: since the drained
-    compared slip's onset (``since_onset``) or since loading began [t0]. Returns the Axes."""
+    block-slider fit of each branch's compared slip where its verdict is "holds" (thesis Figs. 6-12;
+    a failed or inapplicable fit is named in a note, not drawn). Time: since the drained compared
+    slip's onset (``since_onset``) or since loading began [t0]. Returns the Axes."""
     ax = _axes(ax)
     ds = pair.series
     V_s = float(pair.drained.info.V_s)
@@ -36,6 +37,7 @@ def wall_velocity(pair, ax=None, fit: bool = True, since_onset: bool = True, sha
     if since_onset and events["drained"] is not None:
         origin = float(events["drained"].onset_time)          # since loading (Pair.events)
     t = ds["time"].values - origin
+    notes = []
     for branch in ("drained", "undrained"):
         v = ds["wall_vx"].sel(branch=branch).values / V_s
         label = "drained" if branch == "drained" else f"undrained ({pair.branch})"
@@ -44,12 +46,21 @@ def wall_velocity(pair, ax=None, fit: bool = True, since_onset: bool = True, sha
         if shade and event is not None:
             ax.axvspan(event.onset_time - origin, event.end_time - origin,
                        color=_COLOR[branch], alpha=0.08, lw=0)
-        curve = pair.fit_curve(branch) if fit else None
-        if curve is not None:
-            f = pair.fits[branch]
-            ax.plot(curve["time"].values - origin, curve.values / V_s, color=FIT, lw=1.4,
-                    ls="--" if branch == "drained" else ":",
-                    label=f"Eq. 3 fit, {branch}: half period {f.half_period:.4g} t₀, R² = {f.r2:.2f}")
+        f = pair.fits[branch] if fit else None
+        if f is None:
+            continue
+        if f.verdict != "holds":
+            notes.append(f"Eq. 3 fit not drawn, {branch}: {f.verdict_reason}")
+            continue
+        curve = pair.fit_curve(branch)
+        if curve is None:
+            continue
+        ax.plot(curve["time"].values - origin, curve.values / V_s, color=FIT, lw=1.4,
+                ls="--" if branch == "drained" else ":",
+                label=f"Eq. 3 fit, {branch}: half period {f.half_period:.4g} t₀, R² = {f.r2:.2f}")
+    if notes:
+        ax.text(0.99, 0.02, "\n".join(notes), transform=ax.transAxes, ha="right", va="bottom", fontsize=7,
+                color="0.3")
     ax.set_xlabel(LABEL["time_onset"] if since_onset and events["drained"] is not None else LABEL["time"])
     ax.set_ylabel(LABEL["velocity"])
     ax.set_title(f"slip {pair.row['slip']}: drained vs {pair.branch}, Type {pair.type}", fontsize=10)

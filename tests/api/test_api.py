@@ -375,6 +375,45 @@ def test_open_study_equals_pair_json(forked):
     assert df.groupby("permeability").size().tolist() == [1] and df["permeability"].iloc[0] == pytest.approx(PERM)
 
 
+def test_wall_velocity_draws_only_fits_that_hold(forked):
+    """plots.axes.wall_velocity draws a branch's Eq. 3 curve only when its verdict is "holds": the
+    pair's real fits, then the same fits made to fail the bar and made inapplicable (m_eff 9 m_b)."""
+    import dataclasses
+
+    import matplotlib.pyplot as plt
+
+    from gouge_cli.plots.axes import wall_velocity
+
+    out, slip = forked
+    pair = gouge.open_run(out).pair(slip, PERM)
+    real = pair.fits
+    assert real["drained"] is not None and np.isfinite(real["drained"].omega)
+
+    def drawn(fits: dict) -> tuple[set, str]:
+        pair.result = dataclasses.replace(pair.result, drained_fit=fits["drained"], undrained_fit=fits["undrained"])
+        ax = wall_velocity(pair)
+        names = {b for b in ("drained", "undrained") for line in ax.get_lines()
+                 if str(line.get_label()).startswith(f"Eq. 3 fit, {b}")}
+        text = " ".join(t.get_text() for t in ax.texts)
+        plt.close(ax.figure)
+        return names, text
+
+    original = pair.result
+    try:
+        names, _ = drawn(real)
+        assert names == {b for b, f in real.items() if f is not None and f.verdict == "holds"}
+        failed = {b: f and dataclasses.replace(f, success=False, message="R^2 = 0.4 < 0.5") for b, f in real.items()}
+        names, text = drawn(failed)
+        assert names == set() and "Eq. 3 fit not drawn, drained: fit failed: R^2 = 0.4 < 0.5" in text
+        far = {b: f and dataclasses.replace(f, success=True, half_period_ratio=3.0) for b, f in real.items()}
+        names, text = drawn(far)
+        assert names == set() and "Eq. 3 does not apply" in text
+        near = {b: f and dataclasses.replace(f, success=True, half_period_ratio=1.1) for b, f in real.items()}
+        assert drawn(near)[0] == {b for b, f in real.items() if f is not None and np.isfinite(f.omega)}
+    finally:
+        pair.result = original
+
+
 def test_plot_helpers_return_axes(forked):
     import matplotlib.pyplot as plt
 
@@ -385,8 +424,8 @@ def test_plot_helpers_return_axes(forked):
     pair = run.pair(slip, PERM)
     ax = wall_velocity(pair)
     lines = ax.get_lines()
-    fits = [b for b in ("drained", "undrained") if pair.fit_curve(b) is not None]
-    assert len(lines) == 2 + len(fits)                     # two branches, their Eq. 3 fits
+    fits = [b for b in ("drained", "undrained") if pair.fits[b] is not None and pair.fits[b].verdict == "holds"]
+    assert len(lines) == 2 + len(fits)                     # two branches, their Eq. 3 fits that hold
     V_s = run.info.V_s
     onset = pair.events["drained"].onset_time                  # since loading, as the time axis
     np.testing.assert_allclose(lines[0].get_ydata(), pair.series["wall_vx"].sel(branch="drained").values / V_s)
