@@ -22,7 +22,7 @@ PAIR_COLUMNS = (
     "run", "slip", "branch", "permeability", "filter_width", "cell_size", "regime", "deborah_slip", "deborah_mean",
     "main", "type",
     "base_type", "complex", "criteria", "undrained_event", "drained_strength", "undrained_strength",
-    "strength_difference", "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
+    "strength_difference", "drained_strength_time", "undrained_strength_time", "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
     "undrained_peak_over_Vs", "n_undrained_slips", "n_subevents", "drained_onset", "drained_end",
     "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_verdict",
     "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "deborah_drained",
@@ -219,6 +219,8 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 "drained_strength": result.drained_strength,
                 "undrained_strength": result.undrained_strength,
                 "strength_difference": result.strength_difference,
+                "drained_strength_time": result.drained_strength_time - origin,     # NaN without a pair
+                "undrained_strength_time": result.undrained_strength_time - origin,
                 "peak_velocity_ratio": result.peak_velocity_ratio,
                 "stress_drop_ratio": result.stress_drop_ratio,
                 "duration_ratio": result.duration_ratio,

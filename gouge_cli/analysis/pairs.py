@@ -18,7 +18,7 @@ Rule (all thresholds are fields of :class:`PairDefinition` or of its slip rule, 
   an event found then is compared as a "slow slip below trigger" (criterion ``slow``).
   Without one the pair is ``none`` and the note gives the branch's peak velocity.
 * Measures of an event: static strength S = the largest tau/sigma from the series start up
-  to the event's onset sample; stress drop = tau/sigma at onset minus its minimum during the
+  to the event's onset sample (its time reported beside it); stress drop = tau/sigma at onset minus its minimum during the
   event; peak velocity; duration (between the ``end_factor`` crossings); sub-events.
 * Type: ``I`` if S_u < S_d - strength_tol, ``II`` if S_u > S_d + strength_tol, else ``tie``
   (strength_tol = 1e-3 in tau/sigma). Suffix ``-C`` if a criterion of
@@ -137,6 +137,8 @@ class PairResult:
     n_subevents: int = 0
     note: str = ""
     definition: dict = field(default_factory=dict)
+    drained_strength_time: float = _NAN       # when S_d and S_u were reached (the branches' clock)
+    undrained_strength_time: float = _NAN
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -175,6 +177,14 @@ def static_strength(tau_over_sigma, slip: Slip) -> float:
     seg = np.asarray(tau_over_sigma[:slip.onset_index + 1], dtype=float)
     seg = seg[~np.isnan(seg)]
     return float(seg.max()) if seg.size else _NAN
+
+
+def static_strength_time(t, tau_over_sigma, slip: Slip) -> float:
+    """Time (of ``t``) at which :func:`static_strength` is reached: its first sample (NaN if none)."""
+    seg = np.asarray(tau_over_sigma[:slip.onset_index + 1], dtype=float)
+    if not np.any(np.isfinite(seg)):
+        return _NAN
+    return float(np.asarray(t)[int(np.nanargmax(seg))])
 
 
 def _ratio(a: float, b: float) -> float:
@@ -339,6 +349,8 @@ def classify_pair(
         n_subevents=u_main.n_subevents,
         note=note,
         definition=d.to_dict(),
+        drained_strength_time=static_strength_time(drained.t, drained.tau_over_sigma, d_main),
+        undrained_strength_time=static_strength_time(undrained.t, undrained.tau_over_sigma, u_main),
     )
 
 

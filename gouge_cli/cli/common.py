@@ -124,8 +124,9 @@ def guarded(command):
 
 def restart_lines(summary: dict, run_dir) -> list[str]:
     """`gouge restart`'s one-screen result: one line per branch (status, onset, strength, drop,
-    peak velocity of its first slip), one per pair (its type, S_u - S_d, the two onsets and what
-    made it complex), and where the whole record is. Times in t0 since loading began."""
+    peak velocity of its first slip), two per pair (its type, S_u - S_d, the two onsets and what
+    made it complex; when S_d and S_u were reached), and where the whole record is. Times in t0
+    since loading began."""
     from ..io.layout import RunLayout
 
     lines = [f"slip {summary['slip']} forked from t = {summary['start_time']:,.1f} t0 (since loading began)"]
@@ -143,6 +144,10 @@ def restart_lines(summary: dict, run_dir) -> list[str]:
         lines.append(f"  pair drained vs {row['branch']}: {said}"
                      + (f" (S_u - S_d = {diff:+.4f} tau/sigma; {onsets})"
                         if isinstance(diff, float) and diff == diff else "") + complex_)
+        when_d, when_u = row.get("drained_strength_time"), row.get("undrained_strength_time")
+        if isinstance(when_d, float) and isinstance(when_u, float) and when_d == when_d and when_u == when_u:
+            lines.append(f"    S_d reached at t = {when_d:,.1f}, S_u at {when_u:,.1f} t0 (the largest tau/sigma "
+                         "before each onset)")
     fork = RunLayout(run_dir).fork(summary["slip"])
     if summary.get("pair"):
         lines.append(f"record: {fork.pair_file} (the whole of it: --json; `gouge plot {run_dir} --slip "

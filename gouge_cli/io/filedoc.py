@@ -149,7 +149,8 @@ CHECKPOINT_ATTRS = {
 
 
 _T0 = ("onset_time", "end_time", "onset_clock", "duration", "recurrence", "half_period", "predicted_half_period",
-       "drained_onset", "drained_end", "undrained_onset", "undrained_end")
+       "drained_onset", "drained_end", "undrained_onset", "undrained_end", "drained_strength_time",
+       "undrained_strength_time")
 ANALYSIS_UNITS = dict({k: "t0" for k in _T0}, slip="d", peak_velocity_over_Vs="V_s", mean_velocity_over_Vs="V_s",
                       amplitude_over_Vs="V_s", drained_peak_over_Vs="V_s", undrained_peak_over_Vs="V_s",
                       pressure_min_over_sigma="sigma", pressure_max_over_sigma="sigma", static_strength="sigma",

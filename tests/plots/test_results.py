@@ -56,6 +56,13 @@ def test_restart_prints_one_screen(two_perms):
     assert any(line.strip().startswith("drained ") for line in lines)
     pair = next(line for line in lines if "pair drained vs perm_1e-03" in line)
     assert "onsets" in pair or "no pair" in pair or "none" in pair
+    row = json.loads((out / "forks" / f"slip_{n:03d}" / "pair.json").read_text())["pairs"][0]
+    if "onsets" in pair:          # the window of the comparison: when each maximum was reached (issue 60)
+        when = lines[lines.index(pair) + 1]
+        assert when == (f"    S_d reached at t = {row['drained_strength_time']:,.1f}, S_u at "
+                        f"{row['undrained_strength_time']:,.1f} t0 (the largest tau/sigma before each onset)")
+        assert row["drained_strength_time"] <= row["drained_onset"] + 1e-9
+        assert row["undrained_strength_time"] <= row["undrained_onset"] + 1e-9
     assert lines[-1].startswith("record: ") and "pair.json" in lines[-1]
 
 
