@@ -830,10 +830,12 @@ def restart(run: Run | Path | str, slip: int, perm=(), overrides=None, duration:
     One undrained branch per ``perm`` [d^2]; pair.json is written when ``perm`` is given.
     ``duration`` [t0] bounds each branch (default: until its first slip ends).
 
+    The pair's type (``fork.pair(K).type``) is I, II or tie, with -C when complex
+    (docs/physics/pairs.md); which one a slip gives is the simulation's to say.
+
     Example:
-        >>> fork = gouge.restart("runs/first", slip=2, perm=1e-5)  # doctest: +SKIP
-        >>> fork.pair(1e-5).type  # doctest: +SKIP
-        'II'
+        >>> fork = gouge.restart("runs/demo", slip=4, perm=3e-6)  # doctest: +SKIP
+        >>> fork.pair(3e-6).type  # doctest: +SKIP
     """
     from .workflows.fork import ForkRequest, restart as run_restart
 

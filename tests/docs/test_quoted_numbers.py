@@ -4,6 +4,7 @@ bar and the Eq. 3 verdict with blockslider's constants. No run, no docs build: t
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 from gouge_cli.analysis import blockslider
@@ -52,3 +53,33 @@ def test_block_slider_page_states_the_fit_bar_and_the_verdict():
     pairs = (ROOT / "docs/physics/pairs.md").read_text()
     assert f"R^2 < {PairDefinition().min_fit_r2:g} on the undrained slip" in text and "min_fit_r2" in pairs
 
+
+def test_quoted_versions_are_not_newer_than_the_package():
+    """'since 0.3' in a 0.2 package: every 'gouge X.Y(.Z)' / 'since X.Y' the docs quote is a version
+    that exists (at most the package's own)."""
+    import tomllib
+
+    version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
+    own = tuple(int(p) for p in version.split(".")[:3])
+    pages = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "docs").rglob("*.rst")]
+    pattern = re.compile(r"\b(?:gouge|since|version|before|after)\s+v?(\d+)\.(\d+)(?:\.(\d+))?\b(?![.\d]*\s*(?:%|t0|MPa|d\b))")
+    found = []
+    for page in pages:
+        if "_build" in page.parts or "_generated" in page.parts:
+            continue
+        for match in pattern.finditer(page.read_text()):
+            quoted = tuple(int(g or 0) for g in match.groups())
+            if quoted[0] == 0 and quoted > own:
+                found.append(f"{page.relative_to(ROOT)}: {match.group(0)!r} (package {version})")
+    assert not found, "\n".join(found)
+
+
+def test_readme_and_getting_started_fork_one_slip():
+    """The README's tour and Getting started fork, plot and open the same slip of the demo (they
+    forked slip 4 and opened slip 2's pair)."""
+    pattern = re.compile(r"--slip (\d+)|slip=(\d+)|\.pair\((\d+)|slip_(\d{3})")
+    numbers = {}
+    for page in ("README.md", "docs/getting_started.md"):
+        for match in pattern.finditer((ROOT / page).read_text()):
+            numbers.setdefault(int(next(g for g in match.groups() if g)), []).append(f"{page}: {match.group(0)}")
+    assert len(numbers) == 1, numbers
