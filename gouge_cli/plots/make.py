@@ -42,8 +42,8 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
     """Draw the figures of one run into ``out_dir`` (default ``RUN/figures``); returns the files.
 
     Always: ``overview.png`` (four panels, slips shaded) and ``snapshot_latest.png`` (the run's
-    last snapshot); ``campaign.png`` when the run has two or more drained/undrained pairs (one
-    summary per permeability). With ``slip=N``: ``slip_NNN.png`` (the slip magnified, Eq. 3 fit),
+    last snapshot); ``pairs.png`` when the run has two or more drained/undrained pairs (every
+    forked slip of this run: one summary per permeability; `gouge campaign` draws its own). With ``slip=N``: ``slip_NNN.png`` (the slip magnified, Eq. 3 fit),
     ``slip_NNN_friction.png`` (mu_d(t), Eq. 7), for a fork of that slip ``slip_NNN_compare.png``
     (drained and every permeability on shared axes) and per undrained branch B:
     ``slip_NNN_pair_B.png`` (drained black, undrained blue, pore pressure),
@@ -114,7 +114,7 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
                                 sigma=u.info.sigma,
                                 time_offset=u.time_offset()))
     if len(pairs) >= 2:
-        written.append(campaign_figure(pairs, out / "campaign.png", title=str(Path(run_dir).resolve())))
+        written.append(campaign_figure(pairs, out / "pairs.png", title=f"{Path(run_dir).resolve()}: every pair"))
     return written
 
 
@@ -129,7 +129,8 @@ FIGURES = (
     ("slip_???_pair_*.png", "slip N: drained against one permeability, with the pore pressure"),
     ("slip_???_friction_*.png", "slip N, one permeability: combined resistance R/σ of Eq. 6"),
     ("slip_???_snapshot_*.png", "slip N, one permeability: grains and pore pressure nearest the peak velocity"),
-    ("campaign.png", "pair types and undrained/drained peak-velocity ratios, per permeability"),
+    ("pairs.png", "every pair of the run (all forked slips): pair types and undrained/drained peak-velocity "
+                  "ratios, per permeability"),
 )
 
 
