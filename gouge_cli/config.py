@@ -471,7 +471,8 @@ def find_config(name: str | Path) -> Path:
 
 
 def load_config(path: str | Path, overrides: list[str] | dict | None = None) -> Config:
-    """Read a config file (UTF-8 YAML mapping; see _StrictLoader) and validate it with overrides."""
+    """Read a config file (a UTF-8 YAML mapping: no duplicate keys, anchors or aliases) and validate
+    it with overrides (``["loading.normal_stress=24 MPa"]`` or a dict)."""
     path = find_config(path)
     try:
         raw = path.read_bytes()
