@@ -25,7 +25,8 @@ time t0, velocity v0, density rho_s; V_s and sigma, written ``sigma_n``, the run
 and normal stress); every variable carries ``units``, ``long_name`` and ``description``, and a
 dimensionless one has ``units`` '1'. A plain pint registry refuses these names (none reads as one
 of pint's own units): convert with :func:`to_si` (``run.to_si(obj)``), whose results carry SI
-units, or quantify as they are with the run's registry (``ds.pint.quantify(unit_registry=run.pint_registry())``; definitions as text:
+units, or quantify as they are with the run's registry
+(``ds.pint.quantify(unit_registry=run.pint_registry())``; definitions as text:
 ``run.pint_definitions()``, :mod:`gouge_cli.units`). Every time is counted from the start of
 loading unless its name says ``clock`` (the stored clock, which also counts the compaction).
 Errors are gouge_cli.errors exceptions with the CLI's message; ``exc.exit_code`` is the CLI's code.

@@ -176,7 +176,7 @@ def pint_unit(unit: str) -> str:
 
 
 def unit_factors(unit: str) -> list[tuple[str, float]] | None:
-    """(symbol, power) of each factor of one unit string ('E d^3/t0', symbols as written); None if it is not one such product."""
+    """(symbol, power) of each factor of one unit string ('E d_grain^3/t0'); None if it is not one such product."""
     unit = pint_unit(unit.strip())
     if "," in unit:
         return None

@@ -205,7 +205,8 @@ def file_layout(name: str) -> str:
                 + _unit_table(filedoc.CHECKPOINT_ATTRS, "attribute"))
     if name == "analysis":
         return (_unit_table(filedoc.ANALYSIS_ATTRS, "attribute") + "\nColumn units:\n\n"
-                + list_table(["column", "unit"], [[k, pint_unit(u)] for k, u in filedoc.ANALYSIS_UNITS.items()], "40 60"))
+                + list_table(["column", "unit"], [[k, pint_unit(u)] for k, u in filedoc.ANALYSIS_UNITS.items()],
+                             "40 60"))
     if name == "rundir":
         return (_roles_to_literals(textwrap.dedent(rundir.__doc__)) + "\n\nWritten by a run (what ``--force`` may remove): "
                 + ", ".join(f"``{o}``" for o in rundir.OWNED) + "; lock file ``" + rundir.LOCK_NAME + "``.\n")

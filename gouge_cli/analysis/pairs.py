@@ -18,8 +18,8 @@ Rule (all thresholds are fields of :class:`PairDefinition` or of its slip rule, 
   an event found then is compared as a "slow slip below trigger" (criterion ``slow``).
   Without one the pair is ``none`` and the note gives the branch's peak velocity.
 * Measures of an event: static strength S = the largest tau/sigma from the series start up
-  to the event's onset sample (its time reported beside it); stress drop = tau/sigma at onset minus its minimum during the
-  event; peak velocity; duration (between the ``end_factor`` crossings); sub-events.
+  to the event's onset sample (its time reported beside it); stress drop = tau/sigma at onset
+  minus its minimum during the event; peak velocity; duration (between the ``end_factor`` crossings); sub-events.
 * Type: ``I`` if S_u < S_d - strength_tol, ``II`` if S_u > S_d + strength_tol, else ``tie``
   (strength_tol = 1e-3 in tau/sigma). Suffix ``-C`` if a criterion of
   :func:`complexity_criteria` fires on the undrained branch, or it is a slow slip.

@@ -43,7 +43,8 @@ def make_figures(run_dir: Path | str, slip: int | None = None, out_dir: Path | s
 
     Always: ``overview.png`` (four panels, slips shaded) and ``snapshot_latest.png`` (the run's
     last snapshot); ``pairs.png`` when the run has two or more drained/undrained pairs (every
-    forked slip of this run: one summary per permeability; `gouge campaign` draws its own). With ``slip=N``: ``slip_NNN.png`` (the slip magnified, Eq. 3 fit),
+    forked slip of this run: one summary per permeability; `gouge campaign` draws its own). With
+    ``slip=N``: ``slip_NNN.png`` (the slip magnified, Eq. 3 fit),
     ``slip_NNN_friction.png`` (mu_d(t), Eq. 7), for a fork of that slip ``slip_NNN_compare.png``
     (drained and every permeability on shared axes) and per undrained branch B:
     ``slip_NNN_pair_B.png`` (drained black, undrained blue, pore pressure),

@@ -203,7 +203,8 @@ def test_pint_reads_every_unit_written_with_the_runs_definitions(forked, tmp_pat
     assert registry.Quantity(1.0, "d").to("h").magnitude == 24          # pint's day is left alone
     own = pint.UnitRegistry()                                   # the text alone, in a registry of one's own
     own.load_definitions(pint_definitions(run.scales).splitlines())
-    assert own.Quantity(2.0, "E d_grain^2").to("N").magnitude == pytest.approx(2 * run.scales["stress_pa"] * run.scales["length_m"] ** 2)
+    force = own.Quantity(2.0, "E d_grain^2").to("N").magnitude
+    assert force == pytest.approx(2 * run.scales["stress_pa"] * run.scales["length_m"] ** 2)
     assert "V_s" not in pint_definitions(run.scales) and math.isnan(unit_sizes(run.scales)["sigma_n"])
     quantified = run.series.pint.quantify(unit_registry=registry)
     assert quantified["wall_x"].data.units == registry.Unit("d_grain")

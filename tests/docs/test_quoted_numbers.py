@@ -62,7 +62,8 @@ def test_quoted_versions_are_not_newer_than_the_package():
     version = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
     own = tuple(int(p) for p in version.split(".")[:3])
     pages = [ROOT / "README.md", *(ROOT / "docs").rglob("*.md"), *(ROOT / "docs").rglob("*.rst")]
-    pattern = re.compile(r"\b(?:gouge|since|version|before|after)\s+v?(\d+)\.(\d+)(?:\.(\d+))?\b(?![.\d]*\s*(?:%|t0|MPa|d\b))")
+    pattern = re.compile(r"\b(?:gouge|since|version|before|after)\s+v?(\d+)\.(\d+)(?:\.(\d+))?\b"
+                         r"(?![.\d]*\s*(?:%|t0|MPa|d\b))")
     found = []
     for page in pages:
         if "_build" in page.parts or "_generated" in page.parts:
