@@ -21,8 +21,9 @@ from .report import _write_csv
 from .study import transient_slips
 from ..io.runfile import RunReader
 
-PHASE_COLUMNS = ("x", "y", "n_pairs", "n_unclassified", "n_complex", "n_type_I", "n_type_II", "frac_complex",
-                 "frac_type_II")
+PHASE_COLUMNS = ("x", "y", "n_pairs", "n_unclassified", "n_seeds", "n_complex", "n_type_I", "n_type_II",
+                 "frac_complex", "frac_complex_lo", "frac_complex_hi", "frac_type_II", "frac_type_II_lo",
+                 "frac_type_II_hi")
 RUN_STATS = ("stress_drop", "peak_velocity_over_Vs", "duration", "recurrence", "static_strength", "slip")
 _NAN = float("nan")
 
@@ -89,7 +90,12 @@ def phase_cells(pair_rows: list[dict], x: str, y: str | None) -> list[dict]:
     """Fractions of complex (-C) and of Type II pairs per (x, y) cell (thesis future work A).
 
     n_pairs counts the classified pairs (a slip in both branches; ties included); n_unclassified
-    the pairs where a branch did not slip in its window. Fractions are over n_pairs (NaN when 0)."""
+    the pairs where a branch did not slip in its window. Fractions are over n_pairs (NaN when 0),
+    each with its seed-level 95 % interval (``_lo``, ``_hi``: :func:`.seedboot.seed_fraction`,
+    the seed as the sampling unit, since a seed's pairs share one packing); n_seeds: the seeds
+    with a classified pair in the cell (rows without a ``seed`` column count as one seed)."""
+    from .seedboot import seed_fraction
+
     xs = sorted({_axis_value(r, x) for r in pair_rows})
     ys = sorted({_axis_value(r, y) for r in pair_rows}) if y else [None]
     cells = []
@@ -101,9 +107,15 @@ def phase_cells(pair_rows: list[dict], x: str, y: str | None) -> list[dict]:
             n_c = sum(1 for r in classified if r["complex"])
             n_1 = sum(1 for r in classified if r["base_type"] == "I")
             n_2 = sum(1 for r in classified if r["base_type"] == "II")
-            cells.append({"x": xv, "y": yv, "n_pairs": n, "n_unclassified": len(inside) - n,
+            seeds: dict = {}
+            for r in classified:
+                seeds.setdefault(r.get("seed"), []).append(r)
+            c_est, c_lo, c_hi = seed_fraction([[bool(r["complex"]) for r in g] for g in seeds.values()])
+            t_est, t_lo, t_hi = seed_fraction([[r["base_type"] == "II" for r in g] for g in seeds.values()])
+            cells.append({"x": xv, "y": yv, "n_pairs": n, "n_unclassified": len(inside) - n, "n_seeds": len(seeds),
                           "n_complex": n_c, "n_type_I": n_1, "n_type_II": n_2,
-                          "frac_complex": n_c / n if n else _NAN, "frac_type_II": n_2 / n if n else _NAN})
+                          "frac_complex": n_c / n if n else _NAN, "frac_complex_lo": c_lo, "frac_complex_hi": c_hi,
+                          "frac_type_II": n_2 / n if n else _NAN, "frac_type_II_lo": t_lo, "frac_type_II_hi": t_hi})
     return cells
 
 

@@ -26,7 +26,8 @@ def _label(key: str | None) -> str:
 def phase_diagram_figure(cells: list[dict], x: str, y: str | None, path: Path, title: str = "") -> Path:
     """Two panels over the (x, y) cells of :func:`~gouge_cli.analysis.campaign_table.phase_cells`:
     fraction of complex (-C) pairs and fraction of Type II pairs, each cell labelled with its
-    fraction and the number of pairs behind it (grey: no classified pair)."""
+    fraction, its seed-level 95 % interval and the pairs and seeds behind it (grey: no classified
+    pair)."""
     xs = sorted({c["x"] for c in cells})
     ys = sorted({c["y"] for c in cells}, key=lambda v: (v is None, v))
     fig, axes = plt.subplots(1, 2, figsize=(10.0, 4.4), dpi=DPI)
@@ -40,7 +41,10 @@ def phase_diagram_figure(cells: list[dict], x: str, y: str | None, path: Path, t
         for c in cells:
             i, j = ys.index(c["y"]), xs.index(c["x"])
             frac = c[key]
-            text = ("–" if not math.isfinite(frac) else f"{frac:.2f}") + f"\n{c['n_pairs']} pairs"
+            lo, hi = c.get(f"{key}_lo", math.nan), c.get(f"{key}_hi", math.nan)
+            text = ("–" if not math.isfinite(frac) else f"{frac:.2f}"
+                    + (f" [{lo:.2f}, {hi:.2f}]" if math.isfinite(lo) and math.isfinite(hi) else ""))
+            text += f"\n{c['n_pairs']} pairs, {c.get('n_seeds', '?')} seeds"
             ax.text(j, i, text, ha="center", va="center", fontsize=9,
                     color="white" if math.isfinite(frac) and frac < 0.6 else "black")
         ax.set_xticks(range(len(xs)), [f"{v:g}" for v in xs])
