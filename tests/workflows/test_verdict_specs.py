@@ -56,9 +56,9 @@ def test_thickness_spec_scales_the_free_grains_keeps_the_width_and_matches_de():
     assert phase_axes(spec) == ("permeability", "packing.n_grains")
 
 
-def test_sigma_spec_spans_a_decade_around_the_study_scene_with_five_seeds():
+def test_sigma_spec_spans_a_decade_around_the_study_scene_with_four_seeds():
     spec, points = _load("verdict_sigma.yaml")
-    assert len(points) == 3 * 5 and len(spec.sweep.seeds) >= 5
+    assert len(points) == 3 * len(spec.sweep.seeds) and len(spec.sweep.seeds) >= 4
     sigmas = sorted({p.config.loading.normal_stress for p in points})
     assert len(sigmas) == 3
     assert sigmas[-1] / sigmas[0] == pytest.approx(10.0)
@@ -67,7 +67,7 @@ def test_sigma_spec_spans_a_decade_around_the_study_scene_with_five_seeds():
     # the run length grows with sigma (the loading time between slips does)
     by_sigma = {p.config.loading.normal_stress: p.config.run.duration for p in points}
     assert [by_sigma[s] for s in sigmas] == sorted(by_sigma[s] for s in sigmas)
-    assert len(spec.study.permeabilities) >= 2 and 1.0e-5 in spec.study.permeabilities
+    assert {1.0e-5, 3.0e-6, 1.0e-6} <= set(spec.study.permeabilities) and spec.study.skip_transient
     assert phase_axes(spec) == ("permeability", "loading.normal_stress")
 
 
