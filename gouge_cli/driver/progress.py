@@ -25,13 +25,20 @@ class ProgressReport:
         self._last_print = self._t0
         self._first = None               # (wall time, simulated time, step) at the first update
         self._progress = None
+        # below ~120 columns the bar and the labels shrink, so that an 80-column terminal shows
+        # every field whole (rich cuts an overlong line with an ellipsis)
+        self._narrow = self.console.width < 120
         if self.live:
-            self._progress = Progress(
-                TextColumn("[bold]{task.description}"), BarColumn(),
-                TextColumn("t = {task.completed:.4g} / {task.total:.4g} t0"),
-                TextColumn("{task.fields[rate]}"), TextColumn("{task.fields[info]}"),
-                TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(),
-                console=self.console, transient=False)
+            if self._narrow:      # no elapsed time; the info (tau/sigma, slips) is what gets cut
+                columns = (TextColumn("[bold]{task.description}"), BarColumn(bar_width=8),
+                           TextColumn("{task.completed:.3g}/{task.total:.3g} t0"), TextColumn("{task.fields[rate]}"),
+                           TextColumn("{task.fields[info]}"), TextColumn("ETA"), TimeRemainingColumn())
+            else:
+                columns = (TextColumn("[bold]{task.description}"), BarColumn(),
+                           TextColumn("t = {task.completed:.4g} / {task.total:.4g} t0"),
+                           TextColumn("{task.fields[rate]}"), TextColumn("{task.fields[info]}"),
+                           TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn())
+            self._progress = Progress(*columns, console=self.console, transient=False)
             self._progress.start()
             self._task = self._progress.add_task(label, total=total_time, rate="", info="")
 
@@ -45,6 +52,13 @@ class ProgressReport:
         rate = (step - step1) * self.n / (now - t1) if now > t1 else 0.0
         rate_text = f"{rate / 1e6:.2f} M grain-steps/s"
         if self._progress is not None:
+            if self._narrow:
+                rate_text = f"{rate / 1e6:.1f} Mgs/s"
+                fixed = (f"{self.label} {'x' * 8} {min(elapsed_sim, self.total):.3g}/{self.total:.3g} t0 "
+                         f"{rate_text}  ETA 00:00:00")
+                room = self.console.width - len(fixed) - 2
+                if len(info) > room:
+                    info = info[:max(room - 1, 0)] + "…" if room > 1 else ""
             self._progress.update(self._task, completed=min(elapsed_sim, self.total), rate=rate_text, info=info)
         elif now - self._last_print >= self.every_s:
             self._last_print = now
