@@ -34,6 +34,7 @@ def write_groups(pair_rows: list[dict], keys: list[str], root: Path, title: str 
     from .campaign_spec import point_name
 
     out = {}
+    lines = []
     for values, rows in by_swept(pair_rows, keys) if keys else [({}, pair_rows)]:
         name = point_name(values) if values else ""
         where = ", ".join(f"{k} = {v}" for k, v in values.items())
@@ -41,7 +42,64 @@ def write_groups(pair_rows: list[dict], keys: list[str], root: Path, title: str 
         out[f"pairs[{name}]"] = write_table(rows, [], folder / "pairs.csv")
         for key, path in write_regime(rows, folder, folder, f"{title}, {where}" if where else title).items():
             out[f"{key}[{name}]"] = path
+        lines += summary_lines(rows, where or title)
+    path = Path(root) / "summary.md"
+    path.write_text("\n".join(SUMMARY_HEADER + lines) + "\n")
+    out["summary"] = path
     return out
+
+
+SUMMARY_HEADER = [
+    "| group | coupling | kappa_c | seeds | pairs | De of the slip | Type I / II / tie | Type I by sign | -C "
+    "| undrained slower | smaller drop | sign predicts type | mean strain: P / curve (median; within x3) "
+    "| rate: same sign; P / predicted (median; within x3) |",
+    "|" + "---|" * 14]
+
+
+def _coupling(rows: list[dict]) -> str:
+    """The pairs' coupling in words, from their filter_width and cell_size columns [d]."""
+    def one(key):
+        values = {r.get(key) for r in rows if r.get(key) not in (None, "")}
+        return float(values.pop()) if len(values) == 1 else None
+
+    w, h = one("filter_width"), one("cell_size")
+    if w is None or h is None:
+        return "mixed"
+    return f"no filter, {h:g} d cells" if w == 0 else f"w = {w:g} d, h = {h:g} d"
+
+
+def summary_lines(pair_rows: list[dict], group: str) -> list[str]:
+    """One markdown row per permeability of the pairs (pooled over seeds): counts, the seed-level
+    95 % intervals (marked s) of the findings, and the mechanism's tests (regime.csv and
+    mechanism.csv of the same pairs)."""
+    from ..analysis.mechanism import mechanism_rows
+    from ..analysis.regime import regime_rows
+
+    def pct(row, key):
+        lo, hi = float(row[f"{key}_seed_lo"]), float(row[f"{key}_seed_hi"])
+        interval = f" [{100 * lo:.0f}, {100 * hi:.0f}]s" if lo == lo and hi == hi else ""
+        return f"{100 * float(row[key]):.0f} %{interval}"
+
+    mech = {m["kappa_c"]: m for m in mechanism_rows(pair_rows) if m["seed"] == "all"} \
+        if pair_rows and "drained_dilation" in pair_rows[0] else {}
+    coupling = _coupling(pair_rows)
+    lines = []
+    for r in regime_rows(pair_rows):
+        if r["seed"] != "all":
+            continue
+        m = mech.get(r["kappa_c"])
+        sign = f"{m['n_predicted']}/{m['n_signed']}" if m else ""
+        strain = (f"{m['collapse_ratio_median']:.0f}x; {100 * m['collapse_within_factor']:.0f} %"
+                  if m and m["n_collapse"] else "")
+        rate = (f"{m['rate_sign_agrees']}/{m['n_rate']}; {m['rate_ratio_median']:.2f}; "
+                f"{100 * m['rate_within_factor']:.0f} %" if m and m["n_rate"] else "")
+        de = (f"{r['deborah_drained_median']:.2f} ({r['deborah_drained_min']:.2f}-{r['deborah_drained_max']:.2f})"
+              if r["deborah_drained_median"] == r["deborah_drained_median"] else "")
+        cells = [group, coupling, f"{r['kappa_c']:g}", str(r["n_seeds"]), str(r["n_pairs"]), de,
+                 f"{r['n_type_I']} / {r['n_type_II']} / {r['n_tie']}", pct(r, "type_I_sign"), pct(r, "complex"),
+                 pct(r, "slower"), pct(r, "smaller_drop"), sign, strain, rate]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
 
 
 def select(pair_rows: list[dict], where: dict[str, float]) -> list[dict]:

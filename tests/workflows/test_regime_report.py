@@ -88,3 +88,36 @@ def test_by_swept_never_pools_swept_values():
     assert [g for g, _ in groups] == [{"loading.normal_stress": "0.0001"}, {"loading.normal_stress": "0.001"}]
     assert all(len(rs) == 2 for _, rs in groups)
     assert len(select(rows, {"loading.normal_stress": "1e-4"})) == 2          # compared as numbers
+
+
+def test_the_verdict_summary_counts_the_committed_records():
+    """summary.md's rows (the regime page's table) from the verdict campaign's committed records:
+    one row per coupling and permeability, whose pair, seed and type counts are the records' own
+    (counted here from the pair rows, independently of analysis.regime), with seed-level intervals
+    that hold the pooled fraction."""
+    from pathlib import Path
+
+    from gouge_cli.workflows.campaign import spec_pairs
+    from gouge_cli.workflows.regime_report import SUMMARY_HEADER, by_swept, summary_lines
+
+    spec = Path(__file__).resolve().parents[2] / "examples" / "verdict_seeds.yaml"
+    rows, keys = spec_pairs(spec)
+    if not rows:
+        pytest.skip("no verdict records in this checkout")
+    assert keys == ["variant"]
+    n_cols = SUMMARY_HEADER[0].count("|") - 1
+    for values, group in by_swept(rows, keys):
+        perms = sorted({float(r["permeability"]) for r in group})
+        lines = summary_lines(group, f"variant = {values['variant']}")
+        assert len(lines) == len(perms)
+        for line, perm in zip(lines, perms):
+            cells = [c.strip() for c in line.strip("|").split("|")]
+            assert len(cells) == n_cols and float(cells[2]) == perm
+            mine = [r for r in group if float(r["permeability"]) == perm and not r.get("transient")]
+            assert int(cells[3]) == len({r["seed"] for r in mine}) and int(cells[4]) == len(mine)
+            n1, n2, nt = (int(v) for v in cells[6].split(" / "))
+            assert (n1, n2, nt) == tuple(sum(r["base_type"] == t for r in mine) for t in ("I", "II", "tie"))
+            for cell in cells[8:11]:                     # -C, slower, smaller drop: "p % [lo, hi]s"
+                p, lo, hi = (float(v) for v in cell.replace("%", "").replace("[", "").replace("]s", "")
+                             .replace(",", "").split())
+                assert lo <= p <= hi
