@@ -166,7 +166,7 @@ class Simulation:
         if self.fluid is not None:
             from ..kernels.coupled import advance_fluid
 
-            kernel, what, how_long = advance_fluid, "the coupled grain-fluid step", "2-4 minutes"
+            kernel, what, how_long = advance_fluid, "the coupled grain-fluid step", "1-3 minutes"
         else:
             kernel, what, how_long = K.advance, "the grain step", "20-60 s"
         if cached_for_this_cpu(kernel):

@@ -3,7 +3,13 @@ imports from the rest of gouge. Named indices of every shared array: layout.py. 
 equation: contact.py (Eqs. 8-11), step.py (velocity Verlet), deposit.py (App. E),
 pressure.py (Eqs. 14-20), drag.py (Eqs. 12-13), fluid_update.py (their order), coupled.py
 (step + fluid), measure.py (observables), neighbors.py reorder.py (lists, numbering), lanes.py
-(vector adds with the scalar bits), probe.py (the bench's machine probe)."""
+(vector adds with the scalar bits), probe.py (the bench's machine probe).
+
+One compiled specialisation per kernel: numba types a module constant, ``True``/``False`` and an
+omitted default as a literal and compiles a jitted callee again for every literal it is passed
+(the coupled step compiled ``_stages`` six times). Jitted call sites therefore pass constants as
+``int(STAGE)`` / ``bool(False)`` and give ranges explicitly (``int(0), int(-1)``);
+tests/kernels/test_compile_once.py holds every kernel to one specialisation per run kind."""
 
 import hashlib
 import os

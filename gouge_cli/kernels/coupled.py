@@ -35,15 +35,15 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     dt_f = interval * params[DT]
     half = 0.5 * params[DT]
     serial = params[THREADS] <= 1.0          # (the deposit in plain loops)
-    owed = False
-    drifted = False
+    owed = bool(False)           # (bool(...): one compiled _step, kernels/__init__)
+    drifted = bool(False)
     for st in range(nsteps):
         update = (counters[K_STEP] + 1) % interval == 0       # this step ends with a fluid update
         close = st == nsteps - 1
         if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close, drifted):
             return LIST_OVERFLOW, st
         owed = not close
-        drifted = False
+        drifted = bool(False)
         if not update:
             continue
         z_top = wall[W_Z]
@@ -118,17 +118,17 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
         if t == 0 and tasks > 1:
             fetch_add(out, base + _ALIVE, 1)
         if t == 1:
-            _stages(out, base, first, PREDICT, width, z_bot, z_top, dt_f, fluid, False)
+            _stages(out, base, first, int(PREDICT), width, z_bot, z_top, dt_f, fluid, bool(False))
         late = move_range(t * n // tasks, (t + 1) * n // tasks, x, z, vx, vz, spin, force_x, force_z, torque,
                           inv_mass, inv_inertia, body, x_build, z_build, owed, params)
         if t == 0 and tasks > 1:
             out[0] = _grid_on_thread_0(out, base, first, width, z_bot, z_top, dt_f, fluid)
         if t == 1 and fetch_add(out, base + _ALIVE, 0) != 0:       # (thread 0 runs: it sets each flag)
             chosen = _await(out, base + _CHOSEN)
-            _stages(out, base, PREDICT if chosen == _HEUN else DENSITY, BACK_Z, width, z_bot, z_top, dt_f, fluid,
-                    False)
+            _stages(out, base, PREDICT if chosen == _HEUN else DENSITY, int(BACK_Z), width, z_bot, z_top, dt_f, fluid,
+                    bool(False))
             if _await(out, base + _READY) == _GO:
-                _stages(out, base, BACK_Z, N_STAGES, width, z_bot, z_top, dt_f, fluid, False)
+                _stages(out, base, int(BACK_Z), int(N_STAGES), width, z_bot, z_top, dt_f, fluid, bool(False))
         out[t + 1] = late
     total = 0
     for t in range(tasks):
@@ -139,16 +139,16 @@ def _solve_and_drift(x, z, vx, vz, spin, force_x, force_z, torque, inv_mass, inv
 @njit(cache=NUMBA_CACHE)
 def _grid_on_thread_0(out, base, first, width, z_bot, z_top, dt_f, fluid):
     """Thread 0's part of the shared solve (_solve_and_drift); returns the solve's status."""
-    _stages(out, base, first, PREDICT, width, z_bot, z_top, dt_f, fluid, True)
+    _stages(out, base, first, int(PREDICT), width, z_bot, z_top, dt_f, fluid, bool(True))
     heun, status = pressure_choose(dt_f, fluid)
     fetch_add(out, base + _CHOSEN, _HEUN if heun else _SOLVED)
-    _stages(out, base, PREDICT if heun else DENSITY, BACK_Z, width, z_bot, z_top, dt_f, fluid, True)
+    _stages(out, base, PREDICT if heun else DENSITY, int(BACK_Z), width, z_bot, z_top, dt_f, fluid, bool(True))
     status = pressure_close(z_bot, z_top, fluid, fetch_add(out, base + _NONFINITE, 0) == 0, status)
     if status == STATUS_NONFINITE:
         fetch_add(out, base + _READY, _NO_DRAG)
         return status
     fetch_add(out, base + _READY, _GO)
-    _stages(out, base, BACK_Z, N_STAGES, width, z_bot, z_top, dt_f, fluid, True)
+    _stages(out, base, int(BACK_Z), int(N_STAGES), width, z_bot, z_top, dt_f, fluid, bool(True))
     return status
 
 
@@ -169,16 +169,17 @@ def _stages(out, base, first, last, width, z_bot, z_top, dt_f, fluid, wait):
     running thread's). A part that finds the pressure not finite counts in out[_NONFINITE]. With
     wait, returns only once every part of the last stage is done."""
     mx, mz = filter_half_widths(width, z_bot, z_top, fluid)
+    parts = int(_PARTS)
     for stage in range(first, last):
-        count = stage_parts(stage, _PARTS)
+        count = stage_parts(stage, parts)
         if stage != first:
-            while fetch_add(out, base + _FINISHED + stage - 1, 0) < stage_parts(stage - 1, _PARTS):
+            while fetch_add(out, base + _FINISHED + stage - 1, 0) < stage_parts(stage - 1, parts):
                 pass
         k = fetch_add(out, base + _TAKEN + stage, 1)
         while k < count:
-            if not grid_stage(stage, k, _PARTS, width, z_bot, z_top, dt_f, fluid, mx, mz):
+            if not grid_stage(stage, k, parts, width, z_bot, z_top, dt_f, fluid, mx, mz):
                 fetch_add(out, base + _NONFINITE, 1)
             fetch_add(out, base + _FINISHED + stage, 1)
             k = fetch_add(out, base + _TAKEN + stage, 1)
-    while wait and fetch_add(out, base + _FINISHED + last - 1, 0) < stage_parts(last - 1, _PARTS):
+    while wait and fetch_add(out, base + _FINISHED + last - 1, 0) < stage_parts(last - 1, parts):
         pass

@@ -436,7 +436,7 @@ def _velocity_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners,
     without stores to shared places: it vectorises, which the scatter that follows cannot."""
     if grain_kick is None:                  # (the arrays after False are not read)
         _velocity_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners,
-                       (False, vx, vz, vx, vx, 0.0, 0.0, 0.0, 0.0))
+                       (bool(False), vx, vz, vx, vx, 0.0, 0.0, 0.0, 0.0))
     else:
         _velocity_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners, grain_kick)
 

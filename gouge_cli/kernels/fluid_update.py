@@ -113,9 +113,9 @@ def _drag_density(fluid, w_bot, w_top, extrapolate, i0=0, i1=-1):
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, extrapolate):
     """_drag_density, then its fields through S^T on this thread; returns a status."""
-    if not _drag_density(fluid, w_bot, w_top, extrapolate):
+    if not _drag_density(fluid, w_bot, w_top, extrapolate, int(0), int(-1)):
         return STATUS_NONFINITE
-    grid_stages(BACK_Z, N_STAGES, Lx, z_bot, z_top, 0.0, fluid)
+    grid_stages(int(BACK_Z), int(N_STAGES), Lx, z_bot, z_top, 0.0, fluid)
     return STATUS_OK
 
 
@@ -246,7 +246,7 @@ def _pressure_part(stage, Lx, z_bot, z_top, dt_f, fluid, i0, i1):
         heun_corrector(P, capacity, tx, tz, dt_f, diag, work[G_Q], work[G_P], work[G_Z], i0, i1)
     else:
         w_bot, w_top = _plane_velocities(state, z_bot, z_top, dt_f)
-        return _drag_density(fluid, w_bot, w_top, True, i0, i1)
+        return _drag_density(fluid, w_bot, w_top, bool(True), i0, i1)
     return True
 
 
@@ -256,9 +256,10 @@ def grid_stages(first, last, Lx, z_bot, z_top, dt_f, fluid):
     False if the pressure is not finite (DENSITY)."""
     mx, mz = filter_half_widths(Lx, z_bot, z_top, fluid)
     finite = True
+    whole = int(1)
     for stage in range(first, last):
-        for index in range(stage_parts(stage, 1)):
-            finite &= grid_stage(stage, index, 1, Lx, z_bot, z_top, dt_f, fluid, mx, mz)
+        for index in range(stage_parts(stage, whole)):
+            finite &= grid_stage(stage, index, whole, Lx, z_bot, z_top, dt_f, fluid, mx, mz)
     return finite
 
 
@@ -289,14 +290,14 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, fluid, drag_x, drag_z)
     params, state, s, s_old, div_u, work = fluid.params, fluid.state, fluid.s, fluid.s_old, fluid.div_u, fluid.work
     deposit(Discs(x, z, vx, vz, radius), n, Lx, Planes(z_bot, z_top, 0.0, 0.0), _deposited(fluid), fluid.corners,
             fluid.partial)
-    grid_stages(TAPS, SOURCE, Lx, z_bot, z_top, 0.0, fluid)
+    grid_stages(int(TAPS), int(SOURCE), Lx, z_bot, z_top, 0.0, fluid)
     nx, nz = s.shape
     for i in range(nx):
         for j in range(nz):
             s_old[i, j] = s[i, j]
             div_u[i, j] = 0.0
     permeability_field(s, params[P_KAPPA_C], params[P_PHI_MIN], params[P_PHI_MAX],
-                       fluid.permeability, work[G_CAPACITY], params[P_BETA])
+                       fluid.permeability, work[G_CAPACITY], params[P_BETA], int(0), int(-1))
     state[S_Z_BOT] = z_bot
     state[S_Z_TOP] = z_top
     state[S_ITERATIONS] = 0.0
@@ -304,7 +305,7 @@ def fluid_init(x, z, vx, vz, radius, n, Lx, z_bot, z_top, fluid, drag_x, drag_z)
     state[S_SUBSTEPS] = 0.0
     state[S_UPDATES] = 0.0
     state[S_EXPLICIT_UPDATES] = 0.0
-    status = _finish_grid(Lx, z_bot, z_top, fluid, 0.0, 0.0, False)
+    status = _finish_grid(Lx, z_bot, z_top, fluid, 0.0, 0.0, bool(False))
     fluid_drag(n, Lx, fluid, drag_x, drag_z, status)
     return status
 
@@ -365,7 +366,7 @@ def fluid_begin(x, z, vx, vz, radius, n, Lx, z_bot, z_top, dt_f, fluid, grain_ki
 @njit(cache=NUMBA_CACHE, error_model="numpy")
 def fluid_finish_deposit(Lx, z_bot, z_top, fluid):
     """The deposit's last part after fluid_begin(finish=False), on this thread (grid only)."""
-    grid_stages(COLLECT, TAPS, Lx, z_bot, z_top, 0.0, fluid)
+    grid_stages(int(COLLECT), int(TAPS), Lx, z_bot, z_top, 0.0, fluid)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -373,11 +374,11 @@ def fluid_solve(Lx, z_bot, z_top, dt_f, fluid):
     """Second part of fluid_update, on the grid only, on this thread: filter, source, permeability,
     diffusion, gradient and drag density. fluid: kernels.layout.FluidArrays. Returns a status.
     (kernels.coupled runs the same parts with the filter's fields shared between two threads.)"""
-    grid_stages(TAPS, SOURCE, Lx, z_bot, z_top, 0.0, fluid)
+    grid_stages(int(TAPS), int(SOURCE), Lx, z_bot, z_top, 0.0, fluid)
     status = pressure_stage(Lx, z_bot, z_top, dt_f, fluid)
     if status == STATUS_NONFINITE:
         return status
-    grid_stages(BACK_Z, N_STAGES, Lx, z_bot, z_top, dt_f, fluid)
+    grid_stages(int(BACK_Z), int(N_STAGES), Lx, z_bot, z_top, dt_f, fluid)
     return status
 
 
@@ -388,9 +389,9 @@ def pressure_stage(Lx, z_bot, z_top, dt_f, fluid):
     then the drag's fields (_drag_density). Returns a status: STATUS_NONFINITE leaves the drag
     fields unused (fluid_drag then zeroes the drag). As grid stages SOURCE .. DENSITY around the
     serial pressure_choose and pressure_close, which kernels.coupled shares between two threads."""
-    grid_stages(SOURCE, PREDICT, Lx, z_bot, z_top, dt_f, fluid)
+    grid_stages(int(SOURCE), int(PREDICT), Lx, z_bot, z_top, dt_f, fluid)
     heun, status = pressure_choose(dt_f, fluid)
-    finite = grid_stages(PREDICT if heun else DENSITY, BACK_Z, Lx, z_bot, z_top, dt_f, fluid)
+    finite = grid_stages(PREDICT if heun else DENSITY, int(BACK_Z), Lx, z_bot, z_top, dt_f, fluid)
     return pressure_close(z_bot, z_top, fluid, finite, status)
 
 

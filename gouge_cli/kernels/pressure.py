@@ -176,7 +176,7 @@ def implicit_system(capacity, tx, tz, tb, dt_f, p_star, P, diag):
         df[c] = cap[c] / dt_f
         pf[c] = rhs[c]
         rhs[c] *= df[c]
-    _add_face_sums(tx, tz, tb, diag)
+    _add_face_sums(tx, tz, tb, diag, int(0), int(-1))
 
 
 @njit(cache=NUMBA_CACHE, inline="always")
@@ -407,7 +407,7 @@ def conjugate_gradient(solution, rhs, diag, tx, tz, work, tol, max_iter):
         solution[:] = 0.0
         return 0, 0.0, True
     _factor_columns(diag, tz, tzt, cp, dinv)
-    _apply_operator(solution, diag, tx, tz, q)
+    _apply_operator(solution, diag, tx, tz, q, int(0), int(-1))
     rf, bf, qf = flat(r), flat(rhs), flat(q)
     for c in range(np.uint64(rf.size)):
         rf[c] = bf[c] - qf[c]
@@ -420,7 +420,7 @@ def conjugate_gradient(solution, rhs, diag, tx, tz, work, tol, max_iter):
         pf[c] = zf[c]
     rz = _dot(r, zv)
     for it in range(1, max_iter + 1):
-        _apply_operator(p, diag, tx, tz, q)
+        _apply_operator(p, diag, tx, tz, q, int(0), int(-1))
         alpha = rz / _dot(p, q)
         res = math.sqrt(_step_residual(alpha, p, q, solution, r)) / rhs_norm
         if res <= tol:
@@ -441,9 +441,9 @@ def heun_diffusion(P, capacity, tx, tz, tb, dt, diag, slope, predictor, slope_2)
     each cell's face conductances; slope, predictor, slope_2 (nx, nz): scratch. Flat loops, in
     three parts that a caller may also run on column ranges (heun_predictor after _face_diagonal
     on every column, heun_corrector after heun_predictor on every column)."""
-    _face_diagonal(tx, tz, tb, diag)
-    heun_predictor(P, capacity, tx, tz, dt, diag, slope, predictor)
-    heun_corrector(P, capacity, tx, tz, dt, diag, slope, predictor, slope_2)
+    _face_diagonal(tx, tz, tb, diag, int(0), int(-1))
+    heun_predictor(P, capacity, tx, tz, dt, diag, slope, predictor, int(0), int(-1))
+    heun_corrector(P, capacity, tx, tz, dt, diag, slope, predictor, slope_2, int(0), int(-1))
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -469,10 +469,10 @@ def explicit_diffusion(P, capacity, tx, tz, tb, dt_sub, n_sub, diag, scratch):
     """n_sub forward-Euler (FTCS) steps of C dP/dt = -L P with P = 0 on the planes:
     P <- P - dt_sub (L P) / C, L P by _apply_operator with diag (out) = the sum of each cell's
     face conductances; scratch (nx, nz) holds L P. Flat loops."""
-    _face_diagonal(tx, tz, tb, diag)
+    _face_diagonal(tx, tz, tb, diag, int(0), int(-1))
     for _ in range(n_sub):
-        _apply_operator(P, diag, tx, tz, scratch)
-        _forward_euler(P, scratch, capacity, dt_sub, P)
+        _apply_operator(P, diag, tx, tz, scratch, int(0), int(-1))
+        _forward_euler(P, scratch, capacity, dt_sub, P, int(0), int(-1))
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")

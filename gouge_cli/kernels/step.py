@@ -487,6 +487,6 @@ def advance(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, 
     counters[K_NEEDED_CAPACITY] and call again (the interrupted step resumes)."""
     for s in range(nsteps):
         if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, s > 0, s == nsteps - 1,
-                     False):
+                     bool(False)):
             return LIST_OVERFLOW, s
     return OK, nsteps

@@ -10,7 +10,11 @@ footprint profile and a state built from float32 / strided / read-only arrays mu
 from __future__ import annotations
 
 import importlib
+import json
 import pkgutil
+import subprocess
+import sys
+from pathlib import Path
 
 import numba
 import numpy as np
@@ -133,3 +137,25 @@ def test_a_state_from_any_float_arrays_gets_the_kernels_types(reference):
     assert state.body.dtype == np.int8 and type(state.width) is float
     step_and_observe(Simulation(dry.config, state=state))
     assert_no_new(sigs, "a state built from float32 / strided / read-only arrays")
+
+
+# Kernels a fresh dry + wet run compiles more than once, on purpose: permute moves arrays of three
+# dtypes (int8 body, int64 ids, float64 values); the deposit runs without an owed kick once, at the
+# fluid's start (fluid_init: no forces yet), and with one in every coupled step.
+SEVERAL = {"reorder.permute", "deposit.deposit", "deposit._deposit_grouped", "deposit._groups_parallel",
+           "deposit._velocity_range", "deposit._velocity_loop"}
+
+
+@pytest.mark.validation
+def test_a_fresh_cache_compiles_each_kernel_once_per_argument_kind():
+    """benchmarks/compile_time.py in a fresh process and an empty numba cache (the only way to see
+    the kernels a caller compiles inside itself: a cached caller loads them whole): no kernel is
+    compiled again for a literal constant (kernels/__init__), only the SEVERAL kinds above."""
+    repo = Path(__file__).resolve().parents[2]
+    out = subprocess.run([sys.executable, str(repo / "benchmarks" / "compile_time.py"), "--json"],
+                         capture_output=True, text=True, timeout=1800, cwd=repo)
+    assert out.returncode == 0, out.stderr[-3000:]
+    result = json.loads(out.stdout.splitlines()[-1])
+    extra = {name: args for name, args in result["repeated"].items() if name not in SEVERAL}
+    assert not extra, f"compiled more than once: {extra}"
+    assert result["wet_seconds"] > 0 and "coupled.advance_fluid" in result["kernels"]
