@@ -181,3 +181,56 @@ def delay_figure(pair_rows: list[dict], delay: list[dict], path: Path, title: st
     fig.tight_layout(rect=(0, 0, 1, 0.95 if title else 1))
     return save(fig, path, {"Title": title or "undrained slower against onset delay",
                             "Description": "ratios and slower / smaller-drop shares against the undrained onset delay"})
+
+
+_COMPARED = ("type_II", "complex", "slower", "smaller_drop", "peak_velocity_ratio", "stress_drop_ratio")
+
+
+def groups_figure(groups: list[tuple[str, list[dict]]], thesis: ThesisPoint | None, path: Path,
+                  title: str = "") -> Path:
+    """The findings of several groups of pairs (couplings, layer thicknesses, normal stresses: never
+    pooled) on one set of axes against the slip's De: per group and permeability the pooled value
+    with its seed-level 95 % interval, a group's permeabilities joined by a line. groups: (label,
+    :func:`~gouge_cli.analysis.regime.regime_rows` rows) per group."""
+    fig, axes = plt.subplots(2, 3, figsize=(14.0, 7.4), dpi=DPI, sharex=True)
+    cmap = plt.get_cmap("tab10")
+    for g, (label, rows) in enumerate(groups):
+        pooled = sorted((r for r in rows if r["seed"] == "all" and np.isfinite(r[f"{abscissa(r)}_median"])),
+                        key=lambda r: r[f"{abscissa(r)}_median"])
+        if not pooled:
+            continue
+        n_seeds = max(int(r["n_seeds"]) for r in pooled)
+        shift = 1.0 + 0.04 * (g - (len(groups) - 1) / 2)          # (groups side by side on a log axis)
+        for ax, key in zip(axes.flat, _COMPARED):
+            de = np.array([r[f"{abscissa(r)}_median"] for r in pooled]) * shift
+            mid = np.array([_mid(r, key) for r in pooled])
+            lo = np.array([r.get(f"{key}_seed_lo", np.nan) for r in pooled])
+            hi = np.array([r.get(f"{key}_seed_hi", np.nan) for r in pooled])
+            ax.plot(de, mid, "-o", color=cmap(g % 10), ms=5, mec="k", mew=0.4, lw=1.0,
+                    label=f"{label} ({n_seeds} seeds)")
+            ok = np.isfinite(lo) & np.isfinite(hi)
+            ax.errorbar(de[ok], mid[ok], yerr=[np.maximum(mid - lo, 0)[ok], np.maximum(hi - mid, 0)[ok]], fmt="none",
+                        ecolor=cmap(g % 10), elinewidth=2.0, alpha=0.45, capsize=0)
+    for ax, key in zip(axes.flat, _COMPARED):
+        if thesis is not None and key in thesis.fractions:
+            f, flo, fhi = thesis.fractions[key]
+            ax.errorbar([thesis.deborah], [f], yerr=[[f - flo], [fhi - f]], fmt="*", color="k", ms=11,
+                        capsize=2, lw=0.8, label="thesis (Table 3, Wilson)")
+        if key in _MEDIANS:
+            ax.axhline(1.0, color="0.3", lw=0.8, ls="--")
+        else:
+            ax.set_ylim(-0.03, 1.03)
+        ax.set_xscale("log")
+        ax.set_title(_NAMES[key] + (" (median of undrained / drained)" if key in _MEDIANS else ""), fontsize=9,
+                     loc="left")
+        ax.grid(True, which="both", color="0.92", lw=0.6)
+    for ax in axes[1]:
+        ax.set_xlabel("De of the slip (u₀: drained peak wall speed)")
+    axes.flat[0].set_ylabel("fraction of pairs")
+    axes.flat[3].set_ylabel("share of pairs / ratio")
+    axes.flat[0].legend(fontsize=7, loc="best")
+    fig.suptitle((title + ": " if title else "") + "pooled over seeds, bars: seed-level 95 % intervals", fontsize=10)
+    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    return save(fig, path, {"Title": title or "findings by group",
+                            "Description": "pair fractions and ratio medians against the slip's Deborah number, "
+                                           "one line per group of pairs (never pooled), seed-level intervals"})

@@ -29,12 +29,18 @@ def read_pairs(path: str | Path) -> list[dict]:
 
 def write_groups(pair_rows: list[dict], keys: list[str], root: Path, title: str = "") -> dict:
     """:func:`write_regime` and a pairs.csv once per value of ``keys`` (never pooled), under
-    ``root/<key-value_..._hash>/`` (campaign_spec.point_name); at ``root`` itself when there is no key."""
+    ``root/<key-value_..._hash>/`` (campaign_spec.point_name); at ``root`` itself when there is no key.
+    At ``root``: summary.md (:func:`summary_lines` of every group) and, with several groups,
+    groups.png (their findings on one set of axes, plots.regime.groups_figure)."""
     from ..analysis.campaign_table import write_table
     from .campaign_spec import point_name
 
+    from ..analysis.regime import regime_rows, thesis_point
+    from ..plots.regime import groups_figure
+
     out = {}
     lines = []
+    groups = []
     for values, rows in by_swept(pair_rows, keys) if keys else [({}, pair_rows)]:
         name = point_name(values) if values else ""
         where = ", ".join(f"{k} = {v}" for k, v in values.items())
@@ -43,6 +49,10 @@ def write_groups(pair_rows: list[dict], keys: list[str], root: Path, title: str 
         for key, path in write_regime(rows, folder, folder, f"{title}, {where}" if where else title).items():
             out[f"{key}[{name}]"] = path
         lines += summary_lines(rows, where or title)
+        groups.append((where or title, regime_rows(rows)))
+    if len(groups) > 1:
+        out["groups_figure"] = groups_figure(groups, thesis_point(), Path(root) / "groups.png",
+                                             f"{title}: every group" if title else "")
     path = Path(root) / "summary.md"
     path.write_text("\n".join(SUMMARY_HEADER + lines) + "\n")
     out["summary"] = path

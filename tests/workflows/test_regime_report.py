@@ -121,3 +121,26 @@ def test_the_verdict_summary_counts_the_committed_records():
                 p, lo, hi = (float(v) for v in cell.replace("%", "").replace("[", "").replace("]s", "")
                              .replace(",", "").split())
                 assert lo <= p <= hi
+
+
+def test_groups_are_drawn_on_one_figure_and_summarised_never_pooled(tmp_path):
+    """Two swept values of a pair table: a folder each, summary.md with one row per (value,
+    permeability) counting that value's pairs only, and groups.png with both on one set of axes."""
+    from PIL import Image
+
+    from gouge_cli.workflows.regime_report import write_groups
+
+    rows = [r for r in _read(_pairs(tmp_path / "pairs.csv")) if r["kind"] == "pair"]
+    for r in rows:
+        r["loading.normal_stress"] = "0.001" if r["seed"] == "7" else "0.0003"
+    out = write_groups(rows, ["loading.normal_stress"], tmp_path / "out", "sweep")
+    lines = (tmp_path / "out" / "summary.md").read_text().splitlines()[2:]
+    assert len(lines) == 4                              # 2 stresses x 2 permeabilities
+    by_group = {}
+    for line in lines:
+        cells = [c.strip() for c in line.strip("|").split("|")]
+        by_group.setdefault(cells[0], []).append(int(cells[4]))
+    # seed 7 alone at 0.001 (4 pairs per permeability); seeds 3 and 11 at 3e-4, seed 3's tie transient
+    assert by_group == {"loading.normal_stress = 0.001": [4, 4], "loading.normal_stress = 0.0003": [7, 7]}
+    png = Image.open(out["groups_figure"])
+    assert png.size[0] > 1000 and "never pooled" in png.info.get("Description", "")
