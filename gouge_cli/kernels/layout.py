@@ -29,9 +29,10 @@ Grains = namedtuple("Grains", ("x", "z", "vx", "vz", "spin", "radius", "mass", "
 Lists = namedtuple("Lists", ("start", "index", "shear", "rev_start", "rev_slot", "x_build", "z_build",
                              "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count"))
 # the force pass's per-pair data: results pair_fx, pair_fz (force on j), pair_ti, pair_tj (torques)
-# float64 (capacity,); constants pair_const float64 (N_PAIR_CONST, capacity), rows PC_* (set with
-# rev_start/rev_slot, layout[L_BUILT]); per-part chunk buffers pair_buf (parts, N_BUF, PAIR_BUF)
-Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_const", "pair_buf"))
+# float64 (capacity,); constants pair_const float64 (N_PAIR_CONST, capacity), rows PC_*, and pair_row
+# int32 (capacity,), the first grain i of each slot (all set with rev_start/rev_slot, layout[L_BUILT]);
+# per-part chunk buffers pair_buf (parts, N_BUF, PAIR_BUF)
+Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_const", "pair_buf", "pair_row"))
 
 # params: float64 array
 DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \

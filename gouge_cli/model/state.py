@@ -117,6 +117,7 @@ class State:
         self.pair_ti = np.zeros(capacity)
         self.pair_tj = np.zeros(capacity)
         self.pair_const = np.zeros((L.N_PAIR_CONST, capacity))
+        self.pair_row = np.zeros(capacity, np.int32)
 
     def list_changed(self):
         """The list or the masses changed: the arrays derived from them (reverse list, pair

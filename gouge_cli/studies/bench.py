@@ -399,9 +399,10 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
     nb = K.force_parts(threads, s.n, pairs.pair_buf.shape[0])
     out = {
         "contact_forces": timed(lambda: K.compute_forces(g, lists, pairs, s.wall, p, *sim.drag), reset=reset),
-        "law_pass": timed(lambda: K.law_pass(nb, g.x, g.z, g.vx, g.vz, g.spin, lists.start, lists.index, lists.shear,
-                                             pairs.pair_const, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti,
-                                             pairs.pair_tj, pairs.pair_buf, p), reset=reset),
+        "law_pass": timed(lambda: K.law_pass(nb, g.x, g.z, g.vx, g.vz, g.spin, lists.start, pairs.pair_row,
+                                             lists.index, lists.shear, pairs.pair_const, pairs.pair_fx,
+                                             pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, pairs.pair_buf, p),
+                          reset=reset),
         "sum_pass": timed(lambda: K.sum_pass(nb, lists.start, lists.rev_start, lists.rev_slot, pairs.pair_fx,
                                              pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, g.force_x, g.force_z,
                                              g.torque, *sim.drag)),
@@ -445,7 +446,7 @@ def sub_system(s, m: int) -> tuple[L.Grains, L.Lists, L.Pairs]:
         start=start, index=index, shear=s.shear[:npairs][keep].copy(), layout=np.full(L.N_LAYOUT, -1, s.layout.dtype),
         rev_start=np.zeros(m + 1, s.rev_start.dtype), rev_slot=np.zeros(index.size, s.rev_slot.dtype))
     pairs = L.Pairs(*(np.zeros(index.size) for _ in range(4)), np.zeros((L.N_PAIR_CONST, index.size)),
-                    np.zeros((1, L.N_BUF, L.PAIR_BUF)))
+                    np.zeros((1, L.N_BUF, L.PAIR_BUF)), np.zeros(index.size, s.pair_row.dtype))
     return grains, lists, pairs
 
 
