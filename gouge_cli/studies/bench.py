@@ -400,12 +400,10 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
     out = {
         "contact_forces": timed(lambda: K.compute_forces(g, lists, pairs, s.wall, p, *sim.drag), reset=reset),
         "law_pass": timed(lambda: K.law_pass(nb, g.x, g.z, g.vx, g.vz, g.spin, lists.start, pairs.pair_row,
-                                             lists.index, lists.shear, pairs.pair_const, pairs.pair_fx,
-                                             pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, pairs.pair_buf, p),
-                          reset=reset),
-        "sum_pass": timed(lambda: K.sum_pass(nb, lists.start, lists.rev_start, lists.rev_slot, pairs.pair_fx,
-                                             pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, g.force_x, g.force_z,
-                                             g.torque, *sim.drag)),
+                                             lists.index, lists.shear, pairs.pair_const, pairs.sum_x, pairs.sum_z,
+                                             pairs.sum_t, pairs.pair_buf, p), reset=reset),
+        "sum_pass": timed(lambda: K.sum_pass(nb, pairs.sum_start, pairs.sum_end, pairs.sum_x, pairs.sum_z,
+                                             pairs.sum_t, g.force_x, g.force_z, g.torque, *sim.drag)),
         "kick_drift": timed(lambda: K.kick_drift(g.x, g.z, g.vx, g.vz, g.spin, g.force_x, g.force_z, g.torque,
                                                   g.inv_mass, g.inv_inertia, g.body, lists.x_build, lists.z_build,
                                                   True, p, lists.cell_of), reset=reset),
@@ -446,7 +444,9 @@ def sub_system(s, m: int) -> tuple[L.Grains, L.Lists, L.Pairs]:
         start=start, index=index, shear=s.shear[:npairs][keep].copy(), layout=np.full(L.N_LAYOUT, -1, s.layout.dtype),
         rev_start=np.zeros(m + 1, s.rev_start.dtype), rev_slot=np.zeros(index.size, s.rev_slot.dtype))
     pairs = L.Pairs(*(np.zeros(index.size) for _ in range(4)), np.zeros((L.N_PAIR_CONST, index.size)),
-                    np.zeros((1, L.N_BUF, L.PAIR_BUF)), np.zeros(index.size, s.pair_row.dtype))
+                    np.zeros((1, L.N_BUF, L.PAIR_BUF)), np.zeros(index.size, s.pair_row.dtype),
+                    *(np.zeros(2 * index.size + 1) for _ in range(3)), np.zeros(m + 1, s.sum_start.dtype),
+                    np.zeros(2 * index.size + m + 2, s.sum_end.dtype))
     return grains, lists, pairs
 
 
