@@ -106,6 +106,28 @@ class BenchResult:
         return asdict(self)
 
 
+def numba_features() -> str:
+    """The CPU features numba compiles for: "host" (this CPU's: numba's default, also when only
+    NUMBA_CPU_NAME is set, so that NUMBA_CPU_NAME=haswell alone still uses an AVX-512 host's
+    512-bit instructions), "named CPU's own" (NUMBA_CPU_FEATURES set empty: e.g. haswell's AVX2 +
+    FMA, nothing more), else the feature string given."""
+    features = numba.config.CPU_FEATURES
+    return "host" if features is None else features or "named CPU's own"
+
+
+def cpu_mhz() -> float | None:
+    """The first "cpu MHz" of /proc/cpuinfo (a virtual machine's nominal clock; a host's current
+    one), to turn ns into cycles; None where there is none."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "cpu MHz":
+                return float(value)
+    except (OSError, ValueError):
+        pass
+    return None
+
+
 def bench_config(n_grains: int, dt: float, skin: float, permeability: float | None = None, solver: str = "auto"):
     fluid = {"permeability": permeability, "solver": solver} if permeability else None
     return build_config({
@@ -563,7 +585,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
     return BenchResult(
         machine={"cpus": os.cpu_count(), "numba_threads": all_threads, "threads": threads,
                  "numba_cpu_name": os.environ.get("NUMBA_CPU_NAME") or "host",
-                 "numba_cpu_features": os.environ.get("NUMBA_CPU_FEATURES") or "host"},
+                 "numba_cpu_features": numba_features(), "cpu_mhz": cpu_mhz()},
         provenance=provenance.collect(all_threads),
         dt=dt, skin=skin,
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
