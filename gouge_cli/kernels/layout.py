@@ -29,9 +29,17 @@ Grains = namedtuple("Grains", ("x", "z", "vx", "vz", "spin", "radius", "mass", "
 Lists = namedtuple("Lists", ("start", "index", "shear", "rev_start", "rev_slot", "x_build", "z_build",
                              "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count"))
 # the force pass's per-pair data: results pair_fx, pair_fz (force on j), pair_ti, pair_tj (torques)
-# float64 (capacity,); constants pair_const float64 (N_PAIR_CONST, capacity), rows PC_* (set with
-# rev_start/rev_slot, layout[L_BUILT]); per-part chunk buffers pair_buf (parts, N_BUF, PAIR_BUF)
-Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_const", "pair_buf"))
+# float64 (capacity,) (the GPU engine's; the host's pass writes the sum_* tables); constants pair_const
+# float64 (N_PAIR_CONST, capacity), rows PC_*, and pair_row int32 (capacity,), the first grain i of each
+# slot; per-part chunk buffers pair_buf (parts, N_BUF, PAIR_BUF); the terms of the grains' sums, float64
+# (2 capacity + 1,) each: sum_x, sum_z, sum_t at e = k the terms slot k adds to its second grain's sums
+# (fx, fz, tj), at e = capacity + k those it adds to its first grain's (-fx, -fz, ti), at e = 2 capacity
+# -0.0 (a term that adds nothing); sum_start (N + 1,) int64 and sum_end int32 (2 capacity + N + 2,):
+# grain g's terms are e = sum_end[sum_start[g]:sum_start[g + 1]] in the order of its sums
+# (kernels.step.sum_list). pair_row, pair_const and the sum list are set with rev_start/rev_slot
+# (layout[L_BUILT]).
+Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_const", "pair_buf", "pair_row",
+                             "sum_x", "sum_z", "sum_t", "sum_start", "sum_end"))
 
 # params: float64 array
 DT, WIDTH, SKIN, C_NORMAL, C_TANGENTIAL, DAMPING, FRICTION, SIGMA, SPRING, V_LOAD, \

@@ -117,6 +117,12 @@ class State:
         self.pair_ti = np.zeros(capacity)
         self.pair_tj = np.zeros(capacity)
         self.pair_const = np.zeros((L.N_PAIR_CONST, capacity))
+        self.pair_row = np.zeros(capacity, np.int32)
+        self.sum_x = np.zeros(2 * capacity + 1)
+        self.sum_z = np.zeros(2 * capacity + 1)
+        self.sum_t = np.zeros(2 * capacity + 1)
+        self.sum_start = np.zeros(self.n + 1, np.int64)
+        self.sum_end = np.zeros(2 * capacity + self.n + 2, np.int32)
 
     def list_changed(self):
         """The list or the masses changed: the arrays derived from them (reverse list, pair

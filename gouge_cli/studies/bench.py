@@ -106,6 +106,28 @@ class BenchResult:
         return asdict(self)
 
 
+def numba_features() -> str:
+    """The CPU features numba compiles for: "host" (this CPU's: numba's default, also when only
+    NUMBA_CPU_NAME is set, so that NUMBA_CPU_NAME=haswell alone still uses an AVX-512 host's
+    512-bit instructions), "named CPU's own" (NUMBA_CPU_FEATURES set empty: e.g. haswell's AVX2 +
+    FMA, nothing more), else the feature string given."""
+    features = numba.config.CPU_FEATURES
+    return "host" if features is None else features or "named CPU's own"
+
+
+def cpu_mhz() -> float | None:
+    """The first "cpu MHz" of /proc/cpuinfo (a virtual machine's nominal clock; a host's current
+    one), to turn ns into cycles; None where there is none."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "cpu MHz":
+                return float(value)
+    except (OSError, ValueError):
+        pass
+    return None
+
+
 def bench_config(n_grains: int, dt: float, skin: float, permeability: float | None = None, solver: str = "auto"):
     fluid = {"permeability": permeability, "solver": solver} if permeability else None
     return build_config({
@@ -399,12 +421,11 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
     nb = K.force_parts(threads, s.n, pairs.pair_buf.shape[0])
     out = {
         "contact_forces": timed(lambda: K.compute_forces(g, lists, pairs, s.wall, p, *sim.drag), reset=reset),
-        "law_pass": timed(lambda: K.law_pass(nb, g.x, g.z, g.vx, g.vz, g.spin, lists.start, lists.index, lists.shear,
-                                             pairs.pair_const, pairs.pair_fx, pairs.pair_fz, pairs.pair_ti,
-                                             pairs.pair_tj, pairs.pair_buf, p), reset=reset),
-        "sum_pass": timed(lambda: K.sum_pass(nb, lists.start, lists.rev_start, lists.rev_slot, pairs.pair_fx,
-                                             pairs.pair_fz, pairs.pair_ti, pairs.pair_tj, g.force_x, g.force_z,
-                                             g.torque, *sim.drag)),
+        "law_pass": timed(lambda: K.law_pass(nb, g.x, g.z, g.vx, g.vz, g.spin, lists.start, pairs.pair_row,
+                                             lists.index, lists.shear, pairs.pair_const, pairs.sum_x, pairs.sum_z,
+                                             pairs.sum_t, pairs.pair_buf, p), reset=reset),
+        "sum_pass": timed(lambda: K.sum_pass(nb, pairs.sum_start, pairs.sum_end, pairs.sum_x, pairs.sum_z,
+                                             pairs.sum_t, g.force_x, g.force_z, g.torque, *sim.drag)),
         "kick_drift": timed(lambda: K.kick_drift(g.x, g.z, g.vx, g.vz, g.spin, g.force_x, g.force_z, g.torque,
                                                   g.inv_mass, g.inv_inertia, g.body, lists.x_build, lists.z_build,
                                                   True, p, lists.cell_of), reset=reset),
@@ -445,7 +466,9 @@ def sub_system(s, m: int) -> tuple[L.Grains, L.Lists, L.Pairs]:
         start=start, index=index, shear=s.shear[:npairs][keep].copy(), layout=np.full(L.N_LAYOUT, -1, s.layout.dtype),
         rev_start=np.zeros(m + 1, s.rev_start.dtype), rev_slot=np.zeros(index.size, s.rev_slot.dtype))
     pairs = L.Pairs(*(np.zeros(index.size) for _ in range(4)), np.zeros((L.N_PAIR_CONST, index.size)),
-                    np.zeros((1, L.N_BUF, L.PAIR_BUF)))
+                    np.zeros((1, L.N_BUF, L.PAIR_BUF)), np.zeros(index.size, s.pair_row.dtype),
+                    *(np.zeros(2 * index.size + 1) for _ in range(3)), np.zeros(m + 1, s.sum_start.dtype),
+                    np.zeros(2 * index.size + m + 2, s.sum_end.dtype))
     return grains, lists, pairs
 
 
@@ -562,7 +585,7 @@ def run_benchmark(sizes=(10000,), threads=None, steps: int = 5000, repeats: int 
     return BenchResult(
         machine={"cpus": os.cpu_count(), "numba_threads": all_threads, "threads": threads,
                  "numba_cpu_name": os.environ.get("NUMBA_CPU_NAME") or "host",
-                 "numba_cpu_features": os.environ.get("NUMBA_CPU_FEATURES") or "host"},
+                 "numba_cpu_features": numba_features(), "cpu_mhz": cpu_mhz()},
         provenance=provenance.collect(all_threads),
         dt=dt, skin=skin,
         peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,

@@ -16,13 +16,15 @@ def bench_report(r: BenchResult, json_path: Path) -> list[str | Table]:
     prov = r.provenance
     items: list[str | Table] = [
         f"measured on: {prov['cpu']['model']} ({prov['cpu']['vector_width_bits']}-bit vectors: "
-        f"{' '.join(prov['cpu']['vector_features'])}; numba target {prov['cpu']['numba_target']}), "
+        f"{' '.join(prov['cpu']['vector_features'])}; numba target {prov['cpu']['numba_target']}, "
+        f"features {r.machine.get('numba_cpu_features', 'host')}), "
         f"{r.machine['cpus']} cores; numpy {prov['libraries']['numpy']}, numba "
         f"{prov['libraries']['numba']}, llvmlite {prov['libraries']['llvmlite']}",
         _rates(r)]
     items += _lammps(r) + _scaling(r)
     if r.profile_us:
         items.append(_profile(r))
+        items.append(_per_grain(r))
     if r.footprint:
         items.append(_footprint(r))
     for a in r.allocations:
@@ -88,6 +90,25 @@ def _profile(r: BenchResult) -> Table:
                      f"{p['steps_per_rebuild']:.0f}", f"{p['rebuild_per_step']:.0f}", f"{p['renumber_each']:.0f}",
                      f"{p['renumber_per_step']:.1f}", f"{p['whole_step']:.0f}")
     return prof
+
+
+def _per_grain(r: BenchResult) -> Table:
+    """The profile per grain: ns, and cycles at the clock /proc/cpuinfo gives (nominal on a VM; no
+    cycle counter is read), so that CPUs can be compared part by part."""
+    mhz = r.machine.get("cpu_mhz")
+    unit = f"ns (cycles at {mhz / 1e3:.2f} GHz)" if mhz else "ns"
+    table = Table(title=f"per grain and step, by part: {unit}")
+    parts = (("contact pass", "contact_forces"), ("law", "law_pass"), ("sum", "sum_pass"),
+             ("kick pass", "kick_drift"), ("rebuild/step", "rebuild_per_step"), ("whole step", "whole_step"))
+    for col in ("N", "threads") + tuple(name for name, _ in parts):
+        table.add_column(col, justify="right")
+    for p in r.profile_us:
+        cells = []
+        for _, key in parts:
+            ns = p[key] * 1e3 / p["n_grains"]
+            cells.append(f"{ns:.1f} ({ns * mhz / 1e3:.0f})" if mhz else f"{ns:.1f}")
+        table.add_row(str(p["n_grains"]), str(p["threads"]), *cells)
+    return table
 
 
 def _footprint(r: BenchResult) -> Table:
