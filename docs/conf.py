@@ -23,7 +23,7 @@ extensions = ["myst_parser", "sphinx.ext.autodoc", "sphinx.ext.napoleon", "sphin
 myst_enable_extensions = ["dollarmath", "colon_fence", "deflist"]
 myst_heading_anchors = 3
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
-exclude_patterns = ["_build", "_generated", "Thumbs.db", ".DS_Store"]
+exclude_patterns = ["_build", "_generated", "figures", "Thumbs.db", ".DS_Store"]   # figures: data and included tables
 nitpicky = True
 # the Python API page documents gouge's own objects; types from other packages are not linked
 nitpick_ignore_regex = [(r"py:.*", r"(numpy|np|h5py|pathlib|typing|collections|pydantic|typer|click|xarray|xr|pandas|pd)\..*"),
