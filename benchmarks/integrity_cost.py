@@ -42,7 +42,8 @@ from gouge_cli.config import build_config
 from gouge_cli.driver import phases, slips
 from gouge_cli.io import checkpoint, runfile
 from gouge_cli.io.checkpoint import read_checkpoint
-from gouge_cli.io.runfile import RunFile, RunReader, slip_catalog
+from gouge_cli.io.runfile import RunFile, RunReader
+from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.workflows.run import run_scene
 
 WRITER_METHODS = ("__init__", "append", "flush", "snapshot", "add_slip", "set_attr", "close")

@@ -42,7 +42,7 @@ class RunAnalysis:
     """Everything `gouge analyze` computes for one run."""
 
     info: RunInfo
-    catalog: list[dict]
+    catalog: list[dict]           # catalog_table rows
     summary: dict
     fits: list[dict]
     pairs: list[ForkPair]

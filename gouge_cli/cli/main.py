@@ -141,14 +141,13 @@ def slips(
     """List the slips detected in a run (the catalog written while it ran)."""
     import json
 
-    from ..io.runfile import slip_catalog
     from ..io.rundir import refuse_if_in_progress
 
     from .export_cmds import catalog_since_loading
 
     target = _run_dir(run_dir)
     refuse_if_in_progress(target, "slips")
-    catalog, origin = catalog_since_loading(target, slip_catalog)
+    catalog, origin = catalog_since_loading(target)
     if as_json:
         print(json.dumps(catalog, allow_nan=False))
         return

@@ -61,6 +61,16 @@ def object_digest(obj, with_data: bool | None = None) -> str:
     return h.hexdigest()
 
 
+def attr_value(attrs, key, default=None):
+    """Attribute `key` of `attrs` as a Python value (bytes decoded, numpy scalars unwrapped), or `default`."""
+    if key not in attrs:
+        return default
+    value = attrs[key]
+    if isinstance(value, bytes):
+        return value.decode()
+    return value.item() if hasattr(value, "item") else value
+
+
 def seal(obj) -> None:
     """Store the seal of `obj` (call after its last attribute or, small datasets, its data is written)."""
     obj.attrs[SEAL] = object_digest(obj)

@@ -1,6 +1,6 @@
 """The run file ``run.h5``: the only code that writes or reads it (RunFile writes while a run goes
-on, add_slip its slip catalog, write_analysis_tables the tables of `gouge analyze`; RunReader,
-read_slips and slip_catalog read it). Self-describing time series, grain snapshots, slips,
+on, add_slip its slip catalog, write_analysis_tables the tables of `gouge analyze`; RunReader
+reads it, and gouge_cli.io.slipcatalog its slip catalog). Self-describing time series, grain snapshots, slips,
 analysis tables and provenance.
 
 Layout of ``run.h5``::
@@ -68,10 +68,11 @@ from ..model.timestep import half_period
 from .filedoc import (SNAPSHOT, SNAPSHOT_ATTRS, describe, describe_attributes, document_analysis, document_run_file,
                       document_slip, grid_geometry)
 from ..kernels import layout as L
-from .integrity import SEAL, STRUCTURE_ERRORS, check_seal, read, seal, seal_tree, stored_seal, structure_error
+from .integrity import SEAL, STRUCTURE_ERRORS, attr_value, check_seal, read, seal, seal_tree, stored_seal, structure_error
 from .layout import RUN_FILE, RunLayout
 from .outputs import free_bytes, is_no_space, preallocate, remove_temps, require_space, temporary
-from .rundir import RESERVE_BYTES, open_run_file
+from .rundir import RESERVE_BYTES
+from .slipcatalog import SlipEntry
 from ..units import pint_unit
 
 # name -> (unit, description); units are the dimensionless scales of docs/physics/units.md
@@ -380,17 +381,17 @@ class RunFile:
         seal(grp)
         self.h5.flush()
 
-    def add_slip(self, number: int, entry: dict, subevents: list[dict]):
-        """Write slip `number` as /slips/NNN: `entry` as attributes, subevent_time and
+    def add_slip(self, entry: SlipEntry):
+        """Write `entry` as /slips/NNN (NNN its number): its attrs() as attributes, subevent_time and
         subevent_velocity (S,) datasets [t0, v0]; flushed at once."""
         self._room()
         if "slips" not in self.h5:
             seal(self.h5.create_group("slips"))
-        group = self.h5["slips"].create_group(f"{number:03d}")
-        for key, value in entry.items():
+        group = self.h5["slips"].create_group(f"{entry.number:03d}")
+        for key, value in entry.attrs().items():
             group.attrs[key] = value
-        _checked(group, "subevent_time", np.array([s["time"] for s in subevents], float))
-        _checked(group, "subevent_velocity", np.array([s["velocity"] for s in subevents], float))
+        for key in entry.SUBEVENTS:
+            _checked(group, key, np.array(getattr(entry, key), float))
         document_slip(group)
         for ds in group.values():
             seal(ds)
@@ -547,12 +548,6 @@ def run_status(h5_path: Path) -> str | None:
         return str(attr_value(h5.attrs, "status", ""))
 
 
-def slip_catalog(run_dir: Path) -> list[dict]:
-    """The run's slip catalog (one dict of attributes per slip, in order; [] if none)."""
-    with open_run_file(RunLayout(run_dir).run_file) as h5:
-        return read_slips(h5) or []
-
-
 _NAN = float("nan")
 
 
@@ -630,16 +625,6 @@ class RunInfo:
         if self.is_fork:
             return f"fork {self.run_dir} (branch {self.branch} of slip {self.fork_slip})"
         return f"run {self.run_dir}"
-
-
-
-def attr_value(attrs, key, default=None):
-    if key not in attrs:
-        return default
-    value = attrs[key]
-    if isinstance(value, bytes):
-        return value.decode()
-    return value.item() if hasattr(value, "item") else value
 
 
 
@@ -867,26 +852,6 @@ def read_series_items(h5_path: Path, name: str, key) -> np.ndarray:
     flushed rows too); what gouge_cli.api's lazy series call."""
     with _open_for_reading(Path(h5_path), True) as h5:
         return h5["series"][name][key]
-
-
-def read_slips(h5: h5py.File) -> list[dict] | None:
-    """The /slips catalog of an open run file (one dict of attributes, plus subevent_time and
-    subevent_velocity lists, per slip, in order), or None if the run wrote none."""
-    if "slips" not in h5:
-        return None
-    required = stored_seal(h5) is not None
-    check_seal(h5["slips"], required)
-    out = []
-    for name in sorted(h5["slips"]):
-        g = h5["slips"][name]
-        check_seal(g, required)
-        entry = {k: attr_value(g.attrs, k) for k in g.attrs.keys() if k != SEAL}
-        for key in ("subevent_time", "subevent_velocity"):
-            if key in g:
-                check_seal(g[key], required)
-            entry[key] = read(g[key]).tolist() if key in g else []
-        out.append(entry)
-    return out
 
 
 def _table_to_group(group: h5py.Group, rows: list[dict], columns) -> None:

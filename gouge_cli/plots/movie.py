@@ -65,7 +65,7 @@ def _branch(label: str, run_dir: Path) -> Branch:
                          "it writes output.slip_frames of them per slip duration")
     catalog = read_catalog(reader)
     s = reader.series(["time", "wall_vx"])
-    onset = float(catalog[0]["onset_time"]) if catalog else float(s["time"][int(np.argmax(s["wall_vx"]))])
+    onset = catalog[0].onset_time if catalog else float(s["time"][int(np.argmax(s["wall_vx"]))])
     tau = np.array(reader.snapshot_times()) - onset
     return Branch(label, reader, onset, names, tau, s["time"] - onset, s["wall_vx"] / reader.info.V_s)
 

@@ -92,7 +92,7 @@ def _run_rung(config: Config, packing, lam: float, out_dir: Path) -> dict:
         counts = json.loads(attr_value(run.h5.attrs, "stick_scaling_counts", "{}"))
     return {"lam": float(lam), "status": status, "steps": int(steps), "wall": wall, "n": sim.state.n,
             "t_load": t_load, "duration": cfg.run.duration, "i_max": i_max, "counts": counts,
-            "slips": [{k: float(s[k]) for k in ("onset_time", "static_strength", "stress_drop", "peak_velocity",
+            "slips": [{k: getattr(s, k) for k in ("onset_time", "static_strength", "stress_drop", "peak_velocity",
                                                  "duration")} for s in recorder.slips]}
 
 

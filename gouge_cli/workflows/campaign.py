@@ -148,13 +148,14 @@ def run_result(run_dir: Path) -> dict:
     """The results record's body of a finished loading run: its slips kept with checkpoints, its
     transient slips, its table row (analysis.campaign_table.run_row) and its final state hash."""
     from ..analysis.campaign_table import run_row
-    from ..io.runfile import RunReader, slip_catalog
+    from ..io.runfile import RunReader
+    from ..io.slipcatalog import slip_catalog
 
     catalog = slip_catalog(run_dir)
     row, transient = run_row(run_dir)
     with RunReader(run_dir) as reader:
         final = str(reader.h5.attrs.get("final_state_hash", ""))
-    return {"n_slips": len(catalog), "slips": [int(e["number"]) for e in catalog if e.get("checkpoint")],
+    return {"n_slips": len(catalog), "slips": [e.number for e in catalog if e.checkpoint],
             "transient": transient, "row": row, "final_state_hash": final}
 
 

@@ -616,6 +616,7 @@ SLIP_AFTER_THE_CHECK = FILL_AFTER + """
 from gouge_cli.config import build_config
 from gouge_cli.io import runfile
 from gouge_cli.io.outputs import is_no_space
+from gouge_cli.io.slipcatalog import SlipEntry
 writer = runfile.RunFile(Path(sys.argv[1]) / "run.h5", build_config({"name": "slip"}), 0.1, flush_rows=50)
 for k in range(150):
     writer.append({"time": 0.1 * k, "wall_x": np.sin(k), "wall_z": np.cos(k), "wall_vx": 1.0 / (k + 1)})
@@ -625,7 +626,8 @@ def room_then_full(self, need=0):
     fill_now()
 runfile.RunFile._room = room_then_full
 try:
-    writer.add_slip(1, {"time": 15.0, "peak_velocity": 2.0}, [{"time": 15.0, "velocity": 2.0}] * 50)
+    writer.add_slip(SlipEntry.from_attrs({"number": 1, "peak_velocity": 2.0, "subevent_time": [15.0] * 50,
+                                          "subevent_velocity": [2.0] * 50}))
     runfile.RunFile._room = checked
     for k in range(150, 1_000_000):         # rows until a flush finds no room
         writer.append({"time": 0.1 * k, "wall_x": np.sin(k), "wall_z": np.cos(k), "wall_vx": 1.0 / (k + 1)})
