@@ -46,7 +46,7 @@ from xarray.backends import BackendArray
 from xarray.core import indexing
 
 from .analysis.catalog import CATALOG_COLUMNS, catalog_table, fit_slip, read_catalog
-from .analysis.forkpairs import PAIR_COLUMNS, classify_fork, fork_branches, fork_dirs, run_pairs
+from .analysis.forkpairs import PAIR_COLUMNS, PAIR_UNITS, classify_fork, fork_branches, fork_dirs, run_pairs
 from .analysis.study import transient_slips
 from .config import Config, build_config, load_config, parse_overrides
 from .errors import AnalysisError, ConfigError, RunDirError, SlipNotFoundError
@@ -657,9 +657,8 @@ class Pair:
 
 def _pair_frame(rows: list[dict], extra: tuple = ()) -> pd.DataFrame:
     df = pd.DataFrame(rows, columns=list(extra) + list(PAIR_COLUMNS))
-    df.attrs["units"] = {c: pint_unit(ANALYSIS_UNITS.get(c, "-")) for c in df.columns}
-    df.attrs["units"].update(permeability="d^2", drained_onset="t0", drained_end="t0", undrained_onset="t0",
-                             undrained_end="t0", k="E/d", V_s="v0", sigma="E")
+    df.attrs["units"] = {c: pint_unit(PAIR_UNITS.get(c, "-")) for c in df.columns}
+    df.attrs["units"].update(k="E/d", V_s="v0", sigma="E")
     return df
 
 

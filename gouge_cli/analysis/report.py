@@ -23,7 +23,7 @@ from ..io.filedoc import json_safe
 from ..io.outputs import is_no_space, require_space, write_bytes
 from ..io.runfile import RunInfo, RunReader, analysis_bytes, write_analysis_tables
 from .catalog import CATALOG_COLUMNS, FIT_COLUMNS, catalog_table, fit_table, read_catalog, summary_statistics
-from .forkpairs import PAIR_COLUMNS, ForkPair, campaign, run_pairs
+from .forkpairs import PAIR_COLUMNS, PAIR_UNITS, ForkPair, campaign, run_pairs
 
 __all__ = ["RunAnalysis", "analyze_run", "write_analysis"]
 
@@ -145,7 +145,8 @@ def write_analysis(analysis: RunAnalysis, out_dir: Path | None = None, into_h5: 
         require_space(info.h5_path.parent, analysis_bytes(tables), f"the /analysis tables in {info.h5_path}")
         try:
             write_analysis_tables(info.h5_path, bool(analysis.notch),
-                                  json.dumps(json_safe(summary), default=_json_default, allow_nan=False), tables)
+                                  json.dumps(json_safe(summary), default=_json_default, allow_nan=False), tables,
+                                  {"pairs": PAIR_UNITS})
         except OSError as exc:
             if is_no_space(exc):        # (another writer took the room after the check: nothing written)
                 raise

@@ -874,10 +874,12 @@ def analysis_bytes(tables: dict) -> int:
     return 64 * 40 * sum(len(rows) for rows, _ in tables.values()) + 1_000_000
 
 
-def write_analysis_tables(h5_path: Path, notch: bool, summary: str, tables: dict) -> None:
+def write_analysis_tables(h5_path: Path, notch: bool, summary: str, tables: dict,
+                          units: dict[str, dict[str, str]] | None = None) -> None:
     """Replace ``/analysis`` in run.h5 (written by `gouge analyze`): attrs created, version, notch,
     summary (JSON); one group per table, `tables` = {name: (rows as dicts, columns)}, one dataset
-    per column. Its room (analysis_bytes) is allocated first (io.outputs.preallocate): ENOSPC then,
+    per column, its unit from `units` = {name: {column: unit}} (filedoc.ANALYSIS_UNITS for a table
+    not in it). Its room (analysis_bytes) is allocated first (io.outputs.preallocate): ENOSPC then,
     with nothing written. Raises OSError if the file cannot be written (read-only, or open elsewhere)."""
     preallocate(h5_path, analysis_bytes(tables))
     with h5py.File(h5_path, "a", rdcc_nbytes=0) as h5:       # (written by each call: RunFile's rule)
@@ -890,5 +892,5 @@ def write_analysis_tables(h5_path: Path, notch: bool, summary: str, tables: dict
         grp.attrs["summary"] = summary
         for name, (rows, columns) in tables.items():
             _table_to_group(grp.create_group(name), rows, columns)
-        document_analysis(grp)
+        document_analysis(grp, units or {})
         seal_tree(grp)
