@@ -41,7 +41,7 @@ def gouge(*args: str) -> subprocess.CompletedProcess:
 
 def loading_run(seed: int, out: Path) -> Path:
     run = out / f"seed_{seed}" / "loading"
-    from gouge_cli.io.runfile import run_status
+    from gouge_cli.io.runreader import run_status
 
     if not (run / "run.h5").is_file() or run_status(run / "run.h5") != "finished":
         result = gouge("run", str(REPO / "configs" / "demo.yaml"), "--out", str(run), "--set", f"seed={seed}",

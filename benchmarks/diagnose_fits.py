@@ -29,7 +29,7 @@ from scipy import signal
 from gouge_cli.analysis.catalog import (NOTCH_ABOVE, NOTCH_PAD, fit_slip, fit_slip_notched, read_catalog,
                                        slip_friction, slip_window)
 from gouge_cli.analysis.study import DURATION_TOL, GOOD_R2, transient_slips, within_median
-from gouge_cli.io.runfile import RunReader
+from gouge_cli.io.runreader import RunReader
 
 BANDS = (("shape", 0.0, NOTCH_ABOVE), ("vibration", NOTCH_ABOVE, 40.0), ("noise", 40.0, math.inf))
 

@@ -13,7 +13,7 @@ Usage::
     pair = run.pair(4, 1e-5)           # both branches on one time axis, with pair.json's measures
     gouge.open_study("runs/demo")      # pandas.DataFrame, one row per drained/undrained pair
 
-Everything is read through :mod:`gouge_cli.io.runfile` (the one reader of run.h5) and computed
+Everything is read through :mod:`gouge_cli.io.runreader` (the one reader of run.h5) and computed
 by the functions the CLI uses (analysis.catalog, analysis.forkpairs.classify_fork: the one pair
 definition), so the numbers are those of ``gouge slips --json``, ``gouge analyze`` and pair.json.
 Opening and reading never write a byte of a run (analyze, figures and the launchers write what
@@ -52,7 +52,7 @@ from .config import Config, build_config, load_config, parse_overrides
 from .errors import AnalysisError, ConfigError, RunDirError, SlipNotFoundError
 from .io.filedoc import ANALYSIS_UNITS, SLIP_ATTRS, TIME_ORIGIN
 from .io.layout import RunLayout
-from .io.runfile import RunInfo, RunReader, read_series_items
+from .io.runreader import RunInfo, RunReader, read_series_items
 from .units import pint_definitions, pint_registry, pint_unit, si_of, unit_sizes
 
 __all__ = ["Run", "Fork", "Pair", "open_run", "open_study", "open_campaign", "analyze", "figures", "run", "restart",

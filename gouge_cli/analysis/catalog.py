@@ -1,6 +1,6 @@
 """A run's slips as tables: the catalog (stored /slips or detected from the series with the run's
 own thresholds), per-slip windows, friction and block-slider fits (thesis Eq. 3), summary
-statistics, and series reduced for plotting. Reads run files through io.runfile.RunReader only."""
+statistics, and series reduced for plotting. Reads run files through io.runreader.RunReader only."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import numpy as np
 
 from ..model.slip_rule import WallSeries
 from ..errors import NotARunError, SlipNotFoundError
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
 from ..io.slipcatalog import SlipEntry, read_slips
 from .blockslider import BlockSliderFit, fit_block_slider
 from .friction import dynamic_friction, estimate_natural_frequency, mean_dynamic_friction, notch_filter

@@ -12,7 +12,7 @@ import numpy as np
 
 from ..errors import AnalysisError, BranchInterruptedError, DamagedFileError, NotARunError, RunStillRunningError
 from ..io.layout import ForkLayout, RunLayout
-from ..io.runfile import RunInfo, RunReader
+from ..io.runreader import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
 from .pairs import DRAINED_DE, UNDRAINED_DE, PairDefinition, PairResult, campaign_summary, classify_pair, regime  # noqa: F401
 

@@ -1,8 +1,8 @@
 """What `gouge analyze` reports for a run (thesis Sections IV-V): the slip catalog and fits
 (analysis.catalog), the drained/undrained fork pairs (analysis.forkpairs) and their summary, written
-as RUN/analysis/*.csv, summary.json and /analysis in run.h5 (through io.runfile).
+as RUN/analysis/*.csv, summary.json and /analysis in run.h5 (through io.analysis_tables).
 
-Reads only: ``RUN/run.h5`` (io.runfile.RunReader) and the forks under
+Reads only: ``RUN/run.h5`` (io.runreader.RunReader) and the forks under
 ``RUN/forks/slip_NNN/{drained,perm_K}/run.h5``. All quantities are dimensionless (length d,
 stress E, time t0; docs/physics/units.md). Errors are gouge_cli.errors.AnalysisError (subclasses
 name the case); the CLI turns them into exit code 2.
@@ -21,7 +21,8 @@ import numpy as np
 from ..errors import NoSlipsError
 from ..io.filedoc import json_safe
 from ..io.outputs import is_no_space, require_space, write_bytes
-from ..io.runfile import RunInfo, RunReader, analysis_bytes, write_analysis_tables
+from ..io.analysis_tables import analysis_bytes, write_analysis_tables
+from ..io.runreader import RunInfo, RunReader
 from .catalog import CATALOG_COLUMNS, FIT_COLUMNS, catalog_table, fit_table, read_catalog, summary_statistics
 from .forkpairs import PAIR_COLUMNS, PAIR_UNITS, ForkPair, campaign, run_pairs
 

@@ -16,7 +16,7 @@ import numpy as np
 from .blockslider import EQ3_PERIOD_FACTOR
 from .catalog import fit_slip, fit_slip_notched, read_catalog
 from .forkpairs import ForkPair
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
 from ..io.slipcatalog import SlipEntry
 
 __all__ = ["STUDY_COLUMNS", "THESIS", "TRANSIENT_TOL", "DURATION_TOL", "GOOD_R2",

@@ -114,7 +114,7 @@ def catalog_since_loading(run_dir: Path, catalog=None) -> tuple[list[dict], floa
     (peak_velocity_over_Vs, mean_velocity_over_Vs, subevent_velocity_over_Vs in place of the v0
     values) and NaN as None (valid JSON); returns (catalog, the clock at which loading began)."""
     from ..errors import AnalysisError
-    from ..io.runfile import RunReader
+    from ..io.runreader import RunReader
     from ..errors import RunDirError
     from ..io.filedoc import json_safe
     from ..io.slipcatalog import slip_catalog

@@ -117,7 +117,7 @@ def resume(
 ):
     """Continue an interrupted run (Ctrl-C, kill -9, power loss) from its latest checkpoint."""
     from ..io.layout import RunLayout
-    from ..io.runfile import run_status
+    from ..io.runreader import run_status
     from ..workflows.run import resume_run
 
     target = _run_dir(run_dir)
@@ -153,7 +153,7 @@ def slips(
         return
     from rich.markup import escape
 
-    from ..io.runfile import RunReader
+    from ..io.runreader import RunReader
     from ..units import ResultUnits
     from .analysis_cmds import _table
 

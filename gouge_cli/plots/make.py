@@ -11,7 +11,7 @@ from ..analysis.catalog import find_slip, read_catalog, slip_friction
 from ..analysis.forkpairs import fork_branches, run_pairs
 from ..errors import NoSlipsError
 from ..io.layout import RunLayout, branch_perm_text
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
 from .campaign import campaign_figure
 from .series import comparison_figure, friction_figure, overview_figure, pair_figure, slip_figure
 from .snapshot import snapshot_figure

@@ -28,7 +28,7 @@ from ..io.layout import RunLayout, branch_name, branch_perm, perm_text
 from ..driver.progress import ItemProgress
 from ..errors import MovieError
 from ..io.outputs import check_out, require_space, temporary
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
 from .snapshot import CHAIN, chain_segments, draw_discs, draw_pressure, pressure_grid
 from .style import DRAINED, LABEL, UNDRAINED
 

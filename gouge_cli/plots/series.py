@@ -15,7 +15,7 @@ import numpy as np
 from ..analysis.catalog import fit_slip, series_envelope, slip_window, SlipFriction
 from ..analysis.forkpairs import ForkPair
 from ..io.layout import branch_perm_text
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
 from ..io.slipcatalog import SlipEntry
 from ..units import ResultUnits
 from .style import (

@@ -171,7 +171,7 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
     slip checkpoint written before it (work_dir/checkpoints/slip_001.h5), or from the end state
     (checkpoints/latest.h5) if no slip came."""
     from ..io.layout import RunLayout
-    from ..io.runfile import RunFile
+    from ..io.runwriter import RunFile
     from ..driver.phases import load_phase
 
     work_dir = Path(work_dir)

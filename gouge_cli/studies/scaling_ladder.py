@@ -64,7 +64,9 @@ def kept_runs(path: Path, key: str) -> list[dict]:
 def _run_rung(config: Config, packing, lam: float, out_dir: Path) -> dict:
     """One loading run from the compacted `packing` (a Checkpoint) at lambda; its slips and costs."""
     from ..io.layout import RunLayout
-    from ..io.runfile import RunFile, RunReader, attr_value
+    from ..io.integrity import attr_value
+    from ..io.runreader import RunReader
+    from ..io.runwriter import RunFile
     from ..driver.phases import load_phase
     from ..driver.compaction import compact
     from ..driver.simulation import Simulation

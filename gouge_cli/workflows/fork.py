@@ -25,7 +25,8 @@ from ..io.checkpoint import Checkpoint, read_checkpoint
 from ..config import build_config, Config
 from ..errors import ConfigError, InputError, NoSpaceError, PhysicsFailure
 from ..driver.slips import lead_time
-from ..io.runfile import RunFile, RunReader
+from ..io.runreader import RunReader
+from ..io.runwriter import RunFile
 from ..io.slipcatalog import SlipEntry, slip_catalog
 from ..model.scene import Scene
 from ..errors import RunDirError

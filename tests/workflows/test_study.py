@@ -124,7 +124,7 @@ def _check_drained_fits(run_dir, table):
     import numpy as np
 
     from gouge_cli.analysis.catalog import NOTCH_PAD, fit_slip, fit_slip_notched, read_catalog, slip_window
-    from gouge_cli.io.runfile import RunReader
+    from gouge_cli.io.runreader import RunReader
 
     with RunReader(run_dir) as reader:
         catalog = {e.number: e for e in read_catalog(reader)}

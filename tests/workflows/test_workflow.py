@@ -21,7 +21,8 @@ from gouge_cli.io.checkpoint import DIGEST_PREFIX, read_checkpoint, snapshot_of,
 from gouge_cli.io.integrity import content_digest
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
-from gouge_cli.io.runfile import SERIES_CHUNK, SeriesTail
+from gouge_cli.io.recovery import SeriesTail
+from gouge_cli.io.runfile import SERIES_CHUNK
 from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.io.verify import verify_run
 from gouge_cli.workflows.fork import ForkRequest, run_fork
