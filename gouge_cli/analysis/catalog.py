@@ -158,7 +158,7 @@ def catalog_table(reader: RunReader, catalog: list[SlipEntry] | None = None) -> 
             "mean_velocity_over_Vs": mean / V_s,
             "recurrence": onset - previous if previous is not None else _NAN,
             "porosity_change": entry.porosity_change,
-            "n_subevents": len(entry.subevent_time),
+            "n_subevents": entry.n_subevents,
             "deborah": deborah,
             "regime": regime(deborah) if reader.info.has_fluid else "dry",
             "pressure_min_over_sigma": p_min / sigma,

@@ -40,7 +40,7 @@ class PairMeasures:
     ``main``), ``origin`` (the stored clock when loading began [t0]), ``failure`` ("" or which
     branch failed), its Deborah numbers [-] and regime, and the :class:`Mechanism`."""
 
-    parent: str
+    run: str
     slip: int
     branch: str
     permeability: float
@@ -74,36 +74,46 @@ def _fit_reason(r: PairResult) -> str:
                      if f is not None and f.verdict_reason)
 
 
+def _result(name: str, unit: str, doc: str) -> Column:
+    """A column that is the PairResult's field `name`."""
+    return Column(name, unit, doc, lambda r, m: getattr(r, name))
+
+
+def _measured(name: str, unit: str, doc: str) -> Column:
+    """A column that is the PairMeasures' field `name`."""
+    return Column(name, unit, doc, lambda r, m: getattr(m, name))
+
+
 def _mech(name: str, unit: str, doc: str) -> Column:
+    """A column that is the Mechanism's field `name`."""
     return Column(name, unit, doc, lambda r, m: getattr(m.mechanism, name))
 
 
 # The pair row, in the order of its keys (pair.json); adding a pair metric is one line here.
 PAIR_TABLE = (
-    Column("run", "-", "parent run directory", lambda r, m: m.parent),
-    Column("slip", "-", "slip number the fork starts before", lambda r, m: m.slip),
-    Column("branch", "-", "undrained branch folder (perm_K)", lambda r, m: m.branch),
-    Column("permeability", "d^2", "kappa_c of the undrained branch", lambda r, m: m.permeability),
-    Column("filter_width", "d", "fluid.filter_width of the undrained branch", lambda r, m: m.filter_width),
-    Column("cell_size", "d", "pressure grid spacing of the undrained branch", lambda r, m: m.cell_size),
-    Column("main", "-", "compared event: first or largest slip", lambda r, m: m.main),
-    Column("type", "-", "pair type (analysis.pairs), or failed", lambda r, m: r.type),
-    Column("base_type", "-", "type before the complex mark", lambda r, m: r.base_type),
+    _measured("run", "-", "parent run directory"),
+    _measured("slip", "-", "slip number the fork starts before"),
+    _measured("branch", "-", "undrained branch folder (perm_K)"),
+    _measured("permeability", "d^2", "kappa_c of the undrained branch"),
+    _measured("filter_width", "d", "fluid.filter_width of the undrained branch"),
+    _measured("cell_size", "d", "pressure grid spacing of the undrained branch"),
+    _measured("main", "-", "compared event: first or largest slip"),
+    _result("type", "-", "pair type (analysis.pairs), or failed"),
+    _result("base_type", "-", "type before the complex mark"),
     Column("complex", "-", "whether the pair is complex", lambda r, m: bool(r.complex)),
     Column("criteria", "-", "criteria that fired, comma-separated",
            lambda r, m: ",".join(name for name, on in r.criteria.items() if on)),
-    Column("undrained_event", "-", "slip, slow slip below trigger, none (or failed)", lambda r, m: r.undrained_event),
-    Column("drained_strength", "sigma", "static strength of the drained compared slip", lambda r, m: r.drained_strength),
-    Column("undrained_strength", "sigma", "static strength of the undrained compared slip",
-           lambda r, m: r.undrained_strength),
-    Column("strength_difference", "sigma", "undrained minus drained strength", lambda r, m: r.strength_difference),
-    Column("peak_velocity_ratio", "-", "undrained / drained peak wall velocity", lambda r, m: r.peak_velocity_ratio),
-    Column("stress_drop_ratio", "-", "undrained / drained stress drop", lambda r, m: r.stress_drop_ratio),
-    Column("duration_ratio", "-", "undrained / drained slip duration", lambda r, m: r.duration_ratio),
-    Column("drained_peak_over_Vs", "V_s", "drained peak wall velocity", lambda r, m: r.drained_peak_over_Vs),
-    Column("undrained_peak_over_Vs", "V_s", "undrained peak wall velocity", lambda r, m: r.undrained_peak_over_Vs),
+    _result("undrained_event", "-", "slip, slow slip below trigger, none (or failed)"),
+    _result("drained_strength", "sigma", "static strength of the drained compared slip"),
+    _result("undrained_strength", "sigma", "static strength of the undrained compared slip"),
+    _result("strength_difference", "sigma", "undrained minus drained strength"),
+    _result("peak_velocity_ratio", "-", "undrained / drained peak wall velocity"),
+    _result("stress_drop_ratio", "-", "undrained / drained stress drop"),
+    _result("duration_ratio", "-", "undrained / drained slip duration"),
+    _result("drained_peak_over_Vs", "V_s", "drained peak wall velocity"),
+    _result("undrained_peak_over_Vs", "V_s", "undrained peak wall velocity"),
     Column("n_undrained_slips", "-", "slips of the undrained branch", lambda r, m: len(r.undrained_slips)),
-    Column("n_subevents", "-", "sub-events of the undrained compared slip", lambda r, m: r.n_subevents),
+    _result("n_subevents", "-", "sub-events of the undrained compared slip"),
     Column("drained_onset", "t0", "drained compared slip's onset since loading began",
            lambda r, m: _when(r.drained_slip, "onset_time", m.origin)),
     Column("drained_end", "t0", "its end since loading began", lambda r, m: _when(r.drained_slip, "end_time", m.origin)),
@@ -117,13 +127,12 @@ PAIR_TABLE = (
     Column("undrained_fit_verdict", "-", "holds, failed, inapplicable or none",
            lambda r, m: _verdict(r.undrained_fit)),
     Column("fit_reason", "-", "why a fit does not hold, per branch", lambda r, m: _fit_reason(r)),
-    Column("deborah_mean", "-", "mean De of the undrained branch", lambda r, m: m.deborah_mean),
-    Column("deborah_slip", "-", "mean De over the undrained compared slip", lambda r, m: m.deborah_slip),
-    Column("regime", "-", "drainage regime of De (deborah_slip, else deborah_mean)", lambda r, m: m.regime),
-    Column("deborah_onset", "-", "De at the undrained onset", lambda r, m: m.deborah_onset),
-    Column("deborah_max", "-", "largest De over the undrained slip", lambda r, m: m.deborah_max),
-    Column("deborah_drained", "-", "De with the drained twin's peak speed (slip_deborah)",
-           lambda r, m: m.deborah_drained),
+    _measured("deborah_mean", "-", "mean De of the undrained branch"),
+    _measured("deborah_slip", "-", "mean De over the undrained compared slip"),
+    _measured("regime", "-", "drainage regime of De (deborah_slip, else deborah_mean)"),
+    _measured("deborah_onset", "-", "De at the undrained onset"),
+    _measured("deborah_max", "-", "largest De over the undrained slip"),
+    _measured("deborah_drained", "-", "De with the drained twin's peak speed (slip_deborah)"),
     _mech("drained_dilation", "-", "drained eps_v from the fork to its onset"),
     _mech("undrained_dilation", "-", "undrained eps_v from the fork to its onset"),
     _mech("pressure_peak", "E", "undrained layer-mean pressure of largest magnitude before its onset"),
@@ -131,7 +140,7 @@ PAIR_TABLE = (
     _mech("diffusion_time", "t0", "t_D = l^2 / D, l half the layer thickness"),
     _mech("onset_window", "t0", "the fork to the undrained onset"),
     _mech("pressure_from_rate", "E", "pressure the undrained strain rate sustains (rate_pressure)"),
-    Column("note", "-", "one line for people", lambda r, m: r.note),
+    _result("note", "-", "one line for people"),
     Column("status", "-", "finished or failed", lambda r, m: FAILED if m.failure else "finished"),
 )
 _LEAD = ("run", "slip", "branch", "permeability", "filter_width", "cell_size", "regime", "deborah_slip", "deborah_mean")
@@ -318,7 +327,7 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
             de_drained, l_over_d = slip_deborah(ds["time"], ds["deborah"], ds["wall_vx"], u_main,
                                                 result.drained_peak_over_Vs * info.V_s)
             measured = PairMeasures(
-                parent=str(info.parent_dir),      # parent_run is stored relative to the branch
+                run=str(info.parent_dir),      # parent_run is stored relative to the branch
                 slip=int(info.fork_slip) if info.fork_slip is not None else _slip_number(fork_dir),
                 branch=udir.name,
                 permeability=uinfo.permeability if uinfo.permeability is not None else _NAN,

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import h5py
 
-from ..model.slip_rule import Slip
+from ..model.slip_rule import Slip, SubEvent
 from .integrity import SEAL, attr_value, check_seal, read, stored_seal
 from .layout import RunLayout
 from .rundir import open_run_file
@@ -18,93 +18,61 @@ from .rundir import open_run_file
 _NAN = float("nan")
 
 
-@dataclass(frozen=True)
-class SlipEntry:
-    """One slip of a run's catalog (dimensionless units: time t0, length d, velocity v0; indices
-    are series samples in the detector's stream; strengths and drops are tau/sigma).
-
-    The model.slip_rule.Slip fields (onset/end/peak index and time [t0], duration [t0], slip [d],
-    peak/mean velocity [v0], static_strength, tau_onset, tau_min, stress_drop, porosity_change [-],
-    n_merged), then: number (from 1), deborah (mean De over the slip, NaN dry or detected),
-    checkpoint (pre-slip checkpoint relative to the run directory, "" if none), checkpoint_time
-    [t0] (NaN if none), subevent_time [t0] and subevent_velocity [v0] (S,) of its sub-events.
-    A field an older file lacks reads as NaN (floats), -1 (indices), 1 (n_merged) or "".
+@dataclass(frozen=True, kw_only=True)
+class SlipEntry(Slip):
+    """One slip of a run's catalog: the detector's :class:`~gouge_cli.model.slip_rule.Slip`
+    (dimensionless: times [t0], slip [d], velocities [v0], strengths and drops tau/sigma, indices
+    series samples) with what the recorder adds: number (from 1), deborah (mean De over the slip
+    [-], NaN dry or detected afterwards), checkpoint (the pre-slip checkpoint relative to the run
+    directory, "" if none) and checkpoint_time [t0] (NaN if none). Sub-events read from a file have
+    index -1 (only their time and velocity are stored). A field an older file lacks reads as NaN
+    (floats), -1 (indices) or 1 (n_merged).
     """
 
-    onset_index: int
-    onset_time: float
-    end_index: int
-    end_time: float
-    duration: float
-    slip: float
-    peak_velocity: float
-    peak_index: int
-    peak_time: float
-    mean_velocity: float
-    static_strength: float
-    tau_onset: float
-    tau_min: float
-    stress_drop: float
-    porosity_change: float
-    n_merged: int
     number: int
     deborah: float = _NAN
     checkpoint: str = ""
     checkpoint_time: float = _NAN
-    subevent_time: tuple[float, ...] = ()
-    subevent_velocity: tuple[float, ...] = ()
 
-    SUBEVENTS = ("subevent_time", "subevent_velocity")     # stored as datasets, not attributes
-
-    def __post_init__(self):
-        """Every field as its plain Python type (numpy scalars from a detector unwrapped)."""
-        for f in fields(self):
-            value = getattr(self, f.name)
-            kind = {"int": int, "float": float, "str": str}.get(f.type)
-            value = tuple(float(v) for v in value) if f.name in self.SUBEVENTS else kind(value)
-            object.__setattr__(self, f.name, value)
+    SUBEVENTS = ("subevent_time", "subevent_velocity")     # the datasets holding the sub-events
 
     @classmethod
     def from_slip(cls, slip: Slip, number: int, **recorded) -> "SlipEntry":
-        """The entry of a detected `slip` numbered `number`; `recorded`: deborah, checkpoint,
+        """The entry of detected `slip` numbered `number`; `recorded`: deborah, checkpoint,
         checkpoint_time (the recorder's)."""
-        values = {f.name: getattr(slip, f.name) for f in fields(Slip) if f.name != "subevents"}
-        return cls(**values, number=number, subevent_time=tuple(float(s.time) for s in slip.subevents),
-                   subevent_velocity=tuple(float(s.velocity) for s in slip.subevents), **recorded)
+        values = {f.name: getattr(slip, f.name) for f in fields(Slip)}
+        values["subevents"] = tuple(slip.subevents)
+        return cls(**values, number=number, **recorded)
 
     @classmethod
     def from_attrs(cls, attrs: dict) -> "SlipEntry":
-        """From a /slips/NNN group's decoded attributes and sub-event lists (other keys ignored)."""
-        values = {}
-        for f in fields(cls):
-            if f.name in attrs:
-                value = attrs[f.name]
-                values[f.name] = tuple(value) if f.name in cls.SUBEVENTS else value
-            elif f.name in ("onset_index", "end_index", "peak_index"):
-                values[f.name] = -1
-            elif f.name == "n_merged":
-                values[f.name] = 1
-            elif f.name not in ("deborah", "checkpoint", "checkpoint_time", *cls.SUBEVENTS):
-                values[f.name] = _NAN
+        """From a /slips/NNN group's decoded attributes and its sub-event lists (other keys ignored)."""
+        values = {f.name: attrs[f.name] for f in fields(cls) if f.name in attrs}
+        for f in fields(Slip):
+            if f.name not in values and f.name != "subevents":
+                values[f.name] = -1 if f.name.endswith("_index") else 1 if f.name == "n_merged" else _NAN
+        values["subevents"] = tuple(SubEvent(-1, float(t), float(v)) for t, v in
+                                    zip(attrs.get("subevent_time", ()), attrs.get("subevent_velocity", ())))
         return cls(**values)
 
     @property
-    def n_subevents(self) -> int:
-        return len(self.subevent_time)
+    def subevent_time(self) -> tuple[float, ...]:
+        """(S,) [t0] clock of each sub-event."""
+        return tuple(s.time for s in self.subevents)
 
     @property
-    def has_checkpoint(self) -> bool:
-        return bool(self.checkpoint)
+    def subevent_velocity(self) -> tuple[float, ...]:
+        """(S,) [v0] top-wall velocity at each sub-event."""
+        return tuple(s.velocity for s in self.subevents)
 
     def attrs(self) -> dict:
-        """The run file's attributes of this slip (every field but the sub-events, in field order)."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name not in self.SUBEVENTS}
+        """The run file's attributes of this slip: every field but the sub-events, in field order."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "subevents"}
 
     def to_dict(self) -> dict:
         """Plain-dict form as the run file lists it: attributes by name, then the sub-event lists."""
         attrs = self.attrs()
-        return {**{k: attrs[k] for k in sorted(attrs)},
-                **{k: list(getattr(self, k)) for k in self.SUBEVENTS}}
+        return {**{k: attrs[k] for k in sorted(attrs)}, **{k: list(getattr(self, k)) for k in self.SUBEVENTS}}
 
 
 def read_slips(h5: h5py.File) -> list[SlipEntry] | None:

@@ -290,6 +290,7 @@ def test_movie_frame_and_encoding(runs):
 def test_slips_json_is_valid_and_counts_from_loading(runs):
     from gouge_cli.cli.export_cmds import catalog_since_loading
     from gouge_cli.io.slipcatalog import SlipEntry
+    from gouge_cli.model.slip_rule import SubEvent
 
     listed = gouge("slips", runs / "dry", "--json")
     assert listed.exit_code == 0
@@ -301,7 +302,7 @@ def test_slips_json_is_valid_and_counts_from_loading(runs):
     entry = SlipEntry(onset_index=0, onset_time=origin + 5.0, end_index=1, end_time=origin + 9.0, duration=4.0,
                       slip=nan, peak_velocity=nan, peak_index=0, peak_time=origin + 7.0, mean_velocity=nan,
                       static_strength=nan, tau_onset=nan, tau_min=nan, stress_drop=nan, porosity_change=nan,
-                      n_merged=1, number=1, subevent_time=(origin + 7.0,), subevent_velocity=(nan,))
+                      subevents=(SubEvent(-1, origin + 7.0, nan),), number=1)
     catalog, got = catalog_since_loading(runs / "dry", [entry])
     assert got == origin
     (e,) = catalog
