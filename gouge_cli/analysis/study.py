@@ -39,8 +39,8 @@ THESIS = {"n": 39, "n_type_I": 9, "n_type_II": 30, "n_tie": 0, "n_complex": 25, 
 
 
 def transient_slips(catalog: list[SlipEntry], tol: float = TRANSIENT_TOL) -> set[int]:
-    """Numbers of the transient slips of a run's catalog (dicts with number, static_strength,
-    stress_drop).
+    """Numbers of the transient slips of a run's catalog (io.slipcatalog.SlipEntry: number,
+    static_strength, stress_drop).
 
     Rule: let S* and D* be the medians of static strength and stress drop over the second half
     of the catalog (slips ceil(n/2)+1 .. n; the run has reached repeated stick-slip by then).
@@ -53,7 +53,7 @@ def transient_slips(catalog: list[SlipEntry], tol: float = TRANSIENT_TOL) -> set
     late = slips[len(slips) // 2:]
     s_ref = statistics.median(e.static_strength for e in late)
     d_ref = statistics.median(e.stress_drop for e in late)
-    out = {int(slips[0]["number"])}
+    out = {slips[0].number}
     for e in slips[1:]:
         s, d = e.static_strength, e.stress_drop
         if abs(s - s_ref) <= tol * s_ref and abs(d - d_ref) <= tol * d_ref:

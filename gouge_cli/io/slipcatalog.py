@@ -99,8 +99,3 @@ def slip_catalog(run_dir: Path) -> list[SlipEntry]:
     """The run's slip catalog (one entry per slip, in order; [] if none)."""
     with open_run_file(RunLayout(run_dir).run_file) as h5:
         return read_slips(h5) or []
-
-
-def find_entry(catalog: list[SlipEntry], number: int) -> SlipEntry | None:
-    """The entry numbered `number`, None if absent."""
-    return next((e for e in catalog if e.number == number), None)

@@ -192,7 +192,7 @@ def test_rerun_of_a_finished_branch_onto_a_full_disk_keeps_it(forked, small_fs):
     branch = target / "forks" / f"slip_{slip:03d}" / "drained" / "run.h5"
     before = digest(branch)
     dense = ["output.slip_frames=0", "output.snapshot_interval=10"]
-    ck = read_checkpoint(target / fork_entry(target, slip)["checkpoint"], dense)
+    ck = read_checkpoint(target / fork_entry(target, slip).checkpoint, dense)
     filler = fill(small_fs, int(branch_bytes(branch_config(ck.config, None)) + SPACE_MARGIN) + 100_000)
     sets = [a for o in dense for a in ("--set", o)]
     message = full_disk_message(gouge("restart", target, "--slip", slip, *sets, "--force", "--quiet"))
