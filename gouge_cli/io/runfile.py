@@ -20,9 +20,10 @@ Layout of ``run.h5``::
                  scene has fluid (attrs origin, spacing, axis_order); grains in their original
                  (packing) order, contact_i/j in those numbers
     /slips/NNN   one group per slip recorded while running (driver.slips.SlipRecorder), NNN from 001:
-                 attrs = model.slip_rule.Slip fields (onset_time, end_time, duration, slip,
-                 peak_velocity, stress drop, ...) plus number, deborah, checkpoint (path of
-                 checkpoints/slip_NNN.h5 or ""), checkpoint_time; datasets subevent_time [t0],
+                 attrs = the fields of io.slipcatalog.SlipEntry but its sub-events (the
+                 model.slip_rule.Slip fields onset_time, end_time, duration, slip, peak_velocity,
+                 stress_drop, ..., plus number, deborah, checkpoint (path of
+                 checkpoints/slip_NNN.h5 or ""), checkpoint_time); datasets subevent_time [t0],
                  subevent_velocity [v0] (S,)
     /analysis    written by `gouge analyze` (replaced on each call): attrs created, version, notch,
                  summary (JSON); groups catalog, fits[, pairs], one dataset per column
