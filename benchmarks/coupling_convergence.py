@@ -41,7 +41,7 @@ def gouge(*args: str) -> subprocess.CompletedProcess:
 
 def loading_run(seed: int, out: Path) -> Path:
     run = out / f"seed_{seed}" / "loading"
-    from gouge_cli.io.runfile import run_status
+    from gouge_cli.io.runreader import run_status
 
     if not (run / "run.h5").is_file() or run_status(run / "run.h5") != "finished":
         result = gouge("run", str(REPO / "configs" / "demo.yaml"), "--out", str(run), "--set", f"seed={seed}",
@@ -52,9 +52,9 @@ def loading_run(seed: int, out: Path) -> Path:
 
 
 def slips_to_fork(run: Path, count: int) -> list[int]:
-    from gouge_cli.io.runfile import slip_catalog
+    from gouge_cli.io.slipcatalog import slip_catalog
 
-    numbers = [int(e["number"]) for e in slip_catalog(run) if e.get("checkpoint")]
+    numbers = [e.number for e in slip_catalog(run) if e.checkpoint]
     return numbers[1:count + 1]          # the first slip is the loading transient
 
 

@@ -29,7 +29,7 @@ from scipy import signal
 from gouge_cli.analysis.catalog import (NOTCH_ABOVE, NOTCH_PAD, fit_slip, fit_slip_notched, read_catalog,
                                        slip_friction, slip_window)
 from gouge_cli.analysis.study import DURATION_TOL, GOOD_R2, transient_slips, within_median
-from gouge_cli.io.runfile import RunReader
+from gouge_cli.io.runreader import RunReader
 
 BANDS = (("shape", 0.0, NOTCH_ABOVE), ("vibration", NOTCH_ABOVE, 40.0), ("noise", 40.0, math.inf))
 
@@ -41,14 +41,14 @@ def diagnose(reader: RunReader) -> list[dict]:
     transient = transient_slips(catalog)
     rows = []
     for e in catalog:
-        if int(e["number"]) in transient:
+        if e.number in transient:
             continue
         fit = fit_slip(reader, e)
         nf = fit_slip_notched(reader, e, fit)
         j0, j1 = slip_window(reader, e, pad=NOTCH_PAD)[2:]
         s = reader.series(["time", "wall_vx", "tau_over_sigma"], j0, j1)
         t, v = s["time"], s["wall_vx"]
-        inside = (t >= e["onset_time"]) & (t <= e["end_time"])
+        inside = (t >= e.onset_time) & (t <= e.end_time)
         res = v[inside] - fit.amplitude * np.sin(fit.omega * (t[inside] - fit.t0))
         fs = 1.0 / float(np.mean(np.diff(t)))
         f, p = signal.periodogram(res, fs=fs, nfft=max(res.size, 65536), detrend=False)
@@ -60,15 +60,15 @@ def diagnose(reader: RunReader) -> list[dict]:
         phase = (fr.t - fr.onset_time) / (fr.end_time - fr.onset_time)
         tenths = [float(np.mean(mu[(phase >= a) & (phase < a + 0.1)])) for a in np.arange(0.2, 0.8, 0.1)]
         rows.append({
-            "slip": int(e["number"]), "mu_d_drop": fr.mu_s - float(np.mean(tenths)),
-            "mu_d_spread": float(np.ptp(tenths)), "stress_drop": float(e["stress_drop"]),
-            "peak_over_Vs": float(e["peak_velocity"]) / info.V_s, "duration": float(e["duration"]),
+            "slip": e.number, "mu_d_drop": fr.mu_s - float(np.mean(tenths)),
+            "mu_d_spread": float(np.ptp(tenths)), "stress_drop": e.stress_drop,
+            "peak_over_Vs": e.peak_velocity / info.V_s, "duration": e.duration,
             "r2": fit.r2, "fit_ok": fit.success, "T_fit": fit.half_period, "m_eff_over_m_b": fit.m_eff / info.m_b,
-            "start_shift": fit.t0 - float(e["onset_time"]),
-            "rise_over_fall": (float(e["peak_time"]) - e["onset_time"]) / (e["end_time"] - float(e["peak_time"])),
+            "start_shift": fit.t0 - e.onset_time,
+            "rise_over_fall": (e.peak_time - e.onset_time) / (e.end_time - e.peak_time),
             **{f"res_{k}": x for k, x in share.items()}, "f_nat_over_f_s": f_nat / f_s, "r2_notched": r2_notched,
-            "t": t - float(e["onset_time"]), "v": v / info.V_s, "v_notched": v_notched / info.V_s,
-            "tau": s["tau_over_sigma"], "fit_curve": (t[inside] - e["onset_time"],
+            "t": t - e.onset_time, "v": v / info.V_s, "v_notched": v_notched / info.V_s,
+            "tau": s["tau_over_sigma"], "fit_curve": (t[inside] - e.onset_time,
                                                       fit.amplitude * np.sin(fit.omega * (t[inside] - fit.t0)) / info.V_s),
         })
     med = float(np.median([r["duration"] for r in rows])) if rows else math.nan

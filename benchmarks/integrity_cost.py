@@ -40,9 +40,11 @@ import yaml
 
 from gouge_cli.config import build_config
 from gouge_cli.driver import phases, slips
-from gouge_cli.io import checkpoint, runfile
+from gouge_cli.io import checkpoint, runwriter
 from gouge_cli.io.checkpoint import read_checkpoint
-from gouge_cli.io.runfile import RunFile, RunReader, slip_catalog
+from gouge_cli.io.runreader import RunReader
+from gouge_cli.io.runwriter import RunFile
+from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.workflows.run import run_scene
 
 WRITER_METHODS = ("__init__", "append", "flush", "snapshot", "add_slip", "set_attr", "close")
@@ -74,7 +76,7 @@ def patched(checks: bool, writer: Clock, ckpt: Clock):
     saved = [(RunFile, m, getattr(RunFile, m)) for m in WRITER_METHODS]
     saved += [(mod, "write_checkpoint", mod.write_checkpoint) for mod in (phases, slips)]
     if not checks:
-        saved += [(runfile, "seal", runfile.seal), (checkpoint, "content_digest", checkpoint.content_digest),
+        saved += [(runwriter, "seal", runwriter.seal), (checkpoint, "content_digest", checkpoint.content_digest),
                   (h5py.Group, "create_dataset", h5py.Group.create_dataset)]
         create = h5py.Group.create_dataset
 
@@ -82,7 +84,7 @@ def patched(checks: bool, writer: Clock, ckpt: Clock):
             kwargs.pop("fletcher32", None)
             return create(self, name, *args, **kwargs)
 
-        runfile.seal = lambda obj: None
+        runwriter.seal = lambda obj: None
         checkpoint.content_digest = lambda h5, arrays=None, skip=("checksum",): ""
         h5py.Group.create_dataset = plain_dataset
     for m in WRITER_METHODS:

@@ -13,7 +13,7 @@ Usage::
     pair = run.pair(4, 1e-5)           # both branches on one time axis, with pair.json's measures
     gouge.open_study("runs/demo")      # pandas.DataFrame, one row per drained/undrained pair
 
-Everything is read through :mod:`gouge_cli.io.runfile` (the one reader of run.h5) and computed
+Everything is read through :mod:`gouge_cli.io.runreader` (the one reader of run.h5) and computed
 by the functions the CLI uses (analysis.catalog, analysis.forkpairs.classify_fork: the one pair
 definition), so the numbers are those of ``gouge slips --json``, ``gouge analyze`` and pair.json.
 Opening and reading never write a byte of a run (analyze, figures and the launchers write what
@@ -47,13 +47,13 @@ from xarray.backends import BackendArray
 from xarray.core import indexing
 
 from .analysis.catalog import CATALOG_COLUMNS, catalog_table, fit_slip, read_catalog
-from .analysis.forkpairs import PAIR_COLUMNS, classify_fork, fork_branches, fork_dirs, run_pairs
+from .analysis.forkpairs import PAIR_COLUMNS, PAIR_UNITS, classify_fork, fork_branches, fork_dirs, run_pairs
 from .analysis.study import transient_slips
 from .config import Config, build_config, load_config, parse_overrides
 from .errors import AnalysisError, ConfigError, RunDirError, SlipNotFoundError
 from .io.filedoc import ANALYSIS_UNITS, SLIP_ATTRS, TIME_ORIGIN
 from .io.layout import RunLayout
-from .io.runfile import RunInfo, RunReader, read_series_items
+from .io.runreader import RunInfo, RunReader, read_series_items
 from .units import pint_definitions, pint_registry, pint_unit, si_of, unit_sizes
 
 __all__ = ["Run", "Fork", "Pair", "open_run", "open_study", "open_campaign", "analyze", "figures", "run", "restart",
@@ -662,10 +662,8 @@ class Pair:
 
 def _pair_frame(rows: list[dict], extra: tuple = ()) -> pd.DataFrame:
     df = pd.DataFrame(rows, columns=list(extra) + list(PAIR_COLUMNS))
-    df.attrs["units"] = {c: pint_unit(ANALYSIS_UNITS.get(c, "-")) for c in df.columns}
-    df.attrs["units"].update({c: pint_unit(u) for c, u in dict(
-        permeability="d^2", drained_onset="t0", drained_end="t0", undrained_onset="t0", undrained_end="t0", k="E/d",
-        V_s="v0", sigma="E").items()})
+    df.attrs["units"] = {c: pint_unit(PAIR_UNITS.get(c, "-")) for c in df.columns}
+    df.attrs["units"].update({c: pint_unit(u) for c, u in dict(k="E/d", V_s="v0", sigma="E").items()})
     return df
 
 

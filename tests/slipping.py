@@ -16,7 +16,7 @@ import yaml
 from typer.testing import CliRunner
 
 from gouge_cli.cli.main import app
-from gouge_cli.io.runfile import slip_catalog
+from gouge_cli.io.slipcatalog import slip_catalog
 
 TINY = {        # 300 grains: two or more slips with checkpoints in 80,000 t0 for most packings
     "name": "tiny",
@@ -53,7 +53,7 @@ def slipping_run(scene: dict, root: Path, slips: int = 2, min_drop: float = 0.0,
             shutil.rmtree(out)
         result = CliRunner().invoke(app, ["run", str(config), "--out", str(out), "--quiet", *map(str, args)])
         assert result.exit_code == 0, result.output
-        numbers = [int(e["number"]) for e in slip_catalog(out) if e["checkpoint"] and e["stress_drop"] > min_drop]
+        numbers = [e.number for e in slip_catalog(out) if e.checkpoint and e.stress_drop > min_drop]
         if len(numbers) >= slips:
             return config, out, numbers
         counts.append(len(numbers))

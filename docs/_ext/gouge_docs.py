@@ -204,19 +204,21 @@ def file_layout(name: str) -> str:
         return ("Datasets:\n\n" + _unit_table(filedoc.CHECKPOINT, "dataset") + "\nAttributes:\n\n"
                 + _unit_table(filedoc.CHECKPOINT_ATTRS, "attribute"))
     if name == "analysis":
-        return (_unit_table(filedoc.ANALYSIS_ATTRS, "attribute") + "\nColumn units:\n\n"
-                + list_table(["column", "unit"], [[k, pint_unit(u)] for k, u in filedoc.ANALYSIS_UNITS.items()],
-                             "40 60"))
+        return (_unit_table(filedoc.ANALYSIS_ATTRS, "attribute") + "\nColumn units of the catalog and fits tables "
+                "(the pairs table's are listed with the pair file):\n\n"
+                + list_table(["column", "unit"], [[k, pint_unit(u)] for k, u in filedoc.ANALYSIS_UNITS.items()], "40 60"))
     if name == "rundir":
         return (_roles_to_literals(textwrap.dedent(rundir.__doc__)) + "\n\nWritten by a run (what ``--force`` may remove): "
                 + ", ".join(f"``{o}``" for o in rundir.OWNED) + "; lock file ``" + rundir.LOCK_NAME + "``.\n")
     if name == "pair":
-        from gouge_cli.analysis.forkpairs import PAIR_COLUMNS
+        from gouge_cli.analysis.forkpairs import PAIR_COLUMNS, PAIR_TABLE
         from gouge_cli.workflows import pairs
 
         doc = textwrap.dedent(pairs.write_pair_json.__doc__.split("\n", 1)[1])
         return (_literal(doc.split("Raises")[0]) + "\nColumns of each entry of ``pairs`` (and of ``pairs.csv``): "
-                + ", ".join(f"``{c}``" for c in PAIR_COLUMNS) + ".\n")
+                + ", ".join(f"``{c}``" for c in PAIR_COLUMNS) + ".\n\n"
+                + list_table(["column", "unit", "description"], [[c.name, c.unit, c.doc] for c in PAIR_TABLE],
+                             "25 10 65"))
     if name == "campaign":
         from gouge_cli.analysis import campaign_table as ct
 

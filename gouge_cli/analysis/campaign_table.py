@@ -1,7 +1,7 @@
 """The campaign table: one row per run and per drained/undrained pair, and the phase-diagram cells.
 
 A run's row (:func:`run_row`) and a fork's pair rows (:func:`fork_rows`) are read from run files
-(through :mod:`gouge_cli.io.runfile`) once, when the piece finishes, into its results record;
+(through :mod:`gouge_cli.io.runreader`) once, when the piece finishes, into its results record;
 the table is assembled from those records (:func:`gouge_cli.workflows.campaign.table_rows`).
 Pairs are classified by :func:`~gouge_cli.analysis.forkpairs.classify_fork` (thesis Sections
 4.2-4.3: Type I / II, -C).
@@ -19,7 +19,7 @@ from .catalog import catalog_table, read_catalog, summary_statistics
 from .forkpairs import classify_fork, PAIR_COLUMNS
 from .report import _write_csv
 from .study import transient_slips
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
 
 PHASE_COLUMNS = ("x", "y", "n_pairs", "n_unclassified", "n_seeds", "n_complex", "n_type_I", "n_type_II",
                  "frac_complex", "frac_complex_lo", "frac_complex_hi", "frac_type_II", "frac_type_II_lo",

@@ -1,6 +1,6 @@
 """A run's slips as tables: the catalog (stored /slips or detected from the series with the run's
 own thresholds), per-slip windows, friction and block-slider fits (thesis Eq. 3), summary
-statistics, and series reduced for plotting. Reads run files through io.runfile.RunReader only."""
+statistics, and series reduced for plotting. Reads run files through io.runreader.RunReader only."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ import numpy as np
 
 from ..model.slip_rule import WallSeries
 from ..errors import NotARunError, SlipNotFoundError
-from ..io.runfile import RunReader, read_slips
+from ..io.runreader import RunReader
+from ..io.slipcatalog import SlipEntry, read_slips
 from .blockslider import BlockSliderFit, fit_block_slider
 from .friction import dynamic_friction, estimate_natural_frequency, mean_dynamic_friction, notch_filter
 from .pairs import regime
@@ -46,26 +47,18 @@ FIT_COLUMNS = (
 
 
 
-def _detected_catalog(reader: RunReader) -> list[dict]:
+def _detected_catalog(reader: RunReader) -> list[SlipEntry]:
     s = reader.series(["time", "wall_x", "wall_vx", "tau_over_sigma", "porosity"])
     if s["wall_vx"] is None:
         raise NotARunError(f"{reader.info.h5_path} has no /series/wall_vx")
     slips = reader.info.slip_rule.detect(s["time"], s["wall_vx"], x_wall=s["wall_x"],
                                          tau_over_sigma=s["tau_over_sigma"], porosity=s["porosity"])
-    out = []
-    for number, slip in enumerate(slips, start=1):
-        entry = slip.to_dict()
-        subs = entry.pop("subevents")
-        entry.update(number=number, checkpoint="",
-                     subevent_time=[e["time"] for e in subs],
-                     subevent_velocity=[e["velocity"] for e in subs])
-        out.append(entry)
-    return out
+    return [SlipEntry.from_slip(slip, number) for number, slip in enumerate(slips, start=1)]
 
 
 
-def read_catalog(reader: RunReader, detect: bool = False) -> list[dict]:
-    """The run's slips as dicts (the /slips catalog written while it ran).
+def read_catalog(reader: RunReader, detect: bool = False) -> list[SlipEntry]:
+    """The run's slips (the /slips catalog written while it ran).
 
     Runs without a /slips group (or ``detect=True``) are scanned with
     :meth:`~gouge_cli.model.slip_rule.SlipRule.detect` with the run's own rule.
@@ -75,14 +68,14 @@ def read_catalog(reader: RunReader, detect: bool = False) -> list[dict]:
 
 
 
-def slip_window(reader: RunReader, entry: dict, pad: float = 0.0) -> tuple[int, int, int, int]:
+def slip_window(reader: RunReader, entry: SlipEntry, pad: float = 0.0) -> tuple[int, int, int, int]:
     """Sample indices of one slip: ``(i0, i1, j0, j1)``.
 
     ``i0``: first sample at or after the onset; ``i1``: last sample at or before the end
     (the detector's onset and end samples); ``[j0, j1)``: the slice to read, widened
     by ``pad`` slip durations on each side.
     """
-    t_on, t_end = float(entry["onset_time"]), float(entry["end_time"])
+    t_on, t_end = entry.onset_time, entry.end_time
     i0 = reader.index_at_or_after(t_on)
     i1 = max(reader.index_at_or_before(t_end), i0)
     width = pad * (t_end - t_on)
@@ -93,11 +86,11 @@ def slip_window(reader: RunReader, entry: dict, pad: float = 0.0) -> tuple[int, 
 
 
 
-def find_slip(catalog: list[dict], number: int) -> dict:
+def find_slip(catalog: list[SlipEntry], number: int) -> SlipEntry:
     for entry in catalog:
-        if int(entry["number"]) == number:
+        if entry.number == number:
             return entry
-    listed = ", ".join(str(int(e["number"])) for e in catalog) or "none"
+    listed = ", ".join(str(e.number) for e in catalog) or "none"
     raise SlipNotFoundError(f"no slip number {number}; the run has slips {listed}")
 
 
@@ -120,7 +113,7 @@ def _nan_ext(a, fn) -> float:
 
 
 
-def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[dict]:
+def catalog_table(reader: RunReader, catalog: list[SlipEntry] | None = None) -> list[dict]:
     """One row per slip with :data:`CATALOG_COLUMNS`, each quantity in its one unit
     (:class:`~gouge_cli.units.ResultUnits`) and the main ones again in SI (``*_s``, ``*_m``, ``*_MPa``,
     ``*_m_s``, from the run's scales).
@@ -142,7 +135,7 @@ def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[
     rows, previous = [], None
     origin = reader.time_offset()
     for entry in catalog:
-        onset = float(entry["onset_time"])
+        onset = entry.onset_time
         deborah = p_min = p_max = _NAN
         if has_fluid_series:
             i0, i1, _, _ = slip_window(reader, entry)
@@ -150,30 +143,30 @@ def catalog_table(reader: RunReader, catalog: list[dict] | None = None) -> list[
             deborah = nan_mean(s["deborah"])
             p_min = _nan_ext(s["pressure_min"], np.min)
             p_max = _nan_ext(s["pressure_max"], np.max)
-        peak, mean = float(entry["peak_velocity"]), float(entry["mean_velocity"])
-        duration, drop = float(entry["duration"]), float(entry["stress_drop"])
+        peak, mean = entry.peak_velocity, entry.mean_velocity
+        duration, drop = entry.duration, entry.stress_drop
         rows.append({
-            "number": int(entry["number"]),
+            "number": entry.number,
             "onset_time": onset - origin,
-            "end_time": float(entry["end_time"]) - origin,
+            "end_time": entry.end_time - origin,
             "onset_clock": onset,
             "duration": duration,
-            "slip": float(entry["slip"]),
-            "static_strength": float(entry["static_strength"]),
+            "slip": entry.slip,
+            "static_strength": entry.static_strength,
             "stress_drop": drop,
             "peak_velocity_over_Vs": peak / V_s,
             "mean_velocity_over_Vs": mean / V_s,
             "recurrence": onset - previous if previous is not None else _NAN,
-            "porosity_change": float(entry.get("porosity_change", _NAN)),
-            "n_subevents": len(entry.get("subevent_time", [])),
+            "porosity_change": entry.porosity_change,
+            "n_subevents": entry.n_subevents,
             "deborah": deborah,
             "regime": regime(deborah) if reader.info.has_fluid else "dry",
             "pressure_min_over_sigma": p_min / sigma,
             "pressure_max_over_sigma": p_max / sigma,
-            "checkpoint": str(entry.get("checkpoint", "") or ""),
+            "checkpoint": entry.checkpoint,
             "onset_time_s": (onset - origin) * units.t0_s,
             "duration_s": duration * units.t0_s,
-            "slip_m": float(entry["slip"]) * units.d_m,
+            "slip_m": entry.slip * units.d_m,
             "stress_drop_MPa": drop * units.sigma_MPa,
             "peak_velocity_m_s": peak / V_s * units.V_s_m_s,
         })
@@ -237,7 +230,7 @@ class SlipFriction:
 
 
 
-def slip_friction(reader: RunReader, entry: dict, notch: bool = True, pad: float = 0.5) -> SlipFriction:
+def slip_friction(reader: RunReader, entry: SlipEntry, notch: bool = True, pad: float = 0.5) -> SlipFriction:
     """Dynamic friction (drained) or combined resistance (undrained) over one slip and ``pad``
     durations either side; ``notch=True`` removes the layer's natural vibration with
     :func:`~gouge_cli.analysis.friction.notch_filter` (frequency found above 5 sqrt(k/m_b)/2 pi;
@@ -259,22 +252,22 @@ def slip_friction(reader: RunReader, entry: dict, notch: bool = True, pad: float
             freq = estimate_natural_frequency(t, mu, f_min=fmin)
         except ValueError as exc:
             filtered, note = None, f"notch filter skipped: {exc}"
-    span = (float(entry["onset_time"]), float(entry["end_time"]))
+    span = (entry.onset_time, entry.end_time)
     mean_mu_d = mean_dynamic_friction(t, filtered if filtered is not None else mu, span)
     return SlipFriction(
-        number=int(entry["number"]), t=t, v_wall=v, tau_over_sigma=tau, friction=mu, filtered=filtered,
+        number=entry.number, t=t, v_wall=v, tau_over_sigma=tau, friction=mu, filtered=filtered,
         notch_frequency=freq, onset_time=span[0], end_time=span[1],
-        mu_s=float(entry["static_strength"]), mean_mu_d=mean_mu_d, drained=not info.has_fluid,
+        mu_s=entry.static_strength, mean_mu_d=mean_mu_d, drained=not info.has_fluid,
         note=note, pressure=pressure)
 
 
 
-def _fit_window(entry: dict, onset_index: int, end_index: int) -> SimpleNamespace:
-    return SimpleNamespace(onset_index=onset_index, end_index=end_index, onset_time=float(entry["onset_time"]),
-                           duration=float(entry["duration"]), peak_velocity=float(entry["peak_velocity"]))
+def _fit_window(entry: SlipEntry, onset_index: int, end_index: int) -> SimpleNamespace:
+    return SimpleNamespace(onset_index=onset_index, end_index=end_index, onset_time=entry.onset_time,
+                           duration=entry.duration, peak_velocity=entry.peak_velocity)
 
 
-def fit_slip(reader: RunReader, entry: dict) -> BlockSliderFit:
+def fit_slip(reader: RunReader, entry: SlipEntry) -> BlockSliderFit:
     """Fit thesis Eq. 3 to the wall velocity between one slip's onset and end samples."""
     info = reader.info
     i0, i1, j0, j1 = slip_window(reader, entry)
@@ -299,7 +292,7 @@ class NotchedFit:
     notched: np.ndarray           # (n,) [v0] the given wall velocity with that vibration notched (q = NOTCH_Q)
 
 
-def notched_refit(t, v, entry: dict, fit: BlockSliderFit, k: float, m_b: float,
+def notched_refit(t, v, entry: SlipEntry, fit: BlockSliderFit, k: float, m_b: float,
                   sigma: float) -> NotchedFit | None:
     """:class:`NotchedFit` of a slip (catalog entry: onset_time, end_time, duration,
     peak_velocity) from its wall velocity v(t) (shape (n,), uniform cadence, covering the slip)
@@ -307,7 +300,7 @@ def notched_refit(t, v, entry: dict, fit: BlockSliderFit, k: float, m_b: float,
     fewer than 16 samples, or the series is too coarse to hold a band above NOTCH_ABOVE f_s."""
     t = np.asarray(t, dtype=float)
     v = np.asarray(v, dtype=float)
-    inside = (t >= float(entry["onset_time"])) & (t <= float(entry["end_time"]))
+    inside = (t >= entry.onset_time) & (t <= entry.end_time)
     idx = np.flatnonzero(inside)
     if not fit.success or idx.size < 16:
         return None
@@ -322,7 +315,7 @@ def notched_refit(t, v, entry: dict, fit: BlockSliderFit, k: float, m_b: float,
     return NotchedFit(refit, f_nat, notched)
 
 
-def fit_slip_notched(reader: RunReader, entry: dict, fit: BlockSliderFit | None = None) -> NotchedFit | None:
+def fit_slip_notched(reader: RunReader, entry: SlipEntry, fit: BlockSliderFit | None = None) -> NotchedFit | None:
     """:func:`notched_refit` of one slip of a run over its slip_window with NOTCH_PAD durations each
     side (``fit``: its :func:`fit_slip`, if already made)."""
     info = reader.info
@@ -333,7 +326,7 @@ def fit_slip_notched(reader: RunReader, entry: dict, fit: BlockSliderFit | None 
 
 
 
-def fit_table(reader: RunReader, catalog: list[dict] | None = None, notch: bool = True) -> list[dict]:
+def fit_table(reader: RunReader, catalog: list[SlipEntry] | None = None, notch: bool = True) -> list[dict]:
     """Block-slider fit (thesis Eq. 3) of each slip's wall velocity, one row per slip (:data:`FIT_COLUMNS`).
 
     half_period: fitted pi/omega [t0] against predicted pi sqrt(m_b/k);
@@ -351,8 +344,8 @@ def fit_table(reader: RunReader, catalog: list[dict] | None = None, notch: bool 
         fit = fit_slip(reader, entry)
         fr = slip_friction(reader, entry, notch=notch)
         rows.append({
-            "number": int(entry["number"]),
-            "duration": float(entry["duration"]),
+            "number": entry.number,
+            "duration": entry.duration,
             "half_period": fit.half_period,
             "predicted_half_period": fit.predicted_half_period,
             "half_period_ratio": fit.half_period_ratio,
@@ -369,7 +362,7 @@ def fit_table(reader: RunReader, catalog: list[dict] | None = None, notch: bool 
             "verdict": fit.verdict,
             "reason": fit.verdict_reason,
             "m_eff_over_m_b": fit.m_eff / info.m_b,
-            "duration_s": float(entry["duration"]) * t0_s,
+            "duration_s": entry.duration * t0_s,
             "half_period_s": fit.half_period * t0_s,
         })
     return rows

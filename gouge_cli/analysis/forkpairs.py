@@ -5,31 +5,159 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any, Callable
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import AnalysisError, BranchInterruptedError, DamagedFileError, NotARunError, RunStillRunningError
 from ..io.layout import ForkLayout, RunLayout
-from ..io.runfile import RunInfo, RunReader
+from ..io.runreader import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
 from .pairs import DRAINED_DE, UNDRAINED_DE, PairDefinition, PairResult, campaign_summary, classify_pair, regime  # noqa: F401
 
 _NAN = float("nan")
 
 
-PAIR_COLUMNS = (
-    "run", "slip", "branch", "permeability", "filter_width", "cell_size", "regime", "deborah_slip", "deborah_mean",
-    "main", "type",
-    "base_type", "complex", "criteria", "undrained_event", "drained_strength", "undrained_strength",
-    "strength_difference", "drained_strength_time", "undrained_strength_time", "peak_velocity_ratio",
-    "stress_drop_ratio", "duration_ratio", "drained_peak_over_Vs",
-    "undrained_peak_over_Vs", "n_undrained_slips", "n_subevents", "drained_onset", "drained_end",
-    "undrained_onset", "undrained_end", "drained_fit_r2", "drained_fit_verdict",
-    "undrained_fit_r2", "undrained_fit_verdict", "fit_reason", "deborah_onset", "deborah_max", "deborah_drained",
-    "drained_dilation", "undrained_dilation", "pressure_peak", "undrained_pressure", "diffusion_time",
-    "onset_window", "pressure_from_rate", "note", "status",
+@dataclass(frozen=True)
+class Mechanism:
+    """The pair's test of the pressure equation (:func:`_mechanism`): dilations eps_v [-], pressures [E],
+    times [t0]."""
+
+    drained_dilation: float
+    undrained_dilation: float
+    pressure_peak: float
+    undrained_pressure: float
+    diffusion_time: float
+    onset_window: float
+    pressure_from_rate: float
+
+
+@dataclass(frozen=True)
+class PairMeasures:
+    """What classify_fork measures of one pair beside its PairResult: the branch's identity
+    (parent run, slip, branch folder, kappa_c [d^2], filter width and cell size [d], compared event
+    ``main``), ``origin`` (the stored clock when loading began [t0]), ``failure`` ("" or which
+    branch failed), its Deborah numbers [-] and regime, and the :class:`Mechanism`."""
+
+    run: str
+    slip: int
+    branch: str
+    permeability: float
+    filter_width: float
+    cell_size: float
+    main: str
+    origin: float
+    failure: str
+    deborah_mean: float
+    deborah_slip: float
+    regime: str
+    deborah_onset: float
+    deborah_max: float
+    deborah_drained: float
+    mechanism: Mechanism
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of the pair table: name, unit (docs/physics/units.md symbols; '-' for ratios,
+    counts and labels), one line of description, and its value from (PairResult, PairMeasures)."""
+
+    name: str
+    unit: str
+    doc: str
+    get: Callable[[PairResult, PairMeasures], Any]
+
+
+def _fit_reason(r: PairResult) -> str:
+    return "; ".join(f"{b}: {f.verdict_reason}" for b, f in (("drained", r.drained_fit), ("undrained", r.undrained_fit))
+                     if f is not None and f.verdict_reason)
+
+
+def _result(name: str, unit: str, doc: str) -> Column:
+    """A column that is the PairResult's field `name`."""
+    return Column(name, unit, doc, lambda r, m: getattr(r, name))
+
+
+def _measured(name: str, unit: str, doc: str) -> Column:
+    """A column that is the PairMeasures' field `name`."""
+    return Column(name, unit, doc, lambda r, m: getattr(m, name))
+
+
+def _mech(name: str, unit: str, doc: str) -> Column:
+    """A column that is the Mechanism's field `name`."""
+    return Column(name, unit, doc, lambda r, m: getattr(m.mechanism, name))
+
+
+# The pair row, in the order of its keys (pair.json); adding a pair metric is one line here.
+PAIR_TABLE = (
+    _measured("run", "-", "parent run directory"),
+    _measured("slip", "-", "slip number the fork starts before"),
+    _measured("branch", "-", "undrained branch folder (perm_K)"),
+    _measured("permeability", "d^2", "kappa_c of the undrained branch"),
+    _measured("filter_width", "d", "fluid.filter_width of the undrained branch"),
+    _measured("cell_size", "d", "pressure grid spacing of the undrained branch"),
+    _measured("main", "-", "compared event: first or largest slip"),
+    _result("type", "-", "pair type (analysis.pairs), or failed"),
+    _result("base_type", "-", "type before the complex mark"),
+    Column("complex", "-", "whether the pair is complex", lambda r, m: bool(r.complex)),
+    Column("criteria", "-", "criteria that fired, comma-separated",
+           lambda r, m: ",".join(name for name, on in r.criteria.items() if on)),
+    _result("undrained_event", "-", "slip, slow slip below trigger, none (or failed)"),
+    _result("drained_strength", "sigma", "static strength of the drained compared slip"),
+    _result("undrained_strength", "sigma", "static strength of the undrained compared slip"),
+    _result("strength_difference", "sigma", "undrained minus drained strength"),
+    Column("drained_strength_time", "t0", "when S_d, the drained maximum compared, was reached, since loading began",
+           lambda r, m: r.drained_strength_time - m.origin),
+    Column("undrained_strength_time", "t0", "when S_u was reached, since loading began",
+           lambda r, m: r.undrained_strength_time - m.origin),
+    _result("peak_velocity_ratio", "-", "undrained / drained peak wall velocity"),
+    _result("stress_drop_ratio", "-", "undrained / drained stress drop"),
+    _result("duration_ratio", "-", "undrained / drained slip duration"),
+    _result("drained_peak_over_Vs", "V_s", "drained peak wall velocity"),
+    _result("undrained_peak_over_Vs", "V_s", "undrained peak wall velocity"),
+    Column("n_undrained_slips", "-", "slips of the undrained branch", lambda r, m: len(r.undrained_slips)),
+    _result("n_subevents", "-", "sub-events of the undrained compared slip"),
+    Column("drained_onset", "t0", "drained compared slip's onset since loading began",
+           lambda r, m: _when(r.drained_slip, "onset_time", m.origin)),
+    Column("drained_end", "t0", "its end since loading began", lambda r, m: _when(r.drained_slip, "end_time", m.origin)),
+    Column("undrained_onset", "t0", "undrained compared slip's onset since loading began",
+           lambda r, m: _when(r.undrained_slip, "onset_time", m.origin)),
+    Column("undrained_end", "t0", "its end since loading began",
+           lambda r, m: _when(r.undrained_slip, "end_time", m.origin)),
+    Column("drained_fit_r2", "-", "R^2 of the drained Eq. 3 fit", lambda r, m: _r2(r.drained_fit)),
+    Column("drained_fit_verdict", "-", "holds, failed, inapplicable or none", lambda r, m: _verdict(r.drained_fit)),
+    Column("undrained_fit_r2", "-", "R^2 of the undrained Eq. 3 fit", lambda r, m: _r2(r.undrained_fit)),
+    Column("undrained_fit_verdict", "-", "holds, failed, inapplicable or none",
+           lambda r, m: _verdict(r.undrained_fit)),
+    Column("fit_reason", "-", "why a fit does not hold, per branch", lambda r, m: _fit_reason(r)),
+    _measured("deborah_mean", "-", "mean De of the undrained branch"),
+    _measured("deborah_slip", "-", "mean De over the undrained compared slip"),
+    _measured("regime", "-", "drainage regime of De (deborah_slip, else deborah_mean)"),
+    _measured("deborah_onset", "-", "De at the undrained onset"),
+    _measured("deborah_max", "-", "largest De over the undrained slip"),
+    _measured("deborah_drained", "-", "De with the drained twin's peak speed (slip_deborah)"),
+    _mech("drained_dilation", "-", "drained eps_v from the fork to its onset"),
+    _mech("undrained_dilation", "-", "undrained eps_v from the fork to its onset"),
+    _mech("pressure_peak", "E", "undrained layer-mean pressure of largest magnitude before its onset"),
+    _mech("undrained_pressure", "E", "|eps_v| / (beta phi) of the drained twin's strain"),
+    _mech("diffusion_time", "t0", "t_D = l^2 / D, l half the layer thickness"),
+    _mech("onset_window", "t0", "the fork to the undrained onset"),
+    _mech("pressure_from_rate", "E", "pressure the undrained strain rate sustains (rate_pressure)"),
+    _result("note", "-", "one line for people"),
+    Column("status", "-", "finished or failed", lambda r, m: FAILED if m.failure else "finished"),
 )
+_LEAD = ("run", "slip", "branch", "permeability", "filter_width", "cell_size", "regime", "deborah_slip", "deborah_mean")
+# pairs.csv's columns: the identifying ones first, then the rest in PAIR_TABLE's order
+PAIR_COLUMNS = _LEAD + tuple(c.name for c in PAIR_TABLE if c.name not in _LEAD)
+PAIR_UNITS = {c.name: c.unit for c in PAIR_TABLE}
+
+
+def pair_row(result: PairResult, measured: PairMeasures) -> dict:
+    """One pair's row, {column name: value} in PAIR_TABLE's order (pair.json, pairs.csv)."""
+    return {c.name: c.get(result, measured) for c in PAIR_TABLE}
+
+
 FAILED = "failed"       # type and base_type of a pair whose branch failed (status 'failed: <physics message>')
 
 
@@ -46,7 +174,8 @@ def fork_branches(fork_dir: Path) -> tuple[Path | None, list[Path]]:
 
 @dataclass
 class ForkPair:
-    """One drained/undrained pair: the table row (:data:`PAIR_COLUMNS`) and the classification."""
+    """One drained/undrained pair: the table row (:func:`pair_row`, keys :data:`PAIR_TABLE`'s names) and
+    the classification."""
 
     row: dict
     result: PairResult
@@ -192,7 +321,6 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 result = replace(result, type=FAILED, base_type=FAILED, complex=False, undrained_event=FAILED,
                                  criteria={k: False for k in result.criteria}, note=failure)
             d_main, u_main = result.drained_slip, result.undrained_slip
-            fired = [name for name, on in result.criteria.items() if on]
             de_onset, de_max = deborah_during(ds["time"], ds["deborah"], u_main)
             de_slip = _NAN
             if u_main is not None and ds["deborah"] is not None:
@@ -202,60 +330,24 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
             de = de_slip if math.isfinite(de_slip) else de_mean
             de_drained, l_over_d = slip_deborah(ds["time"], ds["deborah"], ds["wall_vx"], u_main,
                                                 result.drained_peak_over_Vs * info.V_s)
-            mech = _mechanism(d_extra, ds, d_main, u_main, uinfo, l_over_d)
-            parent = str(info.parent_dir)      # parent_run is stored relative to the branch
-            row = {
-                "run": parent,
-                "slip": int(info.fork_slip) if info.fork_slip is not None else _slip_number(fork_dir),
-                "branch": udir.name,
-                "permeability": uinfo.permeability if uinfo.permeability is not None else _NAN,
-                "filter_width": uinfo.filter_width if uinfo.filter_width is not None else _NAN,
-                "cell_size": uinfo.grid_spacing if uinfo.grid_spacing is not None else _NAN,
-                "main": definition.main,
-                "type": result.type,
-                "base_type": result.base_type,
-                "complex": bool(result.complex),
-                "criteria": ",".join(fired),
-                "undrained_event": result.undrained_event,
-                "drained_strength": result.drained_strength,
-                "undrained_strength": result.undrained_strength,
-                "strength_difference": result.strength_difference,
-                "drained_strength_time": result.drained_strength_time - origin,     # NaN without a pair
-                "undrained_strength_time": result.undrained_strength_time - origin,
-                "peak_velocity_ratio": result.peak_velocity_ratio,
-                "stress_drop_ratio": result.stress_drop_ratio,
-                "duration_ratio": result.duration_ratio,
-                "drained_peak_over_Vs": result.drained_peak_over_Vs,
-                "undrained_peak_over_Vs": result.undrained_peak_over_Vs,
-                "n_undrained_slips": len(result.undrained_slips),
-                "n_subevents": result.n_subevents,
-                "drained_onset": _when(d_main, "onset_time", origin),
-                "drained_end": _when(d_main, "end_time", origin),
-                "undrained_onset": _when(u_main, "onset_time", origin),
-                "undrained_end": _when(u_main, "end_time", origin),
-                "drained_fit_r2": _r2(result.drained_fit),
-                "drained_fit_verdict": _verdict(result.drained_fit),
-                "undrained_fit_r2": _r2(result.undrained_fit),
-                "undrained_fit_verdict": _verdict(result.undrained_fit),
-                "fit_reason": "; ".join(f"{b}: {f.verdict_reason}" for b, f in
-                                        (("drained", result.drained_fit), ("undrained", result.undrained_fit))
-                                        if f is not None and f.verdict_reason),
-                "deborah_mean": de_mean,
-                "deborah_slip": de_slip,
-                "regime": regime(de),
-                "deborah_onset": de_onset,
-                "deborah_max": de_max,
-                "deborah_drained": de_drained,
-                **mech,
-                "note": result.note,
-                "status": FAILED if failure else "finished",
-            }
+            measured = PairMeasures(
+                run=str(info.parent_dir),      # parent_run is stored relative to the branch
+                slip=int(info.fork_slip) if info.fork_slip is not None else _slip_number(fork_dir),
+                branch=udir.name,
+                permeability=uinfo.permeability if uinfo.permeability is not None else _NAN,
+                filter_width=uinfo.filter_width if uinfo.filter_width is not None else _NAN,
+                cell_size=uinfo.grid_spacing if uinfo.grid_spacing is not None else _NAN,
+                main=definition.main, origin=origin, failure=failure,
+                deborah_mean=de_mean, deborah_slip=de_slip, regime=regime(de), deborah_onset=de_onset,
+                deborah_max=de_max, deborah_drained=de_drained,
+                mechanism=_mechanism(d_extra, ds, d_main, u_main, uinfo, l_over_d))
+            row = pair_row(result, measured)
             pairs.append(ForkPair(row, result, drained_dir, udir))
     return pairs
 
 
 
-def _mechanism(drained: dict, undrained: dict, d_main, u_main, uinfo: RunInfo, l_over_d: float) -> dict:
+def _mechanism(drained: dict, undrained: dict, d_main, u_main, uinfo: RunInfo, l_over_d: float) -> "Mechanism":
     """The pair's test of the pressure equation (undrained limit P = -eps_v / (beta phi)):
     drained_dilation / undrained_dilation (eps_v of each branch from the fork to its onset [-]),
     pressure_peak (the undrained layer-mean pressure of largest magnitude before its onset [E]),
@@ -275,12 +367,13 @@ def _mechanism(drained: dict, undrained: dict, d_main, u_main, uinfo: RunInfo, l
     phi = float(por[0]) if por is not None and len(por) else _NAN
     half = 0.5 * float(undrained["thickness"][0]) if undrained["thickness"] is not None else _NAN
     t_d = l_over_d * half if np.isfinite(l_over_d) else _NAN
-    return {"drained_dilation": eps_d, "undrained_dilation": eps_u,
-            "pressure_peak": pressure_before(undrained["time"], undrained["pressure_mean"], u_onset),
-            "undrained_pressure": abs(eps_d) / (beta * phi) if beta * phi > 0 else _NAN,
-            "diffusion_time": t_d, "onset_window": u_onset - fork_time,
-            "pressure_from_rate": rate_pressure(undrained["time"], undrained["thickness"], undrained["pressure_mean"],
-                                                u_onset, t_d, beta * phi)}
+    return Mechanism(
+        drained_dilation=eps_d, undrained_dilation=eps_u,
+        pressure_peak=pressure_before(undrained["time"], undrained["pressure_mean"], u_onset),
+        undrained_pressure=abs(eps_d) / (beta * phi) if beta * phi > 0 else _NAN,
+        diffusion_time=t_d, onset_window=u_onset - fork_time,
+        pressure_from_rate=rate_pressure(undrained["time"], undrained["thickness"], undrained["pressure_mean"],
+                                         u_onset, t_d, beta * phi))
 
 
 def _slip_number(fork_dir: Path) -> int:

@@ -1,8 +1,8 @@
 """What `gouge analyze` reports for a run (thesis Sections IV-V): the slip catalog and fits
 (analysis.catalog), the drained/undrained fork pairs (analysis.forkpairs) and their summary, written
-as RUN/analysis/*.csv, summary.json and /analysis in run.h5 (through io.runfile).
+as RUN/analysis/*.csv, summary.json and /analysis in run.h5 (through io.analysis_tables).
 
-Reads only: ``RUN/run.h5`` (io.runfile.RunReader) and the forks under
+Reads only: ``RUN/run.h5`` (io.runreader.RunReader) and the forks under
 ``RUN/forks/slip_NNN/{drained,perm_K}/run.h5``. All quantities are dimensionless (length d,
 stress E, time t0; docs/physics/units.md). Errors are gouge_cli.errors.AnalysisError (subclasses
 name the case); the CLI turns them into exit code 2.
@@ -21,9 +21,10 @@ import numpy as np
 from ..errors import NoSlipsError
 from ..io.filedoc import json_safe
 from ..io.outputs import is_no_space, require_space, write_bytes
-from ..io.runfile import RunInfo, RunReader, analysis_bytes, write_analysis_tables
+from ..io.analysis_tables import analysis_bytes, write_analysis_tables
+from ..io.runreader import RunInfo, RunReader
 from .catalog import CATALOG_COLUMNS, FIT_COLUMNS, catalog_table, fit_table, read_catalog, summary_statistics
-from .forkpairs import PAIR_COLUMNS, ForkPair, campaign, run_pairs
+from .forkpairs import PAIR_COLUMNS, PAIR_UNITS, ForkPair, campaign, run_pairs
 
 __all__ = ["RunAnalysis", "analyze_run", "write_analysis"]
 
@@ -42,7 +43,7 @@ class RunAnalysis:
     """Everything `gouge analyze` computes for one run."""
 
     info: RunInfo
-    catalog: list[dict]
+    catalog: list[dict]           # catalog_table rows
     summary: dict
     fits: list[dict]
     pairs: list[ForkPair]
@@ -145,7 +146,8 @@ def write_analysis(analysis: RunAnalysis, out_dir: Path | None = None, into_h5: 
         require_space(info.h5_path.parent, analysis_bytes(tables), f"the /analysis tables in {info.h5_path}")
         try:
             write_analysis_tables(info.h5_path, bool(analysis.notch),
-                                  json.dumps(json_safe(summary), default=_json_default, allow_nan=False), tables)
+                                  json.dumps(json_safe(summary), default=_json_default, allow_nan=False), tables,
+                                  {"pairs": PAIR_UNITS})
         except OSError as exc:
             if is_no_space(exc):        # (another writer took the room after the check: nothing written)
                 raise

@@ -16,7 +16,8 @@ import numpy as np
 from .blockslider import EQ3_PERIOD_FACTOR
 from .catalog import fit_slip, fit_slip_notched, read_catalog
 from .forkpairs import ForkPair
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
+from ..io.slipcatalog import SlipEntry
 
 __all__ = ["STUDY_COLUMNS", "THESIS", "TRANSIENT_TOL", "DURATION_TOL", "GOOD_R2",
            "transient_slips", "within_median", "study_rows", "study_summary", "study_summaries", "summary_lines"]
@@ -37,27 +38,27 @@ STUDY_COLUMNS = (
 THESIS = {"n": 39, "n_type_I": 9, "n_type_II": 30, "n_tie": 0, "n_complex": 25, "I-C": 5, "II-C": 20}
 
 
-def transient_slips(catalog: list[dict], tol: float = TRANSIENT_TOL) -> set[int]:
-    """Numbers of the transient slips of a run's catalog (dicts with number, static_strength,
-    stress_drop).
+def transient_slips(catalog: list[SlipEntry], tol: float = TRANSIENT_TOL) -> set[int]:
+    """Numbers of the transient slips of a run's catalog (io.slipcatalog.SlipEntry: number,
+    static_strength, stress_drop).
 
     Rule: let S* and D* be the medians of static strength and stress drop over the second half
     of the catalog (slips ceil(n/2)+1 .. n; the run has reached repeated stick-slip by then).
     Slip 1 is always transient (it ends the first loading from rest); every later slip is
     transient until the first one with ``|S - S*| <= tol S*`` and ``|D - D*| <= tol D*``.
     """
-    slips = sorted(catalog, key=lambda e: int(e["number"]))
+    slips = sorted(catalog, key=lambda e: e.number)
     if not slips:
         return set()
     late = slips[len(slips) // 2:]
-    s_ref = statistics.median(float(e["static_strength"]) for e in late)
-    d_ref = statistics.median(float(e["stress_drop"]) for e in late)
-    out = {int(slips[0]["number"])}
+    s_ref = statistics.median(e.static_strength for e in late)
+    d_ref = statistics.median(e.stress_drop for e in late)
+    out = {slips[0].number}
     for e in slips[1:]:
-        s, d = float(e["static_strength"]), float(e["stress_drop"])
+        s, d = e.static_strength, e.stress_drop
         if abs(s - s_ref) <= tol * s_ref and abs(d - d_ref) <= tol * d_ref:
             break
-        out.add(int(e["number"]))
+        out.add(e.number)
     return out
 
 
@@ -76,7 +77,7 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
     rows = []
     with RunReader(run_dir) as reader:
         info = reader.info
-        catalog = {int(e["number"]): e for e in read_catalog(reader)}
+        catalog = {e.number: e for e in read_catalog(reader)}
         fits, notched = {}, {}
         for p in pairs:
             n = int(p.row["slip"])
@@ -87,7 +88,7 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
     for p in sorted(pairs, key=lambda q: (int(q.row["slip"]), q.row["permeability"])):
         r, n = p.row, int(p.row["slip"])
         fit = fits.get(n)
-        entry = catalog.get(n, {})
+        entry = catalog.get(n)
         rows.append({
             "slip": n, "transient": n in transient, "k": info.k, "sigma": info.sigma, "V": info.V_s,
             "kappa_c": r["permeability"], "type": r["type"], "undrained_event": r["undrained_event"],
@@ -96,7 +97,7 @@ def study_rows(run_dir, pairs: list[ForkPair], transient: set[int]) -> list[dict
             "duration_ratio": r["duration_ratio"], "deborah": r["deborah_slip"], "regime": r["regime"],
             "deborah_onset": r["deborah_onset"], "deborah_max": r["deborah_max"],
             "subevents": int(p.result.n_subevents),
-            "drained_duration": float(entry.get("duration", _NAN)),
+            "drained_duration": entry.duration if entry is not None else _NAN,
             "drained_fit_r2": fit.r2 if fit is not None else _NAN,
             "drained_fit_ok": bool(fit is not None and fit.success),
             "drained_fit_verdict": fit.verdict if fit is not None else "none",

@@ -108,15 +108,16 @@ def register(app: typer.Typer) -> None:
 _CLOCK_KEYS = ("onset_time", "end_time", "peak_time", "checkpoint_time")
 
 
-def catalog_since_loading(run_dir: Path, slip_catalog) -> tuple[list[dict], float]:
-    """The run's slip catalog (``slip_catalog(run_dir)``) with every time in t0 since loading
-    began, velocities in V_s (peak_velocity_over_Vs, mean_velocity_over_Vs, subevent_velocity_over_Vs
-    in place of the v0 values), NaN as None (valid JSON) and without the run file's
-    attribute_units; returns (catalog, the clock at which loading began)."""
+def catalog_since_loading(run_dir: Path, catalog=None) -> tuple[list[dict], float]:
+    """The run's slip catalog (`catalog`, a list of io.slipcatalog.SlipEntry; read from the run when
+    None) as dicts with every time in t0 since loading began, velocities in V_s
+    (peak_velocity_over_Vs, mean_velocity_over_Vs, subevent_velocity_over_Vs in place of the v0
+    values) and NaN as None (valid JSON); returns (catalog, the clock at which loading began)."""
     from ..errors import AnalysisError
-    from ..io.runfile import RunReader
+    from ..io.runreader import RunReader
     from ..errors import RunDirError
     from ..io.filedoc import json_safe
+    from ..io.slipcatalog import slip_catalog
 
     try:
         with RunReader(run_dir, allow_running=True) as reader:
@@ -124,18 +125,14 @@ def catalog_since_loading(run_dir: Path, slip_catalog) -> tuple[list[dict], floa
             V_s = reader.info.V_s
     except AnalysisError as exc:
         raise RunDirError(str(exc)) from None
-    catalog = slip_catalog(run_dir)
+    catalog = [e.to_dict() for e in (slip_catalog(run_dir) if catalog is None else catalog)]
     for entry in catalog:
-        entry.pop("attribute_units", None)
         for key in _CLOCK_KEYS:
-            if key in entry:
-                entry[key] = float(entry[key]) - origin
-        entry["subevent_time"] = [t - origin for t in entry.get("subevent_time", [])]
+            entry[key] -= origin
+        entry["subevent_time"] = [t - origin for t in entry["subevent_time"]]
         for key in ("peak_velocity", "mean_velocity"):
-            if key in entry:
-                entry[f"{key}_over_Vs"] = float(entry.pop(key)) / V_s
-        if "subevent_velocity" in entry:
-            entry["subevent_velocity_over_Vs"] = [v / V_s for v in entry.pop("subevent_velocity")]
+            entry[f"{key}_over_Vs"] = entry.pop(key) / V_s
+        entry["subevent_velocity_over_Vs"] = [v / V_s for v in entry.pop("subevent_velocity")]
         entry["time_origin"] = "loading start"
     return json_safe(catalog), origin
 

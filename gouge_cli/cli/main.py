@@ -117,7 +117,7 @@ def resume(
 ):
     """Continue an interrupted run (Ctrl-C, kill -9, power loss) from its latest checkpoint."""
     from ..io.layout import RunLayout
-    from ..io.runfile import run_status
+    from ..io.runreader import run_status
     from ..workflows.run import resume_run
 
     target = _run_dir(run_dir)
@@ -141,20 +141,19 @@ def slips(
     """List the slips detected in a run (the catalog written while it ran)."""
     import json
 
-    from ..io.runfile import slip_catalog
     from ..io.rundir import refuse_if_in_progress
 
     from .export_cmds import catalog_since_loading
 
     target = _run_dir(run_dir)
     refuse_if_in_progress(target, "slips")
-    catalog, origin = catalog_since_loading(target, slip_catalog)
+    catalog, origin = catalog_since_loading(target)
     if as_json:
         print(json.dumps(catalog, allow_nan=False))
         return
     from rich.markup import escape
 
-    from ..io.runfile import RunReader
+    from ..io.runreader import RunReader
     from ..units import ResultUnits
     from .analysis_cmds import _table
 

@@ -18,7 +18,7 @@ from ..io import provenance
 from ..io.checkpoint import snapshot_of, state_bytes, write_checkpoint
 from ..io.layout import RunLayout
 from ..io.rundir import ensure_space
-from ..io.runfile import RunFile
+from ..io.runwriter import RunFile
 from ..kernels import layout as L
 from ..model.timestep import slip_duration
 from .callbacks import Callback, restore, schedules, states

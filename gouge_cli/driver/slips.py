@@ -19,6 +19,7 @@ import numpy as np
 
 from ..io.checkpoint import SLIP_RECORDER, Checkpoint, snapshot_of, write_checkpoint
 from ..io.layout import RunLayout
+from ..io.slipcatalog import SlipEntry
 from ..config import Config
 from ..model.slip_rule import Slip, SlipDetector, SlipRule
 from .callbacks import Callback
@@ -55,7 +56,7 @@ class SlipRecorder(Callback):
         self.rule = SlipRule.from_config(config)
         self.hi, self.lo = self.rule.hi, self.rule.lo
         self.peak_band = 0.25 * config.slips.lead_stress
-        self.slips: list[dict] = []
+        self.slips: list[SlipEntry] = []      # recorded since this process started
         self._start_time = sim.state.time
         self.load_state_dict(state or {}, attached)
 
@@ -179,13 +180,9 @@ class SlipRecorder(Callback):
 
     def _record(self, slip: Slip):
         self.count += 1
-        entry = slip.to_dict()
-        subevents = entry.pop("subevents")
-        entry["number"] = self.count
-        entry["deborah"] = float(np.mean(self._deborah)) if self._deborah else float("nan")
+        deborah = float(np.mean(self._deborah)) if self._deborah else float("nan")
         self._deborah.clear()
-        entry["checkpoint"] = ""
-        entry["checkpoint_time"] = float("nan")
+        checkpoint, checkpoint_time = "", float("nan")
         if self.pending is not None and self.layout is not None:
             path = self.layout.slip_checkpoint(self.count)
             extra = dict(self.pending.extra)
@@ -193,8 +190,9 @@ class SlipRecorder(Callback):
             write_checkpoint(path,
                              Checkpoint(self.pending.config, self.pending.state, self.pending.fluid, extra,
                                         provenance=self.pending.provenance))
-            entry["checkpoint"] = self.layout.relative(path)
-            entry["checkpoint_time"] = self.pending.time
+            checkpoint, checkpoint_time = self.layout.relative(path), self.pending.time
+        entry = SlipEntry.from_slip(slip, self.count, deborah=deborah, checkpoint=checkpoint,
+                                    checkpoint_time=checkpoint_time)
         self.slips.append(entry)
         if self.run_file is not None:
-            self.run_file.add_slip(self.count, entry, subevents)
+            self.run_file.add_slip(entry)

@@ -48,7 +48,7 @@ import numpy as np
 from ..driver.progress import ItemProgress
 from ..errors import ExportError
 from ..io.outputs import check_out, write_bytes
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
 from ..io.filedoc import BODY_CODES, TIME_ORIGIN
 
 VERSION = (2, 2)

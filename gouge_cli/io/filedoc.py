@@ -148,14 +148,12 @@ CHECKPOINT_ATTRS = {
 }
 
 
-_T0 = ("onset_time", "end_time", "onset_clock", "duration", "recurrence", "half_period", "predicted_half_period",
-       "drained_onset", "drained_end", "undrained_onset", "undrained_end", "drained_strength_time",
-       "undrained_strength_time")
+_T0 = ("onset_time", "end_time", "onset_clock", "duration", "recurrence", "half_period", "predicted_half_period")
+# units of the slip tables' columns (catalog, fits; '-' where absent); the pairs table's are
+# analysis.forkpairs PAIR_UNITS, passed to write_analysis_tables
 ANALYSIS_UNITS = dict({k: "t0" for k in _T0}, slip="d", peak_velocity_over_Vs="V_s", mean_velocity_over_Vs="V_s",
-                      amplitude_over_Vs="V_s", drained_peak_over_Vs="V_s", undrained_peak_over_Vs="V_s",
-                      pressure_min_over_sigma="sigma", pressure_max_over_sigma="sigma", static_strength="sigma",
-                      stress_drop="sigma", drained_strength="sigma", undrained_strength="sigma",
-                      strength_difference="sigma", m_eff_over_m_b="m_b", permeability="d^2",
+                      amplitude_over_Vs="V_s", pressure_min_over_sigma="sigma", pressure_max_over_sigma="sigma",
+                      static_strength="sigma", stress_drop="sigma", m_eff_over_m_b="m_b",
                       notch_frequency="1/t0", onset_time_s="s", duration_s="s", half_period_s="s", slip_m="m",
                       stress_drop_MPa="MPa", peak_velocity_m_s="m/s")
 ANALYSIS_ATTRS = {
@@ -166,16 +164,20 @@ ANALYSIS_ATTRS = {
 }
 
 
-def document_analysis(group) -> None:
+def document_analysis(group, units: dict[str, dict[str, str]] | None = None) -> None:
     """unit/description of the /analysis tables `gouge analyze` writes into run.h5 (one dataset
-    per column; unit '-' for ratios, counts, flags and labels)."""
+    per column; unit '-' for ratios, counts, flags and labels). `units`: {table: {column: unit}}
+    (ANALYSIS_UNITS for a table not in it); None: a column already described keeps its unit."""
     describe(group, "-", "tables written by `gouge analyze` (also RUN/analysis/*.csv)")
     describe_attributes(group, ANALYSIS_ATTRS)
     for table, g in group.items():
         describe(g, "-", f"the {table} table, one row per {'pair' if table == 'pairs' else 'slip'}")
         describe_attributes(g, ANALYSIS_ATTRS)
+        table_units = (units or {}).get(table, ANALYSIS_UNITS)
         for name, ds in g.items():
-            describe(ds, ANALYSIS_UNITS.get(name, "-"), f"column {name} of RUN/analysis/{table}.csv")
+            if units is None and "unit" in ds.attrs:
+                continue
+            describe(ds, table_units.get(name, "-"), f"column {name} of RUN/analysis/{table}.csv")
 
 
 def json_safe(obj):

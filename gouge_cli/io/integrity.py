@@ -61,6 +61,16 @@ def object_digest(obj, with_data: bool | None = None) -> str:
     return h.hexdigest()
 
 
+def attr_value(attrs, key, default=None):
+    """Attribute `key` of `attrs` as a Python value (bytes decoded, numpy scalars unwrapped), or `default`."""
+    if key not in attrs:
+        return default
+    value = attrs[key]
+    if isinstance(value, bytes):
+        return value.decode()
+    return value.item() if hasattr(value, "item") else value
+
+
 def seal(obj) -> None:
     """Store the seal of `obj` (call after its last attribute or, small datasets, its data is written)."""
     obj.attrs[SEAL] = object_digest(obj)
@@ -208,3 +218,13 @@ def content_digest(h5, skip: tuple = ("checksum",), arrays: dict | None = None) 
             data = arrays[path] if arrays is not None and path in arrays else read(obj)
             h.update(b"data=" + value_bytes(data))
     return h.hexdigest()
+
+
+def checked_dataset(group, name: str, data: np.ndarray, **options):
+    """A dataset with Fletcher-32 per chunk (an empty one, which cannot be chunked, is covered by
+    its seal instead). Chunked, in a file without a chunk cache, its data is written by this call:
+    a full disk raises here, never later when the handle is freed (a small contiguous dataset waits
+    in HDF5's sieve buffer until then, where the error is only printed)."""
+    if data.size == 0:
+        return group.create_dataset(name, data=data)
+    return group.create_dataset(name, data=data, chunks=options.pop("chunks", True), fletcher32=True, **options)

@@ -186,7 +186,7 @@ def prepare_run_dir(out_dir: Path, force: bool = False) -> RunLock:
 
 
 SPACE_MARGIN = 4_000_000     # bytes kept free beyond the next checkpoints
-RESERVE_BYTES = 500_000      # of them, allocated past a run file's end for its close (io.runfile.RunFile._room)
+RESERVE_BYTES = 500_000      # of them, allocated past a run file's end for its close (io.runwriter.RunFile._room)
 
 
 def ensure_space(run_dir: Path, need: float):

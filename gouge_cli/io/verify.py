@@ -24,7 +24,9 @@ from ..errors import DamagedFileError, InputError
 from .checkpoint import read_checkpoint
 from .layout import RUN_FILE, ForkLayout, RunLayout, branch_flag
 from .integrity import STRUCTURE_ERRORS, check_seal, damaged_rows, read, stored_seal, structure_error, walk_objects
-from .runfile import SeriesTail, attr_value, checked_time, run_status, torn_series_tail
+from .integrity import attr_value
+from .recovery import SeriesTail, torn_series_tail
+from .runreader import checked_time, run_status
 
 
 @dataclass
@@ -248,7 +250,7 @@ def _resumed_from(layout: RunLayout):
 
 def _torn_tail(layout: RunLayout, latest) -> set[tuple[str, int]]:
     """(column, first row) of the series chunks that `gouge resume` from checkpoint `latest` mends
-    (runfile.torn_series_tail against its record)."""
+    (recovery.torn_series_tail against its record)."""
     if latest is None:
         return set()
     try:

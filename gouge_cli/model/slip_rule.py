@@ -66,18 +66,19 @@ __all__ = [
 _NAN = float("nan")
 
 
-@dataclass
+@dataclass(frozen=True)
 class SubEvent:
-    """One local velocity maximum inside a slip."""
+    """One local velocity maximum inside a slip (index: its series sample, -1 where not stored)."""
 
     index: int
     time: float
     velocity: float
 
 
-@dataclass
+@dataclass(frozen=True)
 class Slip:
-    """One detected slip event (dimensionless units; indices into the series)."""
+    """One detected slip event (dimensionless units; indices into the series). A run's catalog
+    keeps it as io.slipcatalog.SlipEntry, this record with its number and checkpoint."""
 
     onset_index: int
     onset_time: float

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from contextlib import ExitStack
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,8 @@ from ..analysis.catalog import find_slip, read_catalog, slip_friction
 from ..analysis.forkpairs import fork_branches, run_pairs
 from ..errors import NoSlipsError
 from ..io.layout import RunLayout, branch_perm_text
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
+from ..io.slipcatalog import SlipEntry
 from .campaign import campaign_figure
 from .series import comparison_figure, friction_figure, overview_figure, pair_figure, slip_figure
 from .snapshot import snapshot_figure
@@ -29,8 +31,8 @@ def undrained_friction_figure(u: RunReader, pair, path: Path, notch: bool, drain
     """R/sigma = mu_d (1 - P*/sigma) (Eq. 6) over the pair's compared undrained event (thesis Fig. 18)."""
     main = pair.result.undrained_slip
     slip = int(pair.row["slip"])
-    fr = slip_friction(u, {"number": slip, "onset_time": main.onset_time, "end_time": main.end_time,
-                           "static_strength": pair.result.undrained_strength}, notch=notch)
+    entry = replace(SlipEntry.from_slip(main, slip), static_strength=pair.result.undrained_strength)
+    fr = slip_friction(u, entry, notch=notch)
     title = (f"Slip {slip}, κ_c = {branch_perm_text(pair.row['branch'])} d² ({pair.row['regime']}): "
              "combined resistance R/σ (Eq. 6)")
     return friction_figure(fr, u.info.V_s, path, title=title,

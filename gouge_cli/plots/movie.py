@@ -28,7 +28,7 @@ from ..io.layout import RunLayout, branch_name, branch_perm, perm_text
 from ..driver.progress import ItemProgress
 from ..errors import MovieError
 from ..io.outputs import check_out, require_space, temporary
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
 from .snapshot import CHAIN, chain_segments, draw_discs, draw_pressure, pressure_grid
 from .style import DRAINED, LABEL, UNDRAINED
 
@@ -65,7 +65,7 @@ def _branch(label: str, run_dir: Path) -> Branch:
                          "it writes output.slip_frames of them per slip duration")
     catalog = read_catalog(reader)
     s = reader.series(["time", "wall_vx"])
-    onset = float(catalog[0]["onset_time"]) if catalog else float(s["time"][int(np.argmax(s["wall_vx"]))])
+    onset = catalog[0].onset_time if catalog else float(s["time"][int(np.argmax(s["wall_vx"]))])
     tau = np.array(reader.snapshot_times()) - onset
     return Branch(label, reader, onset, names, tau, s["time"] - onset, s["wall_vx"] / reader.info.V_s)
 

@@ -15,7 +15,8 @@ import numpy as np
 from ..analysis.catalog import fit_slip, series_envelope, slip_window, SlipFriction
 from ..analysis.forkpairs import ForkPair
 from ..io.layout import branch_perm_text
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
+from ..io.slipcatalog import SlipEntry
 from ..units import ResultUnits
 from .style import (
     DRAINED,
@@ -48,13 +49,13 @@ def _scaled(name: str, y: np.ndarray, reader: RunReader) -> np.ndarray:
     return y
 
 
-def overview_figure(reader: RunReader, catalog: list[dict], path: Path, max_points: int = 6000) -> Path:
+def overview_figure(reader: RunReader, catalog: list[SlipEntry], path: Path, max_points: int = 6000) -> Path:
     """Four stacked panels against time since loading began, slips shaded (thesis Fig. 5, App. C)."""
     data = series_envelope(reader, [q for q, _ in _QUANTITIES], max_points=max_points)
     offset = reader.time_offset()
     t = data["time"] - offset
     fig, axes = new_figure("overview", 4, 1, sharex=True)
-    spans = [(float(e["onset_time"]) - offset, float(e["end_time"]) - offset) for e in catalog]
+    spans = [(e.onset_time - offset, e.end_time - offset) for e in catalog]
     for ax, (name, label) in zip(axes, _QUANTITIES):
         if name in data:
             ax.plot(t, _scaled(name, data[name], reader), color=DRAINED, lw=0.7)
@@ -75,13 +76,13 @@ def overview_figure(reader: RunReader, catalog: list[dict], path: Path, max_poin
     return save(fig, path)
 
 
-def slip_figure(reader: RunReader, entry: dict, path: Path, pad: float = 1.0) -> Path:
+def slip_figure(reader: RunReader, entry: SlipEntry, path: Path, pad: float = 1.0) -> Path:
     """One slip magnified (thesis Fig. 6): the four quantities against time since onset, with the
     block-slider fit of Eq. 3 and the Eq. 3 curve of period 2 pi sqrt(m_b/k) on the velocity."""
     info = reader.info
     i0, i1, j0, j1 = slip_window(reader, entry, pad)
     s = reader.series([q for q, _ in _QUANTITIES] + ["time"], j0, j1)
-    onset, end = float(entry["onset_time"]), float(entry["end_time"])
+    onset, end = entry.onset_time, entry.end_time
     t = s["time"] - onset
     fig, axes = new_figure("slip", 4, 1, sharex=True)
     for ax, (name, label) in zip(axes, _QUANTITIES):
@@ -101,19 +102,19 @@ def slip_figure(reader: RunReader, entry: dict, path: Path, pad: float = 1.0) ->
         ax.plot(tp, fit.amplitude * np.sin(omega * tp) / info.V_s, color=PREDICTED, lw=1.2, ls=":",
                 label=f"Eq. 3, π√(m_b/k) = {info.predicted_half_period:.4g} t₀, same amplitude")
         ax.legend(loc="upper left", fontsize=8, frameon=True, framealpha=0.85, edgecolor="none")
-    axes[0].axhline(float(entry["static_strength"]), color="0.5", lw=0.7, ls=":")
+    axes[0].axhline(entry.static_strength, color="0.5", lw=0.7, ls=":")
     axes[0].set_xlim(float(t[0]), float(t[-1]))
     axes[-1].set_xlabel(LABEL["time_onset"])
     tidy(axes)
     units = ResultUnits.of_run(info.config, info.V_s, info.sigma)
-    duration = float(entry["duration"])
-    fig.suptitle(f"{info.run_dir}, slip {int(entry['number'])}: duration {duration:.4g} t₀ "
-                 f"({duration * units.t0_s * 1e6:.3g} µs), peak {float(entry['peak_velocity']) / info.V_s:.3g} V_s, "
-                 f"Δτ/σ = {float(entry['stress_drop']):.3g}\n{_params_line(reader)}"
+    duration = entry.duration
+    fig.suptitle(f"{info.run_dir}, slip {entry.number}: duration {duration:.4g} t₀ "
+                 f"({duration * units.t0_s * 1e6:.3g} µs), peak {entry.peak_velocity / info.V_s:.3g} V_s, "
+                 f"Δτ/σ = {entry.stress_drop:.3g}\n{_params_line(reader)}"
                  + ("" if fit.verdict == "holds" else f"\nEq. 3 fit not drawn: {fit.verdict_reason}"), fontsize=10)
     fig.text(0.5, 0.008, units.caption(), ha="center", fontsize=8, color="0.3")
     fig.subplots_adjust(left=0.11, right=0.97, top=0.92 if fit.verdict == "holds" else 0.9, bottom=0.07, hspace=0.08)
-    return save(fig, path, metadata={"Title": f"slip {int(entry['number'])}", "Description": json.dumps(
+    return save(fig, path, metadata={"Title": f"slip {entry.number}", "Description": json.dumps(
         {"fit_drawn": fit.verdict == "holds", "verdict": fit.verdict, "reason": fit.verdict_reason})})
 
 

@@ -10,7 +10,7 @@ import numpy as np
 from ..analysis.blockslider import EQ3_PERIOD_FACTOR
 from ..analysis.catalog import find_slip, read_catalog, slip_friction
 from ..analysis.forkpairs import ForkPair
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
 from .campaign import _COLORS, campaign_figure
 from .make import undrained_friction_figure
 from .series import friction_figure, overview_figure, pair_figure

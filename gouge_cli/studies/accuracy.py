@@ -119,14 +119,14 @@ def slip_end(path: Path, extra: dict) -> float | None:
     """End time of the slip a checkpoint was kept for, from the run's catalog (RUN/run.h5 next
     to RUN/checkpoints/), or None."""
     from ..io.layout import RunLayout
-    from ..io.runfile import slip_catalog
+    from ..io.slipcatalog import slip_catalog
 
     run = RunLayout.of_checkpoint(path)
     if "slip" not in extra or not run.run_file.is_file():
         return None
     for entry in slip_catalog(run.root):
-        if int(entry["number"]) == int(extra["slip"]):
-            return float(entry["end_time"])
+        if entry.number == int(extra["slip"]):
+            return entry.end_time
     return None
 
 
@@ -171,7 +171,7 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
     slip checkpoint written before it (work_dir/checkpoints/slip_001.h5), or from the end state
     (checkpoints/latest.h5) if no slip came."""
     from ..io.layout import RunLayout
-    from ..io.runfile import RunFile
+    from ..io.runwriter import RunFile
     from ..driver.phases import load_phase
 
     work_dir = Path(work_dir)
@@ -185,8 +185,8 @@ def prepare_start(config: Config, work_dir: Path, interval: float | None = None,
                                  stop_after_slip=True)
     finally:
         writer.close()
-    if recorder.slips and recorder.slips[0]["checkpoint"]:
-        return start_from_checkpoint(work_dir / recorder.slips[0]["checkpoint"], config, interval)
+    if recorder.slips and recorder.slips[0].checkpoint:
+        return start_from_checkpoint(work_dir / recorder.slips[0].checkpoint, config, interval)
     return start_from_checkpoint(RunLayout(work_dir).latest, config, interval)
 
 

@@ -64,7 +64,9 @@ def kept_runs(path: Path, key: str) -> list[dict]:
 def _run_rung(config: Config, packing, lam: float, out_dir: Path) -> dict:
     """One loading run from the compacted `packing` (a Checkpoint) at lambda; its slips and costs."""
     from ..io.layout import RunLayout
-    from ..io.runfile import RunFile, RunReader, attr_value
+    from ..io.integrity import attr_value
+    from ..io.runreader import RunReader
+    from ..io.runwriter import RunFile
     from ..driver.phases import load_phase
     from ..driver.compaction import compact
     from ..driver.simulation import Simulation
@@ -92,7 +94,7 @@ def _run_rung(config: Config, packing, lam: float, out_dir: Path) -> dict:
         counts = json.loads(attr_value(run.h5.attrs, "stick_scaling_counts", "{}"))
     return {"lam": float(lam), "status": status, "steps": int(steps), "wall": wall, "n": sim.state.n,
             "t_load": t_load, "duration": cfg.run.duration, "i_max": i_max, "counts": counts,
-            "slips": [{k: float(s[k]) for k in ("onset_time", "static_strength", "stress_drop", "peak_velocity",
+            "slips": [{k: getattr(s, k) for k in ("onset_time", "static_strength", "stress_drop", "peak_velocity",
                                                  "duration")} for s in recorder.slips]}
 
 

@@ -148,13 +148,14 @@ def run_result(run_dir: Path) -> dict:
     """The results record's body of a finished loading run: its slips kept with checkpoints, its
     transient slips, its table row (analysis.campaign_table.run_row) and its final state hash."""
     from ..analysis.campaign_table import run_row
-    from ..io.runfile import RunReader, slip_catalog
+    from ..io.runreader import RunReader
+    from ..io.slipcatalog import slip_catalog
 
     catalog = slip_catalog(run_dir)
     row, transient = run_row(run_dir)
     with RunReader(run_dir) as reader:
         final = str(reader.h5.attrs.get("final_state_hash", ""))
-    return {"n_slips": len(catalog), "slips": [int(e["number"]) for e in catalog if e.get("checkpoint")],
+    return {"n_slips": len(catalog), "slips": [e.number for e in catalog if e.checkpoint],
             "transient": transient, "row": row, "final_state_hash": final}
 
 
@@ -164,7 +165,7 @@ def advance_run(run_dir: str, config: dict, settings: dict, target: RecordTarget
     earlier attempt left one; starts afresh otherwise. Returns the slips kept with checkpoints and
     writes the run's results record to ``target``. ``expect_hash``: the final state hash a record
     of this run holds (a loading run again after its folder was lost); RuntimeError if it differs."""
-    from ..io.runfile import run_status
+    from ..io.runreader import run_status
     from .run import resume_run, run_scene
 
     run_dir = Path(run_dir)
@@ -267,7 +268,7 @@ def fork_result(run_dir: Path, slip: int, permeabilities: list[float],
     from the run folder: ``{"pairs": [pair rows, with 'variant' where the study has variants],
     "final_state_hashes": {variant/branch: hash}}`` (a variant's linked drained branch once)."""
     from ..analysis.campaign_table import fork_rows
-    from ..io.runfile import RunReader
+    from ..io.runreader import RunReader
 
     pairs, hashes = [], {}
     for i, (name, _) in enumerate(variants or [(None, {})]):

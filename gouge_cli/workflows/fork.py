@@ -25,7 +25,9 @@ from ..io.checkpoint import Checkpoint, read_checkpoint
 from ..config import build_config, Config
 from ..errors import ConfigError, InputError, NoSpaceError, PhysicsFailure
 from ..driver.slips import lead_time
-from ..io.runfile import RunFile, RunReader, slip_catalog
+from ..io.runreader import RunReader
+from ..io.runwriter import RunFile
+from ..io.slipcatalog import SlipEntry, slip_catalog
 from ..model.scene import Scene
 from ..errors import RunDirError
 from ..io.outputs import remove_temps, require_space, temporary
@@ -62,17 +64,17 @@ class BranchResult:
     status: str
     wall_seconds: float
     steps: int
-    first_slip: dict | None
+    first_slip: SlipEntry | None
 
 
-def fork_entry(run_dir: Path, slip: int) -> dict:
+def fork_entry(run_dir: Path, slip: int) -> SlipEntry:
     """The catalog entry of slip ``slip``; :class:`RunDirError` naming the slips with checkpoints."""
     catalog = slip_catalog(run_dir)
-    numbers = [int(e["number"]) for e in catalog if e.get("checkpoint")]
+    numbers = [e.number for e in catalog if e.checkpoint]
     if slip not in numbers:
         listed = ", ".join(str(n) for n in numbers) or "none yet"
         raise RunDirError(f"{run_dir} has no checkpoint for slip {slip}; slips with checkpoints: {listed}")
-    return next(e for e in catalog if int(e["number"]) == slip)
+    return next(e for e in catalog if e.number == slip)
 
 
 SNAPSHOT_BYTES_PER_GRAIN = 130     # a snapshot's grains (7 float64) and about 3 contacts (2 int32, 2 float64)
@@ -157,7 +159,7 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     run_dir = Path(run_dir)
     refuse_if_in_progress(run_dir, f"restart --slip {slip}")
     entry = fork_entry(run_dir, slip)
-    ck = checkpoint if checkpoint is not None else read_checkpoint(run_dir / entry["checkpoint"], overrides)
+    ck = checkpoint if checkpoint is not None else read_checkpoint(run_dir / entry.checkpoint, overrides)
     frames = {} if "output.slip_frames" in (overrides or {}) \
         else {"output": {"slip_frames": ck.config.output.slip_frames or FORK_SLIP_FRAMES}}
     scene = Scene(branch_config(ck.config, perm, frames))
@@ -167,7 +169,7 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
     if stop_after_slip is None:
         stop_after_slip = duration is None
     if duration is None:
-        span = float(entry["end_time"]) - ck.time
+        span = entry.end_time - ck.time
         duration = 5.0 * span + 2.0 * lead_time(ck.config)
     out_dir = RunLayout(run_dir).fork(slip).branch(perm).root
     require_space(run_dir, branch_bytes(config), f"branch {name} of slip {slip}",
@@ -179,7 +181,7 @@ def run_branch(run_dir: Path, slip: int, perm: float | None, duration: float | N
         return _run_branch(run_dir, slip, entry, ck, scene, name, out_dir, duration, stop_after_slip, live, quiet)
 
 
-def _run_branch(run_dir: Path, slip: int, entry: dict, ck: Checkpoint, scene: Scene, name: str, out_dir: Path,
+def _run_branch(run_dir: Path, slip: int, entry: SlipEntry, ck: Checkpoint, scene: Scene, name: str, out_dir: Path,
                 duration: float, stop_after_slip: bool, live, quiet: bool) -> BranchResult:
     """Drive the branch into a temporary file that becomes ``run.h5`` only once closed (finished,
     interrupted, or failed physically: 'failed: ...', the branch's record); a crash or a full disk
@@ -191,7 +193,7 @@ def _run_branch(run_dir: Path, slip: int, entry: dict, ck: Checkpoint, scene: Sc
     failure = None
     with temporary(RunLayout(out_dir).run_file) as tmp:
         writer = RunFile(tmp, config, sim.dt, extra_attrs={
-            "parent_run": os.path.relpath(run_dir, out_dir), "parent_checkpoint": str(entry["checkpoint"]),
+            "parent_run": os.path.relpath(run_dir, out_dir), "parent_checkpoint": entry.checkpoint,
             "fork_slip": slip, "branch": name, "n_grains": sim.state.n, "width": sim.state.width,
             "wall_mass_per_length": sim.wall_mass_per_length, "load_start_time": ck.time,
             "end_time": ck.time + duration}, threads=sim.threads, safe_close=False)
@@ -230,7 +232,7 @@ def run_fork(request: ForkRequest, live=None, quiet=False) -> dict:
     run_dir = check_run_dir(request.run_dir)
     refuse_if_in_progress(run_dir, f"restart --slip {slip}")
     entry = fork_entry(run_dir, slip)
-    ck = read_checkpoint(run_dir / entry["checkpoint"], request.overrides)
+    ck = read_checkpoint(run_dir / entry.checkpoint, request.overrides)
     note = provenance.risk_line(ck.provenance, f"the checkpoint of slip {slip}")
     if note:
         print(note, file=sys.stderr, flush=True)
@@ -311,10 +313,10 @@ def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[Bran
         first = None
         if r.first_slip:
             f = r.first_slip
-            first = {"onset_time": float(f["onset_time"]) - origin, "duration": float(f["duration"]),
-                     "static_strength": float(f["static_strength"]), "stress_drop": float(f["stress_drop"]),
-                     "slip": float(f["slip"]), "peak_velocity_over_Vs": float(f["peak_velocity"]) / V_s,
-                     "mean_velocity_over_Vs": float(f["mean_velocity"]) / V_s}
+            first = {"onset_time": f.onset_time - origin, "duration": f.duration,
+                     "static_strength": f.static_strength, "stress_drop": f.stress_drop,
+                     "slip": f.slip, "peak_velocity_over_Vs": f.peak_velocity / V_s,
+                     "mean_velocity_over_Vs": f.mean_velocity / V_s}
         branches[r.name] = {"status": r.status, "dir": r.out_dir.name, "wall_seconds": round(r.wall_seconds, 3),
                             "steps": r.steps, "first_slip": first}
     return {"run": "../..", "slip": slip, "time_origin": "loading start", "start_time": start_time,

@@ -19,7 +19,7 @@ from ..io.filedoc import json_safe
 from ..io.integrity import check_seal, stored_seal
 from ..io.provenance import bit_risks, loads
 from ..io.layout import ForkLayout, RunLayout
-from ..io.runfile import RunReader
+from ..io.runreader import RunReader
 
 __all__ = ["write_pair_json", "branch_status"]
 

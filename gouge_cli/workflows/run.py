@@ -15,7 +15,8 @@ from ..config import Config, dump_config, load_config
 from ..errors import ConfigError, DamagedFileError, hdf5_os_error
 from ..kernels import layout as L
 from ..io.layout import RunLayout
-from ..io.runfile import RunFile, SeriesTail, mend_series_tail, rebuild_openable
+from ..io.recovery import SeriesTail, mend_series_tail, rebuild_openable
+from ..io.runwriter import RunFile
 from ..io.verify import continued_problems
 from ..model.scene import Scene
 from ..driver.compaction import compaction_phase

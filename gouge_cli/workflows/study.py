@@ -37,7 +37,7 @@ from ..analysis.study import STUDY_COLUMNS, study_rows, study_summaries, summary
 from ..io.checkpoint import read_checkpoint
 from ..config import load_config
 from ..errors import ConfigError, NoSpaceError, StudyInterrupted
-from ..io.runfile import slip_catalog
+from ..io.slipcatalog import SlipEntry, slip_catalog
 from .fork import check_main, check_perms, run_branch
 from ..errors import RunDirError
 from ..io.layout import RunLayout, branch_name, perm_text
@@ -73,10 +73,10 @@ def parse_slips(text: str | None) -> list[int] | None:
     return sorted(out)
 
 
-def study_window(entry: dict, checkpoint_time: float, sigma: float, k: float, V_s: float) -> float:
+def study_window(entry: SlipEntry, checkpoint_time: float, sigma: float, k: float, V_s: float) -> float:
     """Duration [t0] of every branch of one slip, from its checkpoint:
     ``(end - t_ck) + 2 duration + EXTRA_STRENGTH sigma / (k V_s)``."""
-    end, duration = float(entry["end_time"]), float(entry["duration"])
+    end, duration = entry.end_time, entry.duration
     return (end - checkpoint_time) + 2.0 * duration + EXTRA_STRENGTH * sigma / (k * V_s)
 
 
@@ -152,11 +152,11 @@ def _finished(result, run_dir: Path) -> None:
 def plan_branches(run_dir: Path, slips: list[int], perms: list[float]) -> tuple[list[tuple], list[str]]:
     """Step 3's work list: ``(slip, perm, duration)`` for every branch not yet 'finished'; and the
     names of those skipped as done."""
-    catalog = {int(e["number"]): e for e in slip_catalog(run_dir)}
+    catalog = {e.number: e for e in slip_catalog(run_dir)}
     todo, done = [], []
     for slip in slips:
         entry = catalog[slip]
-        ck = read_checkpoint(run_dir / entry["checkpoint"])
+        ck = read_checkpoint(run_dir / entry.checkpoint)
         cfg = ck.config
         window = study_window(entry, ck.time, cfg.loading.normal_stress, cfg.loading.spring_constant,
                               cfg.loading.velocity)
@@ -174,7 +174,7 @@ def _select(run_dir: Path, wanted: list[int] | None) -> tuple[list[int], set[int
     if not catalog:
         raise RunDirError(f"{run_dir} has no slips yet: run it longer (run.duration) before a study")
     transient = transient_slips(catalog)
-    with_ck = [int(e["number"]) for e in catalog if e.get("checkpoint")]
+    with_ck = [e.number for e in catalog if e.checkpoint]
     if wanted is None:
         return [n for n in with_ck if n not in transient], transient
     missing = [n for n in wanted if n not in with_ck]

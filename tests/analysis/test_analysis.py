@@ -390,6 +390,7 @@ def test_campaign_summary_counts_and_ratios():
 def test_notched_refit_removes_the_layers_vibration_and_recovers_eq3():
     from gouge_cli.analysis.blockslider import fit_block_slider
     from gouge_cli.analysis.catalog import notched_refit
+    from gouge_cli.io.slipcatalog import SlipEntry
 
     k, m_b, sigma = 1e-6, 24.0, 3e-4
     omega = math.sqrt(k / m_b)
@@ -401,7 +402,8 @@ def test_notched_refit_removes_the_layers_vibration_and_recovers_eq3():
     v = slip + 0.25 * amplitude * np.sin(2.0 * math.pi * 30.0 * f_s * t)     # the layer's vibration at 30 f_s
     inside = np.flatnonzero((t >= 0.0) & (t <= half))
     plain = fit_block_slider(t, v, (int(inside[0]), int(inside[-1])), k, m_b, sigma)
-    entry = {"onset_time": 0.0, "end_time": half, "duration": half, "peak_velocity": amplitude}
+    entry = SlipEntry.from_attrs({"number": 1, "onset_time": 0.0, "end_time": half, "duration": half,
+                                  "peak_velocity": amplitude})
     nf = notched_refit(t, v, entry, plain, k, m_b, sigma)
     # unfiltered, the vibration (variance 0.25^2 / 2 = 0.031 A^2) is all the residual, against a half sine's
     # 1/2 - 4/pi^2 = 0.095 A^2: R^2 = 1 - 0.031 / (0.095 + 0.031) = 0.75

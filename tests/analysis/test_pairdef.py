@@ -11,6 +11,7 @@ import pytest
 from gouge_cli.analysis.blockslider import FIT_MIN_R2, FIT_PERIOD_FACTOR, fit_block_slider, judge_fit
 from gouge_cli.analysis.pairs import SLOW, PairDefinition, classify_pair
 from gouge_cli.analysis.study import study_summary, transient_slips
+from gouge_cli.io.slipcatalog import SlipEntry
 from gouge_cli.model.slip_rule import WallSeries
 from gouge_cli.workflows.study import parse_slips, study_window
 
@@ -92,7 +93,7 @@ def test_fit_bar_sine_passes_noise_and_wrong_period_fail():
 
 
 def test_transient_rule():
-    cat = [{"number": i + 1, "static_strength": s, "stress_drop": d} for i, (s, d) in enumerate(
+    cat = [SlipEntry.from_attrs({"number": i + 1, "static_strength": s, "stress_drop": d}) for i, (s, d) in enumerate(
         [(0.40, 0.20), (0.15, 0.01), (0.31, 0.10), (0.20, 0.02), (0.30, 0.11), (0.32, 0.09), (0.29, 0.10)])]
     assert transient_slips(cat) == {1, 2}            # slip 3 is the first near the late medians
     assert transient_slips(cat[:1]) == {1}
@@ -120,7 +121,7 @@ def test_parse_slips_and_window():
     assert parse_slips("3-5,9") == [3, 4, 5, 9] and parse_slips(None) is None
     with pytest.raises(ValueError):
         parse_slips("5-3")
-    entry = {"end_time": 1000.0, "duration": 100.0}
+    entry = SlipEntry.from_attrs({"number": 1, "end_time": 1000.0, "duration": 100.0})
     assert study_window(entry, 400.0, 3e-4, 1e-6, 1e-4) == pytest.approx(600 + 200 + 0.05 * 3e-4 / 1e-10)
 
 

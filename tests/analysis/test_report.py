@@ -1,4 +1,4 @@
-"""gouge_cli.analysis.report (with catalog, forkpairs, io.runfile) on small synthetic run files with planted block-slider slips.
+"""gouge_cli.analysis.report (with catalog, forkpairs, io.runreader) on small synthetic run files with planted block-slider slips.
 
 The planted series is thesis Eq. 3 exactly (loading neglected during slip): slip i starts
 when tau/sigma reaches MU_S[i], v = (mu_s - mu_d) sigma / sqrt(k m) sin(omega t'),
@@ -19,7 +19,7 @@ import yaml
 from gouge_cli import errors as E
 from gouge_cli.analysis import catalog as C
 from gouge_cli.analysis import forkpairs as FP
-from gouge_cli.io import runfile as RF
+from gouge_cli.io import runreader as RF
 from gouge_cli.analysis import report as R
 
 M, K, SIGMA, V_S, MU_D = 2.0, 0.5, 1.0, 2e-4, 0.5       # omega = 0.5, half period 2 pi

@@ -444,7 +444,7 @@ WRITER = textwrap.dedent("""
     import sys, time
     from pathlib import Path
     from gouge_cli.config import build_config
-    from gouge_cli.io.runfile import RunFile
+    from gouge_cli.io.runwriter import RunFile
     w = RunFile(Path(sys.argv[1]) / "run.h5", build_config({}), 0.1, flush_rows=1000,
                 extra_attrs={"n_grains": 10, "width": 5.0, "wall_mass_per_length": 2.0})
     for i in range(25):

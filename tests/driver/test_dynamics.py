@@ -343,7 +343,7 @@ def test_snapshot_of_renumbered_scene_is_in_packing_order(tmp_path):
     radii are the packing's, and each contact's (i, j) centres are as far apart as the two
     grains' radii allow (so the contact numbers match the coordinates)."""
     import h5py
-    from gouge_cli.io.runfile import RunFile
+    from gouge_cli.io.runwriter import RunFile
     from gouge_cli.model.packing import build_packing
     from gouge_cli.driver.simulation import Simulation
     cfg = build_config({"packing": {"n_grains": 400}, "seed": 5, "numerics": {"sort_every": 1}})

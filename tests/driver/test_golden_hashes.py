@@ -24,7 +24,7 @@ import h5py
 import numba
 import pytest
 
-from gouge_cli.io.runfile import slip_catalog
+from gouge_cli.io.slipcatalog import slip_catalog
 from needs import two_threads
 
 REPO = Path(__file__).resolve().parents[2]

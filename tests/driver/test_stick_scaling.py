@@ -182,12 +182,12 @@ def test_scaling_resumes_after_the_closed_slip_and_a_quiet_window_tied_to_it(mer
     ctl._set(sim, 1.0, rescale=False)
     resumed = _feed(ctl, sim, recorder, _slip_rows(V, 100.0, 300.0, 3000.0))
     assert recorder.count == 1 and recorder.closed()
-    duration = recorder.slips[0]["duration"]
+    duration = recorder.slips[0].duration
     assert duration == pytest.approx(200.0, abs=10.0)
     quiet_from = 300.0                      # first row below end_factor V_s after the slip
     window = max(merge_gap + 20.0, min(duration, lead))
     assert resumed is not None and quiet_from + window <= resumed <= quiet_from + window + 10.0
-    assert resumed >= recorder.slips[0]["end_time"] + merge_gap      # the detector closed it first
+    assert resumed >= recorder.slips[0].end_time + merge_gap      # the detector closed it first
     assert resumed <= quiet_from + max(merge_gap + 20.0, lead) + 10.0     # the first version's window at most
     assert ctl.lam == 16.0 and ctl.resumed_at == resumed and ctl.slip_span == 0.0
     assert recorder.ring[-1].time == sim.state.time                  # the resume state is kept

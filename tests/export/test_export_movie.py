@@ -289,6 +289,8 @@ def test_movie_frame_and_encoding(runs):
 
 def test_slips_json_is_valid_and_counts_from_loading(runs):
     from gouge_cli.cli.export_cmds import catalog_since_loading
+    from gouge_cli.io.slipcatalog import SlipEntry
+    from gouge_cli.model.slip_rule import SubEvent
 
     listed = gouge("slips", runs / "dry", "--json")
     assert listed.exit_code == 0
@@ -296,9 +298,12 @@ def test_slips_json_is_valid_and_counts_from_loading(runs):
     with h5py.File(runs / "dry" / "run.h5", "r") as h5:
         origin = h5["series/time"][0] - h5["series/load_time"][0]
     assert origin > 500                                       # compaction took at least min_time
-    entry = {"number": 1, "onset_time": origin + 5.0, "end_time": origin + 9.0, "peak_time": origin + 7.0,
-             "checkpoint_time": float("nan"), "deborah": float("nan"), "subevent_time": [origin + 7.0]}
-    catalog, got = catalog_since_loading(runs / "dry", lambda _: [dict(entry)])
+    nan = float("nan")
+    entry = SlipEntry(onset_index=0, onset_time=origin + 5.0, end_index=1, end_time=origin + 9.0, duration=4.0,
+                      slip=nan, peak_velocity=nan, peak_index=0, peak_time=origin + 7.0, mean_velocity=nan,
+                      static_strength=nan, tau_onset=nan, tau_min=nan, stress_drop=nan, porosity_change=nan,
+                      subevents=(SubEvent(-1, origin + 7.0, nan),), number=1)
+    catalog, got = catalog_since_loading(runs / "dry", [entry])
     assert got == origin
     (e,) = catalog
     assert (e["onset_time"], e["end_time"], e["peak_time"]) == pytest.approx((5.0, 9.0, 7.0), abs=1e-9)

@@ -29,7 +29,8 @@ from gouge_cli.errors import CheckpointError, DamagedFileError, MAX_MESSAGE
 from gouge_cli.io import provenance
 from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.io.integrity import all_objects, seal, value_bytes
-from gouge_cli.io.runfile import RunReader, slip_catalog
+from gouge_cli.io.runreader import RunReader
+from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.io.verify import run_file_problems, verify_run
 from slipping import slipping_run
 
@@ -268,7 +269,7 @@ def test_run_file_flips_are_refused_or_change_nothing(run, tmp_path):
     planted = list(plants(work / "run.h5", rng, datasets=5, attrs=5))
     _, offset, size = next(x for x in dataset_spans(work / "run.h5") if x[0] == "/series/wall_vx")
     planted.append(("dataset /series/wall_vx", offset + rng.randrange(size), rng.randrange(8)))
-    slip = slip_catalog(work)[0]["number"]
+    slip = slip_catalog(work)[0].number
     at = plant_in_attribute(work / "run.h5", f"/slips/{slip:03d}", "onset_time", rng)
     flip(work / "run.h5", *at)
     planted.append((f"attribute /slips/{slip:03d}:onset_time", *at))
@@ -450,7 +451,7 @@ def test_damaged_snapshot_refused_by_movie(run, tmp_path):
 def test_campaign_status_read_through_the_seal(run, tmp_path):
     """The campaign decides to resume, restart or keep a point's run from its status attribute:
     read through the root seal, a flipped status is DamagedFileError, never a silent re-run."""
-    from gouge_cli.io.runfile import run_status
+    from gouge_cli.io.runreader import run_status
 
     run_dir, _ = run
     work = tmp_path / "run"

@@ -84,7 +84,7 @@ def _check_pair_rule(fork, row):
     import numpy as np
 
     from gouge_cli.analysis.pairs import PairDefinition
-    from gouge_cli.io.runfile import RunReader
+    from gouge_cli.io.runreader import RunReader
 
     def strength(branch, onset):
         """onset: since loading began, as in pairs.csv; the series carries the stored clock."""

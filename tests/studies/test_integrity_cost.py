@@ -12,7 +12,7 @@ import pytest
 
 from benchmark_scripts import load
 from gouge_cli.config import build_config
-from gouge_cli.io import checkpoint, runfile
+from gouge_cli.io import checkpoint, runwriter
 from gouge_cli.io.integrity import SEAL
 from gouge_cli.io.verify import verify_run
 
@@ -39,10 +39,10 @@ def _objects(path):
 
 def test_with_and_without_checks(cost, tmp_path):
     config = build_config(SCENE)
-    originals = (runfile.seal, checkpoint.content_digest, h5py.Group.create_dataset, runfile.RunFile.flush)
+    originals = (runwriter.seal, checkpoint.content_digest, h5py.Group.create_dataset, runwriter.RunFile.flush)
     with_ = cost.one_run(config, tmp_path / "with", True)
     without = cost.one_run(config, tmp_path / "without", False)
-    assert (runfile.seal, checkpoint.content_digest, h5py.Group.create_dataset, runfile.RunFile.flush) == originals
+    assert (runwriter.seal, checkpoint.content_digest, h5py.Group.create_dataset, runwriter.RunFile.flush) == originals
     for row in (with_, without):
         assert row["write_run_h5_s"] > 0 and row["read_run_h5_s"] > 0
         assert math.isnan(row["analyze_s"]) or row["analyze_s"] > 0     # NaN: no slip, nothing to analyse and row["checkpoints"] >= 1 and row["write_checkpoints_s"] > 0

@@ -20,7 +20,7 @@ from typer.testing import CliRunner
 from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
-from gouge_cli.io.runfile import slip_catalog
+from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.workflows.campaign import read_ledger, run_campaign, status_lines, survey
 from gouge_cli.workflows.campaign_spec import load_spec
 from gouge_cli.workflows.executors import ClusterOptions, local_cluster, slurm_cluster
@@ -64,11 +64,11 @@ def assert_same_run(a: Path, b: Path):
     assert sa.keys() == sb.keys()
     for name in sa:
         assert np.array_equal(sa[name], sb[name], equal_nan=True), name
-    for ck in ["latest.h5"] + [Path(e["checkpoint"]).name for e in slip_catalog(a) if e["checkpoint"]]:
+    for ck in ["latest.h5"] + [Path(e.checkpoint).name for e in slip_catalog(a) if e.checkpoint]:
         x, y = read_checkpoint(a / "checkpoints" / ck).state, read_checkpoint(b / "checkpoints" / ck).state
         for name in x:
             assert np.array_equal(x[name], y[name]), (ck, name)
-    assert [e["onset_time"] for e in slip_catalog(a)] == [e["onset_time"] for e in slip_catalog(b)]
+    assert [e.onset_time for e in slip_catalog(a)] == [e.onset_time for e in slip_catalog(b)]
 
 
 @pytest.fixture(scope="module")
@@ -145,7 +145,7 @@ def test_campaign_runs_to_the_end_after_a_worker_is_killed(campaign):
         state = yaml.safe_load((root / name / "point.yaml").read_text())
         assert state["overrides"]["loading.normal_stress"] in (3.0e-4, 3.5e-4) and state["overrides"]["seed"] in (1, 2)
         assert state["config"]["loading"]["normal_stress"] == state["overrides"]["loading.normal_stress"]
-    kept = {n: [e["number"] for e in slip_catalog(root / n) if e["checkpoint"]] for n in points}
+    kept = {n: [e.number for e in slip_catalog(root / n) if e.checkpoint] for n in points}
     assert sum(map(len, kept.values())) >= 1, "no slip in four stick-slip runs"
     for n, slips in kept.items():
         assert sorted(int(p.name[5:]) for p in (root / n / "forks").glob("slip_*")) == slips

@@ -192,7 +192,7 @@ def test_rerun_of_a_finished_branch_onto_a_full_disk_keeps_it(forked, small_fs):
     branch = target / "forks" / f"slip_{slip:03d}" / "drained" / "run.h5"
     before = digest(branch)
     dense = ["output.slip_frames=0", "output.snapshot_interval=10"]
-    ck = read_checkpoint(target / fork_entry(target, slip)["checkpoint"], dense)
+    ck = read_checkpoint(target / fork_entry(target, slip).checkpoint, dense)
     filler = fill(small_fs, int(branch_bytes(branch_config(ck.config, None)) + SPACE_MARGIN) + 100_000)
     sets = [a for o in dense for a in ("--set", o)]
     message = full_disk_message(gouge("restart", target, "--slip", slip, *sets, "--force", "--quiet"))
@@ -526,7 +526,7 @@ import sys
 import numpy as np
 from pathlib import Path
 from gouge_cli.config import build_config
-from gouge_cli.io.runfile import RunFile
+from gouge_cli.io.runwriter import RunFile
 from gouge_cli.io.outputs import is_no_space
 path = Path(sys.argv[1])
 writer = RunFile(path, build_config({"name": "rows"}), 0.1, flush_rows=50)
@@ -614,19 +614,21 @@ def fill_now():                 # the disk full to the last byte, as another wri
 
 SLIP_AFTER_THE_CHECK = FILL_AFTER + """
 from gouge_cli.config import build_config
-from gouge_cli.io import runfile
+from gouge_cli.io import runwriter
 from gouge_cli.io.outputs import is_no_space
-writer = runfile.RunFile(Path(sys.argv[1]) / "run.h5", build_config({"name": "slip"}), 0.1, flush_rows=50)
+from gouge_cli.io.slipcatalog import SlipEntry
+writer = runwriter.RunFile(Path(sys.argv[1]) / "run.h5", build_config({"name": "slip"}), 0.1, flush_rows=50)
 for k in range(150):
     writer.append({"time": 0.1 * k, "wall_x": np.sin(k), "wall_z": np.cos(k), "wall_vx": 1.0 / (k + 1)})
-checked = runfile.RunFile._room
+checked = runwriter.RunFile._room
 def room_then_full(self, need=0):
     checked(self, need)
     fill_now()
-runfile.RunFile._room = room_then_full
+runwriter.RunFile._room = room_then_full
 try:
-    writer.add_slip(1, {"time": 15.0, "peak_velocity": 2.0}, [{"time": 15.0, "velocity": 2.0}] * 50)
-    runfile.RunFile._room = checked
+    writer.add_slip(SlipEntry.from_attrs({"number": 1, "peak_velocity": 2.0, "subevent_time": [15.0] * 50,
+                                          "subevent_velocity": [2.0] * 50}))
+    runwriter.RunFile._room = checked
     for k in range(150, 1_000_000):         # rows until a flush finds no room
         writer.append({"time": 0.1 * k, "wall_x": np.sin(k), "wall_z": np.cos(k), "wall_vx": 1.0 / (k + 1)})
     print("written")
@@ -667,7 +669,7 @@ import shutil, subprocess, sys, time
 from pathlib import Path
 import numpy as np
 from gouge_cli.config import build_config
-from gouge_cli.io.runfile import RunFile
+from gouge_cli.io.runwriter import RunFile
 fs, other_writer = Path(sys.argv[1]), sys.argv[2]
 writer = RunFile(fs / "run.h5", build_config({"name": "close"}), 0.1, flush_rows=50)
 for k in range(200):
@@ -700,23 +702,23 @@ def test_close_on_a_full_disk_while_another_writer_takes_every_byte(small_fs):
 
 TABLES_ONTO = FILL_AFTER + """
 import h5py
-from gouge_cli.io import runfile
+from gouge_cli.io import analysis_tables
 from gouge_cli.io.outputs import is_no_space
 path = Path(sys.argv[1]) / "run.h5"
 with h5py.File(path, "w") as h5:
     h5.attrs["status"] = "finished"
     h5.create_dataset("series/time", data=np.arange(50_000.0), chunks=True, fletcher32=True)
-allocated = runfile.preallocate
+allocated = analysis_tables.preallocate
 def allocated_then_full(where, nbytes):
     allocated(where, nbytes)
     fill_now()
 if sys.argv[2] == "after":
-    runfile.preallocate = allocated_then_full
+    analysis_tables.preallocate = allocated_then_full
 else:
     fill_now()
 rows = [{"slip": i, "type": "II" if i % 3 else "I", "fit_ok": bool(i % 2), "drop": 1e-3 * i} for i in range(500)]
 try:
-    runfile.write_analysis_tables(path, False, "{}", {"pairs": (rows, ["slip", "type", "fit_ok", "drop"])})
+    analysis_tables.write_analysis_tables(path, False, "{}", {"pairs": (rows, ["slip", "type", "fit_ok", "drop"])})
     print("written")
 except (OSError, RuntimeError) as exc:
     print("full" if is_no_space(exc) else f"other: {exc!r}")

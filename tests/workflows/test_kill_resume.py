@@ -28,7 +28,7 @@ from gouge_cli.errors import CheckpointError
 from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.io.integrity import seal
 from gouge_cli.cli.main import app
-from gouge_cli.io.runfile import slip_catalog
+from gouge_cli.io.slipcatalog import slip_catalog
 
 SCENE = {
     "name": "kill",
@@ -81,7 +81,7 @@ def slipping_scene(root: Path, tries: int = 4) -> tuple[Path, Path, float, float
                 compaction = time.time() - t0
             time.sleep(0.005)
         assert proc.wait(timeout=300) == 0, proc.stderr.read().decode()
-        if any(e["checkpoint"] for e in slip_catalog(out)):
+        if any(e.checkpoint for e in slip_catalog(out)):
             return scene_file, out, time.time() - t0, compaction
     pytest.fail(f"none of {tries} packings of the kill scene slipped with a ring checkpoint")
 
@@ -113,11 +113,11 @@ def assert_identical(ref: Path, run: Path):
     ca, cb = slip_catalog(ref), slip_catalog(run)
     assert len(ca) == len(cb)
     for ea, eb in zip(ca, cb):
-        assert ea.keys() == eb.keys()
-        for key in ea:
-            assert _same(ea[key], eb[key]), (ea["number"], key, ea[key], eb[key])
-        if ea["checkpoint"]:
-            sa, sb = read_checkpoint(ref / ea["checkpoint"]).state, read_checkpoint(run / eb["checkpoint"]).state
+        da, db = ea.to_dict(), eb.to_dict()
+        for key in da:
+            assert _same(da[key], db[key]), (ea.number, key, da[key], db[key])
+        if ea.checkpoint:
+            sa, sb = read_checkpoint(ref / ea.checkpoint).state, read_checkpoint(run / eb.checkpoint).state
             assert all(np.array_equal(sa[k], sb[k]) for k in sa)
     assert not [p.name for p in (run / "checkpoints").iterdir() if ".tmp" in p.name]
 
@@ -213,17 +213,17 @@ def test_resume_keeps_the_pre_slip_ring(reference, tmp_path, where):
     """A run stopped where the slip's checkpoint exists only in memory (the ring of pre-slip
     states, or the state set aside at the trigger) and resumed: the slip keeps that checkpoint."""
     scene_file, ref, _, _ = reference
-    entry = next(e for e in slip_catalog(ref) if e["checkpoint"])
-    stop = entry["onset_time"] - 5.0 if where == "before the onset" else 0.5 * (entry["onset_time"] + entry["end_time"])
+    entry = next(e for e in slip_catalog(ref) if e.checkpoint)
+    stop = entry.onset_time - 5.0 if where == "before the onset" else 0.5 * (entry.onset_time + entry.end_time)
     with h5py.File(ref / "run.h5", "r") as h5:
         load_start, end_time = float(h5.attrs["load_start_time"]), float(h5.attrs["end_time"])
-    assert entry["checkpoint_time"] < stop
+    assert entry.checkpoint_time < stop
     out = tmp_path / "stopped"
     runner = CliRunner()
     result = runner.invoke(app, ["run", str(scene_file), "--out", str(out), "--quiet",
                                  "--set", f"run.duration={stop - load_start}"])
     assert result.exit_code == 0, result.output
-    assert not (out / entry["checkpoint"]).exists()            # the slip was not recorded yet
+    assert not (out / entry.checkpoint).exists()            # the slip was not recorded yet
     saved = read_checkpoint(out / "checkpoints" / "latest.h5")
     assert any(k.startswith("ring_") for k in saved.attached)
     with h5py.File(out / "run.h5", "r+") as h5:                 # as if it had been killed there

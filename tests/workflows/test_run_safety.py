@@ -22,7 +22,7 @@ from gouge_cli.cli.main import app
 from gouge_cli.config import build_config
 from gouge_cli.errors import MAX_MESSAGE
 from gouge_cli.io.rundir import LOCK_NAME, holder
-from gouge_cli.io.runfile import slip_catalog
+from gouge_cli.io.slipcatalog import slip_catalog
 from test_kill_resume import ENV, slipping_scene
 
 runner = CliRunner()
@@ -96,7 +96,7 @@ def test_existing_run_needs_force_and_force_replaces_only_its_own(finished, scen
     assert result.exit_code == 0, result.output
     assert (d / "my_notes.txt").read_text() == "keep" and not (d / "figures").exists()
     # only the new run's checkpoints are left (a 200 t0 run may itself slip, from an unsettled start)
-    kept = {e["checkpoint"] for e in slip_catalog(d) if e["checkpoint"]}
+    kept = {e.checkpoint for e in slip_catalog(d) if e.checkpoint}
     assert {f"checkpoints/{p.name}" for p in (d / "checkpoints").glob("slip_*.h5")} == kept
 
 
@@ -165,7 +165,7 @@ def test_sigterm_stops_a_restart_cleanly(finished, tmp_path):
     """SIGTERM to `gouge restart` while a branch runs: exit 130, one line naming the command that
     finishes the fork, no temporary file; that command then finishes it."""
     d = copy_of(finished, tmp_path / "run")
-    n = next(int(e["number"]) for e in slip_catalog(d) if e["checkpoint"])
+    n = next(e.number for e in slip_catalog(d) if e.checkpoint)
     fork = d / "forks" / f"slip_{n:03d}"
     args = ["restart", str(d), "--slip", str(n), "--perm", "1e-3", "--duration", "3000"]
     proc = subprocess.Popen([sys.executable, "-m", "gouge_cli.cli", *args], env=ENV, stdout=subprocess.PIPE,
@@ -189,7 +189,7 @@ def test_sigterm_stops_a_restart_cleanly(finished, tmp_path):
 
 def test_drained_only_fork_without_perm(finished, tmp_path):
     d = copy_of(finished, tmp_path / "run")
-    n = next(int(e["number"]) for e in slip_catalog(d) if e["checkpoint"])
+    n = next(e.number for e in slip_catalog(d) if e.checkpoint)
     result = gouge("restart", d, "--slip", n, "--quiet")
     assert result.exit_code == 0, result.output
     fork = d / "forks" / f"slip_{n:03d}"

@@ -28,7 +28,7 @@ import numpy as np
 import pytest
 import yaml
 
-from gouge_cli.io.runfile import slip_catalog
+from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.workflows.campaign import read_ledger
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -287,7 +287,7 @@ def reference(folder):
                            f"run.duration={DISRUPTED_DURATION}", "--out", str(out), "--quiet"],
                           env=env(), capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
-    return series(out / "run.h5"), [e["onset_time"] for e in slip_catalog(out)]
+    return series(out / "run.h5"), [e.onset_time for e in slip_catalog(out)]
 
 
 DISRUPTED_DURATION = 8000
@@ -344,7 +344,7 @@ def assert_nothing_lost_or_repeated(run_dir: Path, reference):
     assert got.keys() == ref_series.keys()
     for name in got:
         assert np.array_equal(got[name], ref_series[name], equal_nan=True), name
-    assert [e["onset_time"] for e in slip_catalog(run_dir)] == ref_onsets
+    assert [e.onset_time for e in slip_catalog(run_dir)] == ref_onsets
     with h5py.File(run_dir / "run.h5", "r") as h5:
         assert h5.attrs["status"] == "finished"
 

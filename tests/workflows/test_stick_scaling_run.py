@@ -19,7 +19,7 @@ from typer.testing import CliRunner
 from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.cli.main import app
 from gouge_cli.driver import phases
-from gouge_cli.io.runfile import slip_catalog
+from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.workflows.fork import ForkRequest, run_fork
 from gouge_cli.driver.stick_scaling import StickScaling
 
@@ -60,7 +60,7 @@ def scaled_run(tmp_path_factory):
         out = root / f"run{k}"
         result = gouge("run", path, "--out", out, "--quiet")
         assert result.exit_code == 0, result.output
-        if counts(out)["rollbacks"] >= 1 and any(e["checkpoint"] for e in slip_catalog(out)):
+        if counts(out)["rollbacks"] >= 1 and any(e.checkpoint for e in slip_catalog(out)):
             return path, out, scene
     pytest.fail("no seed gave a rolled-back slip with a checkpoint")
 
@@ -74,12 +74,12 @@ def test_every_slip_is_computed_at_true_inertia(scaled_run):
     c = counts(out)
     assert c["steps_discarded"] > 0 and c["steps_true"] > 0 and c["steps_scaled"] > 0
     for e in slip_catalog(out):
-        inside = (s["time"] >= e["onset_time"] - 10.0) & (s["time"] <= e["end_time"] + 10.0)
-        assert np.all(lam[inside] == 1.0), e["number"]
-        if e["checkpoint"]:     # from the pre-slip checkpoint on, the run is at true inertia
-            assert e["checkpoint_time"] < e["onset_time"]
-            after = (s["time"] > e["checkpoint_time"]) & (s["time"] <= e["end_time"])
-            assert np.all(lam[after] == 1.0), e["number"]
+        inside = (s["time"] >= e.onset_time - 10.0) & (s["time"] <= e.end_time + 10.0)
+        assert np.all(lam[inside] == 1.0), e.number
+        if e.checkpoint:     # from the pre-slip checkpoint on, the run is at true inertia
+            assert e.checkpoint_time < e.onset_time
+            after = (s["time"] > e.checkpoint_time) & (s["time"] <= e.end_time)
+            assert np.all(lam[after] == 1.0), e.number
     hi = SCENE["slips"]["start_factor"] * SCENE["loading"]["velocity"]
     assert np.all(s["wall_vx"][lam > 1.0] < hi)            # no scaled row is past a trigger
     assert np.all(np.isfinite(s["inertial_number"][1:]))
@@ -87,14 +87,14 @@ def test_every_slip_is_computed_at_true_inertia(scaled_run):
 
 def test_drained_fork_retraces_the_scaled_runs_slip(scaled_run):
     _, out, _ = scaled_run
-    entry = next(e for e in slip_catalog(out) if e["checkpoint"])
-    ck = read_checkpoint(out / entry["checkpoint"])
+    entry = next(e for e in slip_catalog(out) if e.checkpoint)
+    ck = read_checkpoint(out / entry.checkpoint)
     assert ck.config.numerics.stick_scaling == 16.0
-    summary = run_fork(ForkRequest(out, entry["number"]), quiet=True)
+    summary = run_fork(ForkRequest(out, entry.number), quiet=True)
     drained = summary["branches"]["drained"]
     assert drained["first_slip"] is not None
     original = series(out / "run.h5")
-    branch = out / "forks" / f"slip_{entry['number']:03d}" / "drained" / "run.h5"
+    branch = out / "forks" / f"slip_{entry.number:03d}" / "drained" / "run.h5"
     with h5py.File(branch, "r") as h5:
         assert yaml.safe_load(h5.attrs["config"])["numerics"]["stick_scaling"] == 1.0
     fork = series(branch)
@@ -104,7 +104,7 @@ def test_drained_fork_retraces_the_scaled_runs_slip(scaled_run):
         assert np.array_equal(original[name][idx], fork[name][1:]), name
     with h5py.File(out / "run.h5", "r") as h5:          # restart reports times since loading began
         origin = float(h5["series/time"][0] - h5["series/load_time"][0])
-    assert drained["first_slip"]["onset_time"] == pytest.approx(entry["onset_time"] - origin, abs=1e-9)
+    assert drained["first_slip"]["onset_time"] == pytest.approx(entry.onset_time - origin, abs=1e-9)
 
 
 def test_stop_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_path, monkeypatch):
@@ -113,7 +113,7 @@ def test_stop_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_pa
     written where it stops, as a kill -9 would find it there or earlier), then `gouge resume`."""
     path, out, scene = scaled_run
     entry = next(e for e in slip_catalog(out))
-    t_mid = 0.5 * (entry["onset_time"] + entry["end_time"])
+    t_mid = 0.5 * (entry.onset_time + entry.end_time)
     flag = {"set": False}
     after_row = StickScaling.after_row
 
@@ -137,7 +137,7 @@ def test_stop_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_pa
     ck = read_checkpoint(cut / "checkpoints" / "latest.h5")
     state = ck.extra["stick_scaling"]
     assert state["lam"] == 1.0 and state["onset_scaled"] is not None      # inside a recomputation
-    assert entry["onset_time"] < ck.time < entry["end_time"]
+    assert entry.onset_time < ck.time < entry.end_time
     result = gouge("resume", cut, "--quiet")
     assert result.exit_code == 0, result.output
     a = read_checkpoint(out / "checkpoints" / "latest.h5")
@@ -149,8 +149,8 @@ def test_stop_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_pa
     for name in ("time", "wall_vx", "tau_over_sigma", "stick_scaling", "inertial_number"):
         assert np.array_equal(sa[name], sb[name], equal_nan=True), name
     ca, cb = slip_catalog(out), slip_catalog(cut)
-    assert [e["onset_time"] for e in ca] == [e["onset_time"] for e in cb]
-    assert np.array_equal([e["checkpoint_time"] for e in ca], [e["checkpoint_time"] for e in cb],
+    assert [e.onset_time for e in ca] == [e.onset_time for e in cb]
+    assert np.array_equal([e.checkpoint_time for e in ca], [e.checkpoint_time for e in cb],
                           equal_nan=True)                 # (NaN: a slip kept without a checkpoint)
 
 
@@ -204,4 +204,4 @@ def test_kill_9_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_
     sa, sb = series(straight / "run.h5"), series(cut / "run.h5")
     for name in ("time", "wall_vx", "tau_over_sigma", "stick_scaling"):
         assert np.array_equal(sa[name], sb[name], equal_nan=True), name
-    assert [e["onset_time"] for e in slip_catalog(straight)] == [e["onset_time"] for e in slip_catalog(cut)]
+    assert [e.onset_time for e in slip_catalog(straight)] == [e.onset_time for e in slip_catalog(cut)]

@@ -124,10 +124,10 @@ def _check_drained_fits(run_dir, table):
     import numpy as np
 
     from gouge_cli.analysis.catalog import NOTCH_PAD, fit_slip, fit_slip_notched, read_catalog, slip_window
-    from gouge_cli.io.runfile import RunReader
+    from gouge_cli.io.runreader import RunReader
 
     with RunReader(run_dir) as reader:
-        catalog = {int(e["number"]): e for e in read_catalog(reader)}
+        catalog = {e.number: e for e in read_catalog(reader)}
         for n, row in table.items():
             entry = catalog[n]
             plain = fit_slip(reader, entry)
@@ -140,7 +140,7 @@ def _check_drained_fits(run_dir, table):
             assert plain.success
             _, _, j0, j1 = slip_window(reader, entry, pad=NOTCH_PAD)
             t = reader.series(["time"], j0, j1)["time"]
-            idx = np.flatnonzero((t >= float(entry["onset_time"])) & (t <= float(entry["end_time"])))
+            idx = np.flatnonzero((t >= entry.onset_time) & (t <= entry.end_time))
             tt, vv = t[idx[0]:idx[-1] + 1], refit.notched[idx[0]:idx[-1] + 1]
             f = refit.fit
             res = vv - f.amplitude * np.sin(f.omega * (tt - f.t0))

@@ -21,7 +21,9 @@ from gouge_cli.io.checkpoint import DIGEST_PREFIX, read_checkpoint, snapshot_of,
 from gouge_cli.io.integrity import content_digest
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
-from gouge_cli.io.runfile import SERIES_CHUNK, SeriesTail, slip_catalog
+from gouge_cli.io.recovery import SeriesTail
+from gouge_cli.io.runfile import SERIES_CHUNK
+from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.io.verify import verify_run
 from gouge_cli.workflows.fork import ForkRequest, run_fork
 from gouge_cli.driver.simulation import Simulation
@@ -79,15 +81,15 @@ def test_run_outputs_describe_themselves(finished_run):
 
 def test_catalog_has_slips_with_checkpoints(finished_run):
     catalog = slip_catalog(finished_run)
-    kept = [e for e in catalog if e["checkpoint"]]
-    assert len([e for e in kept if e["stress_drop"] > 0.02]) >= 2
+    kept = [e for e in catalog if e.checkpoint]
+    assert len([e for e in kept if e.stress_drop > 0.02]) >= 2
     previous_end = -np.inf
     for e in catalog:
-        assert e["end_time"] > e["onset_time"] and e["peak_velocity"] >= 10 * SCENE["loading"]["velocity"]
-        if e["checkpoint"]:
-            assert previous_end < e["checkpoint_time"] < e["onset_time"]   # after the last slip, before this
-            assert (finished_run / e["checkpoint"]).is_file()
-        previous_end = e["end_time"]
+        assert e.end_time > e.onset_time and e.peak_velocity >= 10 * SCENE["loading"]["velocity"]
+        if e.checkpoint:
+            assert previous_end < e.checkpoint_time < e.onset_time   # after the last slip, before this
+            assert (finished_run / e.checkpoint).is_file()
+        previous_end = e.end_time
     listed = gouge("slips", finished_run, "--json")
     assert listed.exit_code == 0 and f'"number": {len(catalog)}' in listed.output
 
@@ -129,10 +131,10 @@ def test_drained_fork_retraces_the_original(tiny):
     assert np.array_equal(original["time"][idx], fork["time"][1:])
     for name in ("wall_x", "wall_vx", "tau_over_sigma", "porosity", "kinetic_energy", "max_overlap"):
         assert np.array_equal(original[name][idx], fork[name][1:]), name
-    entry = next(e for e in slip_catalog(finished_run) if e["number"] == n)
+    entry = next(e for e in slip_catalog(finished_run) if e.number == n)
     with h5py.File(finished_run / "run.h5", "r") as h5:          # restart reports times since loading began
         origin = float(h5["series/time"][0] - h5["series/load_time"][0])
-    assert drained["first_slip"]["onset_time"] == pytest.approx(entry["onset_time"] - origin, abs=1e-9)
+    assert drained["first_slip"]["onset_time"] == pytest.approx(entry.onset_time - origin, abs=1e-9)
     # the fork wrote dense snapshots while its wall slipped (output.slip_frames, 30 by default)
     with h5py.File(finished_run / "forks" / f"slip_{n:03d}" / "drained" / "run.h5", "r") as h5:
         interval, dt = h5.attrs["snapshot_dense_interval"], h5.attrs["dt"]
@@ -156,7 +158,7 @@ def test_drained_fork_retraces_the_original(tiny):
 def test_restart_bad_input(tiny, args, words):
     """N: a slip kept with its checkpoint; KEPT: the list of those the message offers."""
     _, finished_run, kept = tiny
-    offered = ", ".join(str(int(e["number"])) for e in slip_catalog(finished_run) if e["checkpoint"])
+    offered = ", ".join(str(e.number) for e in slip_catalog(finished_run) if e.checkpoint)
     result = gouge("restart", finished_run, *[kept[1] if a == "N" else a for a in args])
     assert result.exit_code == EXIT_BAD_INPUT, result.output
     for w in words:
@@ -257,7 +259,7 @@ def _assert_matches_uninterrupted(finished_run: Path, out: Path):
     assert np.array_equal(sa["time"], sb["time"])        # no duplicated or missing rows
     assert np.array_equal(sa["wall_vx"], sb["wall_vx"])
     ca, cb = slip_catalog(finished_run), slip_catalog(out)
-    assert [e["onset_time"] for e in ca] == [e["onset_time"] for e in cb]
+    assert [e.onset_time for e in ca] == [e.onset_time for e in cb]
 
 
 def test_resume_after_kill_9_matches_uninterrupted(killed_run, finished_run, tmp_path):
@@ -379,7 +381,7 @@ def test_moved_run_directory_still_forks(finished_run, tmp_path):
     import shutil
     moved = tmp_path / "elsewhere" / "tiny"
     shutil.copytree(finished_run, moved, ignore=shutil.ignore_patterns("forks"))
-    slip = next(int(e["number"]) for e in slip_catalog(moved) if e["checkpoint"])
+    slip = next(e.number for e in slip_catalog(moved) if e.checkpoint)
     summary = run_fork(ForkRequest(moved, slip, duration=100.0), quiet=True)
     branch = moved / "forks" / f"slip_{slip:03d}" / "drained"
     with h5py.File(branch / "run.h5", "r") as h5:
@@ -396,7 +398,7 @@ def test_restart_names_library_differences_from_the_parent(finished_run, tmp_pat
     import shutil
     run = tmp_path / "other_numpy"
     shutil.copytree(finished_run, run, ignore=shutil.ignore_patterns("forks"))
-    slip = next(int(e["number"]) for e in slip_catalog(run) if e["checkpoint"])
+    slip = next(e.number for e in slip_catalog(run) if e.checkpoint)
     path = run / "checkpoints" / f"slip_{slip:03d}.h5"
     with h5py.File(path, "r+") as h5:
         prov = json.loads(h5.attrs["provenance"])
