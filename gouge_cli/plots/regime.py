@@ -81,6 +81,11 @@ def _panel(ax, rows: list[dict], key: str, thesis: ThesisPoint | None, legend: b
                     xerr=[[thesis.deborah - thesis.deborah_lo], [thesis.deborah_hi - thesis.deborah]],
                     fmt="*", color="k", mfc=c, ms=12, mec="k", mew=0.6, capsize=2, alpha=0.85, lw=0.8,
                     label="thesis (Wilson)" if legend else None)
+    _style(ax, key)
+
+
+def _style(ax, key: str):
+    """A finding's panel: log De axis, its name, the ratio's 1 or the fraction's 0-1 range."""
     if key in _MEDIANS:
         ax.axhline(1.0, color="0.3", lw=0.8, ls="--")
     else:
@@ -216,14 +221,7 @@ def groups_figure(groups: list[tuple[str, list[dict]]], thesis: ThesisPoint | No
             f, flo, fhi = thesis.fractions[key]
             ax.errorbar([thesis.deborah], [f], yerr=[[f - flo], [fhi - f]], fmt="*", color="k", ms=11,
                         capsize=2, lw=0.8, label="thesis (Table 3, Wilson)")
-        if key in _MEDIANS:
-            ax.axhline(1.0, color="0.3", lw=0.8, ls="--")
-        else:
-            ax.set_ylim(-0.03, 1.03)
-        ax.set_xscale("log")
-        ax.set_title(_NAMES[key] + (" (median of undrained / drained)" if key in _MEDIANS else ""), fontsize=9,
-                     loc="left")
-        ax.grid(True, which="both", color="0.92", lw=0.6)
+        _style(ax, key)
     for ax in axes[1]:
         ax.set_xlabel("De of the slip (u₀: drained peak wall speed)")
     axes.flat[0].set_ylabel("fraction of pairs")
