@@ -43,6 +43,17 @@ def run_row(run_dir: Path) -> tuple[dict, list[int]]:
     return row, sorted(transient_slips(catalog))
 
 
+def reload_columns(row: dict, sigma: float, k: float, V: float) -> dict:
+    """The loading's own clock for a run row: ``recurrence_reload`` = stress_drop_mean sigma / (k V)
+    [t0], the time the spring (k per length [E/d], pulled at V [v0]) takes to give back a mean drop
+    at normal stress sigma [E], and ``recurrence_ratio`` = recurrence_mean / that. A layer that
+    sticks rigidly between slips has ratio 1; creep and hardening before a slip make it larger.
+    With sigma swept, the ratio says whether the recurrence scales with drop x sigma (issue 63)."""
+    drop, recurrence = row.get("stress_drop_mean", _NAN), row.get("recurrence_mean", _NAN)
+    reload = drop * sigma / (k * V) if k * V > 0 else _NAN
+    return {"recurrence_reload": reload, "recurrence_ratio": recurrence / reload if reload > 0 else _NAN}
+
+
 def fork_rows(fork_dir: Path, permeabilities: list[float]) -> list[dict]:
     """The pair rows (:data:`PAIR_COLUMNS` but ``run``) of one fork's undrained branches at the
     listed permeabilities, classified by :func:`~gouge_cli.analysis.forkpairs.classify_fork`."""

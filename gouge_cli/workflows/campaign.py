@@ -741,9 +741,12 @@ def _results_stale(s: Survey) -> bool:
 
 def table_rows(s: Survey) -> list[dict]:
     """The campaign table's rows, from the results records alone: per point whose run is
-    recorded, its run row (``kind`` 'run': swept values, the run statistics), then one row per
+    recorded, its run row (``kind`` 'run': swept values, the run statistics and their
+    :func:`~gouge_cli.analysis.campaign_table.reload_columns`), then one row per
     recorded pair (``kind`` 'pair': swept values, variant if the study has variants, the pair
     columns, and ``transient``), in sweep then slip order."""
+    from ..analysis.campaign_table import reload_columns
+
     swept = s.spec.swept_keys()
     records = {(p.piece.point, p.piece.label): p.result for p in s.pieces
                if p.state == "done" and p.result is not None}
@@ -753,7 +756,10 @@ def table_rows(s: Survey) -> list[dict]:
         if run is None:
             continue
         values = {k: run.result["values"].get(k) for k in swept}
-        rows.append({"kind": "run", "point": point.name, **values, **run.result["row"]})
+        loading = point.config.loading
+        rows.append({"kind": "run", "point": point.name, **values, **run.result["row"],
+                     **reload_columns(run.result["row"], loading.normal_stress, loading.spring_constant,
+                                      loading.velocity)})
         transient = set(run.result.get("transient", ()))
         forks = sorted((r for (name, label), r in records.items() if name == point.name and label != RUN_PIECE),
                        key=lambda r: r.result["slip"])
