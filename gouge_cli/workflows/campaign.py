@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import shutil
 import socket
@@ -45,6 +46,7 @@ from pathlib import Path
 
 import yaml
 
+from ..driver.progress import format_eta
 from ..errors import CampaignConflict
 from ..config import Config, build_config
 from ..io.layout import CONFIG_FILE, OWNED, ForkLayout, RunLayout
@@ -668,6 +670,20 @@ def task_slots(client, opts) -> int:
     return max(1, n or (opts.workers or 0))
 
 
+def campaign_eta(seconds: dict[str, list[float]], forks_left: int, runs_left: int, forks_per_run: float,
+                 slots: int) -> float:
+    """Wall seconds left [s]: the forks queued, and per loading still to run (waiting or running)
+    the loading and its forks, each at the median wall time of its kind so far (``seconds``:
+    {"run": [...], "fork": [...]}, this campaign's records and this session's pieces), over the
+    task slots. NaN until a piece of each kind needed has finished."""
+    import statistics
+
+    fork = statistics.median(seconds["fork"]) if seconds["fork"] else math.nan
+    run = statistics.median(seconds["run"]) if seconds["run"] else (0.0 if not runs_left else math.nan)
+    work = forks_left * fork + runs_left * (run + forks_per_run * fork) if forks_left or runs_left else 0.0
+    return work / max(slots, 1)
+
+
 def _execute(s: Survey, todo: list[PieceState], client, opts, log) -> dict[str, int]:
     """Finish points before starting new ones: the forks of points whose run is done go first;
     a new loading starts only while fewer points are in flight than the cluster has task slots.
@@ -692,6 +708,20 @@ def _execute(s: Survey, todo: list[PieceState], client, opts, log) -> dict[str, 
         while runs and len(in_flight) < task_slots(client, opts):
             submit(runs.pop(0))
 
+    seconds: dict[str, list[float]] = {"run": [], "fork": []}       # (for the ETA: campaign_eta)
+    for p in s.pieces:
+        if p.state == "done" and p.result is not None and p.result.wall_seconds:
+            seconds[p.piece.kind].append(float(p.result.wall_seconds))
+    forked = [p.piece.point for p in s.pieces if p.piece.kind == "fork" and p.state == "done"]
+    forks_per_run = len(forked) / len(set(forked)) if forked else 0.0
+
+    def eta() -> str:
+        pending = list(futures.values())
+        left = campaign_eta(seconds, sum(p.kind == "fork" for p in pending),
+                            sum(p.kind == "run" for p in pending) + len(runs), forks_per_run,
+                            task_slots(client, opts))
+        return f"; ETA ~{format_eta(left)}" if math.isfinite(left) else ""
+
     for ps in todo:
         if ps.piece.kind == "fork" and ps.piece.point not in loading:
             submit(ps)
@@ -712,6 +742,8 @@ def _execute(s: Survey, todo: list[PieceState], client, opts, log) -> dict[str, 
             result = {"state": "failed", "cause": cause}
         state = result["state"]
         done[state] = done.get(state, 0) + 1
+        if state == "done" and result.get("wall_seconds"):
+            seconds[piece.kind].append(float(result["wall_seconds"]))
         for nxt in action.after(piece.point, piece, result):
             ps = known.get((nxt.point, nxt.label))
             if ps is None or ps.state not in ("done", "running"):
@@ -723,7 +755,7 @@ def _execute(s: Survey, todo: list[PieceState], client, opts, log) -> dict[str, 
             (f", {len(result['slips'])} slips to fork" if "slips" in result and s.spec.action == "study" else "") + ")" \
             if state == "done" else f": {result.get('cause', '')}"
         log(f"[{n} finished, {len(futures)} queued, {len(runs)} points waiting] {piece.point} {piece.label}: "
-            f"{state}{extra}" + ("" if piece.point in in_flight or state != "done" else "; point finished"))
+            f"{state}{extra}" + ("" if piece.point in in_flight or state != "done" else "; point finished") + eta())
         fill()
     return done
 

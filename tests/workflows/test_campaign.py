@@ -4,6 +4,7 @@ one worker killed in the middle of a run, results bitwise equal to serial `gouge
 
 from __future__ import annotations
 
+import math
 import os
 import shlex
 import signal
@@ -202,6 +203,21 @@ def test_table_and_phase_diagram(campaign):
     for name in ("phase_diagram.png", "slip_statistics.png", "pairs_perm_1e-03.png"):
         assert (root / "figures" / name).stat().st_size > 10_000
     assert any(line.startswith("phase cell permeability=0.001") for line in campaign["log"])
+    finished = [line for line in campaign["log"] if line.startswith("[") and " finished, " in line]
+    assert any("; ETA ~" in line for line in finished)                 # once a fork and a run are timed
+    assert finished[-1].endswith("ETA ~0:00:00")                        # nothing left after the last
+
+
+def test_the_eta_is_what_is_left_at_the_medians_so_far():
+    from gouge_cli.workflows.campaign import campaign_eta
+
+    seconds = {"run": [3000.0, 5000.0, 4000.0], "fork": [200.0, 100.0, 300.0]}
+    # 10 forks queued, 2 loadings to run with 15 slips each: (10 x 200 + 2 x (4000 + 15 x 200)) / 2 slots
+    assert campaign_eta(seconds, 10, 2, 15, 2) == pytest.approx(8000.0)
+    assert campaign_eta(seconds, 0, 0, 15, 2) == 0.0
+    assert math.isnan(campaign_eta({"run": [3000.0], "fork": []}, 4, 0, 15, 2))       # no fork timed yet
+    assert math.isnan(campaign_eta({"run": [], "fork": [100.0]}, 4, 1, 15, 2))        # no loading timed yet
+    assert campaign_eta({"run": [], "fork": [100.0]}, 4, 0, 15, 1) == pytest.approx(400.0)
 
 
 def test_local_workers_have_one_numba_thread_per_task(client):
