@@ -139,17 +139,24 @@ class Simulation:
         with numba_threads(self.threads):
             self._advance(int(nsteps))
 
+    @property
+    def engine(self) -> str:
+        """What runs the steps: 'gpu' (numerics.device gpu, dry steps: model.gpu_layers), 'coupled'
+        (kernels.coupled.advance_fluid, from the moment the fluid grid exists) or 'cpu'
+        (kernels.step.advance). The one place the choice is made (advance, compile_note)."""
+        if self.fluid is not None:
+            return "coupled"
+        return "gpu" if self.gpu else "cpu"
+
     def _advance(self, left: int):
         s = self.state
-        if self.gpu and self.fluid is None:
+        engine = self.engine
+        if engine == "gpu":
             self._gpu_layers().advance(left, params=self.params)
             return
+        step = self._advance_fluid if engine == "coupled" else self._advance_dry
         while left > 0:
-            if self.fluid is None:
-                status, done = K.advance(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params,
-                                         s.counters, left, *self.drag)
-            else:
-                status, done = self._advance_fluid(left)
+            status, done = step(left)
             left -= done
             if status == L.LIST_OVERFLOW:
                 s.grow_pairs(int(s.counters[L.K_NEEDED_CAPACITY]))
@@ -161,9 +168,10 @@ class Simulation:
         (a fresh environment: numba compiles it once, then loads it from its cache)."""
         from ..kernels import cached_for_this_cpu
 
-        if self.gpu and self.fluid is None:
+        engine = self.engine
+        if engine == "gpu":
             return None
-        if self.fluid is not None:
+        if engine == "coupled":
             from ..kernels.coupled import advance_fluid
 
             kernel, what, how_long = advance_fluid, "the coupled grain-fluid step", "1-3 minutes"
@@ -181,6 +189,11 @@ class Simulation:
 
             self._layers = Layers([self.state], self.params)
         return self._layers
+
+    def _advance_dry(self, nsteps: int):
+        s = self.state
+        return K.advance(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params, s.counters, nsteps,
+                         *self.drag)
 
     def _advance_fluid(self, nsteps: int):
         from ..kernels.coupled import advance_fluid
