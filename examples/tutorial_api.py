@@ -19,16 +19,10 @@
 # branches of one slip with the block-slider fit (thesis Eq. 3), and tabulates the pairs of a study.
 # Every number is the one the CLI prints (`gouge slips --json`, `gouge analyze`, pair.json).
 #
-# Which run it uses (environment variables, so the same file runs in the docs and in the tests):
-#
-# * `GOUGE_TUTORIAL_RUN=DIR`: an existing run directory with at least one fork (`gouge restart`).
-# * `GOUGE_TUTORIAL_SCENE=small`: a reduced 300-grain scene, run and forked here (a few minutes on
-#   one core) into `GOUGE_TUTORIAL_OUT` (default `runs/tutorial_small`).
-# * otherwise the demo: `runs/demo` (made by `make demo`, or run here from the scene `demo`), its
-#   slip `GOUGE_TUTORIAL_SLIP` (default: the second slip with a checkpoint) forked at kappa_c = 1e-5 d^2
-#   when it has no fork yet.
-#
-# `GOUGE_TUTORIAL_FIGURES=DIR` also saves the figures as PNG files there.
+# It looks at the demo run, `runs/demo` (made by `make demo`, or run here if it is missing), and
+# forks its second slip with a checkpoint at kappa_c = 1e-5 d^2 unless that slip has a fork
+# already. (The docs and the tests point `GOUGE_TUTORIAL_RUN` and `GOUGE_TUTORIAL_SLIP` at their
+# own run, and `GOUGE_TUTORIAL_FIGURES` at a folder for the figures.)
 
 # %%
 import os
@@ -37,39 +31,22 @@ from pathlib import Path
 import gouge_cli as gouge
 from gouge_cli.plots.axes import series, table_scatter, wall_velocity
 
-figures = os.environ.get("GOUGE_TUTORIAL_FIGURES")
+where = Path(os.environ.get("GOUGE_TUTORIAL_RUN", "runs/demo"))
+run = gouge.open_run(where) if (where / "run.h5").is_file() else gouge.run("demo", out=where)
+with_checkpoint = [int(n) for n, ck in run.slips["checkpoint"].items() if ck]
+slip = int(os.environ.get("GOUGE_TUTORIAL_SLIP") or with_checkpoint[min(1, len(with_checkpoint) - 1)])
+if slip not in run.forks:
+    gouge.restart(run, slip=slip, perm=[1e-5])
 
 
 def save(ax, name):
-    if figures:
-        Path(figures).mkdir(parents=True, exist_ok=True)
-        ax.figure.savefig(Path(figures) / f"{name}.png", dpi=100)
+    """Keep a figure as PNG where GOUGE_TUTORIAL_FIGURES says (nothing otherwise)."""
+    if os.environ.get("GOUGE_TUTORIAL_FIGURES"):
+        folder = Path(os.environ["GOUGE_TUTORIAL_FIGURES"])
+        folder.mkdir(parents=True, exist_ok=True)
+        ax.figure.savefig(folder / f"{name}.png", dpi=100)
 
 
-def forked_run():
-    """The run this tutorial looks at, and the slip whose fork it overlays (see the first cell)."""
-    given = os.environ.get("GOUGE_TUTORIAL_RUN")
-    wanted = os.environ.get("GOUGE_TUTORIAL_SLIP")
-    if given:
-        run = gouge.open_run(given)
-        return run, int(wanted) if wanted else min(run.forks)
-    if os.environ.get("GOUGE_TUTORIAL_SCENE") == "small":
-        out = Path(os.environ.get("GOUGE_TUTORIAL_OUT", "runs/tutorial_small"))
-        scene = {"name": "tutorial_small", "seed": 4, "packing.n_grains": 300, "packing.width": 15,
-                 "loading.spring_constant": 2e-4, "loading.velocity": 4e-5, "numerics.dt_safety": 0.3,
-                 "run.duration": 30000, "output.snapshot_interval": 20000}
-        perm, config = 1e-3, "demo"
-    else:
-        out, scene, perm, config = Path("runs/demo"), {}, 1e-5, "demo"
-    run = gouge.open_run(out) if (out / "run.h5").is_file() else gouge.run(config, out=out, overrides=scene)
-    with_checkpoint = [int(n) for n, ck in run.slips["checkpoint"].items() if ck]
-    slip = int(wanted) if wanted else (with_checkpoint[1] if len(with_checkpoint) > 1 else with_checkpoint[0])
-    if slip not in run.forks:
-        gouge.restart(run, slip=slip, perm=[perm])
-    return run, slip
-
-
-run, slip = forked_run()
 run
 
 # %% [markdown]
