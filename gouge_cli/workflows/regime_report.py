@@ -35,7 +35,7 @@ def write_groups(pair_rows: list[dict], keys: list[str], root: Path, title: str 
     from ..analysis.campaign_table import write_table
     from .campaign_spec import point_name
 
-    from ..analysis.regime import regime_rows, thesis_point
+    from ..analysis.regime import thesis_point
     from ..plots.regime import groups_figure
 
     out = {}
@@ -46,10 +46,12 @@ def write_groups(pair_rows: list[dict], keys: list[str], root: Path, title: str 
         where = ", ".join(f"{k} = {v}" for k, v in values.items())
         folder = Path(root) / name if name else Path(root)
         out[f"pairs[{name}]"] = write_table(rows, [], folder / "pairs.csv")
-        for key, path in write_regime(rows, folder, folder, f"{title}, {where}" if where else title).items():
+        tables = regime_tables(rows)            # (the bootstraps: once per group)
+        for key, path in write_regime(rows, folder, folder, f"{title}, {where}" if where else title,
+                                      tables).items():
             out[f"{key}[{name}]"] = path
-        lines += summary_lines(rows, where or title)
-        groups.append((where or title, regime_rows(rows)))
+        lines += summary_lines(rows, where or title, tables)
+        groups.append((where or title, tables[0]))
     if len(groups) > 1:
         out["groups_figure"] = groups_figure(groups, thesis_point(), Path(root) / "groups.png",
                                              f"{title}: every group" if title else "")
@@ -78,23 +80,31 @@ def _coupling(rows: list[dict]) -> str:
     return f"no filter, {h:g} d cells" if w == 0 else f"w = {w:g} d, h = {h:g} d"
 
 
-def summary_lines(pair_rows: list[dict], group: str) -> list[str]:
-    """One markdown row per permeability of the pairs (pooled over seeds): counts, the seed-level
-    95 % intervals (marked s) of the findings, and the mechanism's tests (regime.csv and
-    mechanism.csv of the same pairs)."""
+def regime_tables(pair_rows: list[dict]) -> tuple[list[dict], list[dict]]:
+    """(analysis.regime.regime_rows, analysis.mechanism.mechanism_rows) of the pairs, the latter
+    empty where the pairs lack the mechanism's columns: what regime.csv and mechanism.csv hold."""
     from ..analysis.mechanism import mechanism_rows
     from ..analysis.regime import regime_rows
+
+    has_mechanism = bool(pair_rows) and "drained_dilation" in pair_rows[0]
+    return regime_rows(pair_rows), mechanism_rows(pair_rows) if has_mechanism else []
+
+
+def summary_lines(pair_rows: list[dict], group: str, tables: tuple | None = None) -> list[str]:
+    """One markdown row per permeability of the pairs (pooled over seeds): counts, the seed-level
+    95 % intervals (marked s) of the findings, and the mechanism's tests (``tables``:
+    :func:`regime_tables` of the same pairs, computed here if not given)."""
+    regime, mechanism = tables if tables is not None else regime_tables(pair_rows)
 
     def pct(row, key):
         lo, hi = float(row[f"{key}_seed_lo"]), float(row[f"{key}_seed_hi"])
         interval = f" [{100 * lo:.0f}, {100 * hi:.0f}]s" if lo == lo and hi == hi else ""
         return f"{100 * float(row[key]):.0f} %{interval}"
 
-    mech = {m["kappa_c"]: m for m in mechanism_rows(pair_rows) if m["seed"] == "all"} \
-        if pair_rows and "drained_dilation" in pair_rows[0] else {}
+    mech = {m["kappa_c"]: m for m in mechanism if m["seed"] == "all"}
     coupling = _coupling(pair_rows)
     lines = []
-    for r in regime_rows(pair_rows):
+    for r in regime:
         if r["seed"] != "all":
             continue
         m = mech.get(r["kappa_c"])
@@ -137,18 +147,18 @@ def by_swept(pair_rows: list[dict], keys: list[str]) -> list[tuple[dict, list[di
     return [(dict(zip(keys, values)), rows) for values, rows in groups.items()]
 
 
-def write_regime(pair_rows: list[dict], root: Path, figs: Path, title: str = "") -> dict:
+def write_regime(pair_rows: list[dict], root: Path, figs: Path, title: str = "", tables: tuple | None = None) -> dict:
     """regime.csv, delay.csv and, where the pairs carry the mechanism's columns, mechanism.csv
     under ``root``; regime_map.png, regime_delay.png, mechanism_sign.png and mechanism_collapse.png
-    under ``figs``."""
+    under ``figs``. ``tables``: :func:`regime_tables` of the same pairs (computed here if not given)."""
     from ..analysis.campaign_table import write_table
-    from ..analysis.mechanism import MECHANISM_COLUMNS, mechanism_rows
-    from ..analysis.regime import DELAY_COLUMNS, REGIME_COLUMNS, delay_rows, regime_rows, thesis_point
+    from ..analysis.mechanism import MECHANISM_COLUMNS
+    from ..analysis.regime import DELAY_COLUMNS, REGIME_COLUMNS, delay_rows, thesis_point
     from ..plots.mechanism import collapse_figure, sign_figure
     from ..plots.regime import delay_figure, regime_figure
 
     root, figs = Path(root), Path(figs)
-    rows = regime_rows(pair_rows)
+    rows, mech = tables if tables is not None else regime_tables(pair_rows)
     out = {"regime_csv": write_table(rows, [], root / "regime.csv", columns=list(REGIME_COLUMNS))}
     if rows:
         out["regime_map"] = regime_figure(rows, thesis_point(), figs / "regime_map.png",
@@ -160,7 +170,6 @@ def write_regime(pair_rows: list[dict], root: Path, figs: Path, title: str = "")
                                            f"{title}: undrained slower, smaller drop against the onset delay"
                                            if title else "")
     if pair_rows and "drained_dilation" in pair_rows[0]:
-        mech = mechanism_rows(pair_rows)
         out["mechanism_csv"] = write_table(mech, [], root / "mechanism.csv", columns=list(MECHANISM_COLUMNS))
         if any(m["n_signed"] for m in mech):
             out["mechanism_sign"] = sign_figure(pair_rows, mech, figs / "mechanism_sign.png",
