@@ -104,8 +104,9 @@ def phase_cells(pair_rows: list[dict], x: str, y: str | None) -> list[dict]:
     the pairs where a branch did not slip in its window. Fractions are over n_pairs (NaN when 0),
     each with its seed-level 95 % interval (``_lo``, ``_hi``: :func:`.seedboot.seed_fraction`,
     the seed as the sampling unit, since a seed's pairs share one packing); n_seeds: the seeds
-    with a classified pair in the cell (rows without a ``seed`` column count as one seed)."""
-    from .seedboot import seed_fraction
+    with a classified pair in the cell (rows without a ``seed`` column count as one seed); the
+    intervals are NaN for a single seed, as in the regime map (:func:`.regime.seed_interval`)."""
+    from .regime import seed_interval
 
     xs = sorted({_axis_value(r, x) for r in pair_rows})
     ys = sorted({_axis_value(r, y) for r in pair_rows}) if y else [None]
@@ -121,8 +122,8 @@ def phase_cells(pair_rows: list[dict], x: str, y: str | None) -> list[dict]:
             seeds: dict = {}
             for r in classified:
                 seeds.setdefault(r.get("seed"), []).append(r)
-            c_est, c_lo, c_hi = seed_fraction([[bool(r["complex"]) for r in g] for g in seeds.values()])
-            t_est, t_lo, t_hi = seed_fraction([[r["base_type"] == "II" for r in g] for g in seeds.values()])
+            c_lo, c_hi = seed_interval(list(seeds.values()), "complex")
+            t_lo, t_hi = seed_interval(list(seeds.values()), "type_II")
             cells.append({"x": xv, "y": yv, "n_pairs": n, "n_unclassified": len(inside) - n, "n_seeds": len(seeds),
                           "n_complex": n_c, "n_type_I": n_1, "n_type_II": n_2,
                           "frac_complex": n_c / n if n else _NAN, "frac_complex_lo": c_lo, "frac_complex_hi": c_hi,

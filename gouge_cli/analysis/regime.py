@@ -141,6 +141,16 @@ def _group_stats(rows: list[dict]) -> dict:
     return out
 
 
+def seed_interval(by_seed: list[list[dict]], key: str) -> tuple[float, float]:
+    """The seed-level 95 % interval (lo, hi) of fraction ``key`` (:data:`FRACTIONS`) over the
+    classified pairs of groups of pair rows, one group per seed (``analysis.seedboot``: seeds
+    resampled, then pairs within them). NaN for a single seed: there is no seed to resample."""
+    if len(by_seed) < 2:
+        return _NAN, _NAN
+    _, lo, hi = seed_fraction([_outcomes(rows)[key] for rows in by_seed])
+    return lo, hi
+
+
 def _seed_stats(by_seed: list[list[dict]]) -> dict:
     """The seed-level view of a pooled group (one list of pair rows per seed): the number of
     seeds, for each fraction the range of the per-seed fractions and the 95 % seed-level interval
@@ -153,8 +163,7 @@ def _seed_stats(by_seed: list[list[dict]]) -> dict:
         fr = [np.nanmean(oc[key]) for oc in per_seed if np.isfinite(oc[key]).any()]
         out[f"{key}_seed_min"] = min(fr) if fr else _NAN
         out[f"{key}_seed_max"] = max(fr) if fr else _NAN
-        _, lo, hi = seed_fraction([oc[key] for oc in per_seed]) if several else (_NAN, _NAN, _NAN)
-        out[f"{key}_seed_lo"], out[f"{key}_seed_hi"] = lo, hi
+        out[f"{key}_seed_lo"], out[f"{key}_seed_hi"] = seed_interval(by_seed, key)
     for col in RATIO_MEDIANS:
         _, lo, hi = seed_median([oc[col] for oc in per_seed]) if several else (_NAN, _NAN, _NAN)
         out[f"{col}_seed_lo"], out[f"{col}_seed_hi"] = lo, hi
