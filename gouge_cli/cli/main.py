@@ -250,6 +250,7 @@ _register_campaign(app)
 from .study_cmds import register as _register_study
 _register_study(app)
 from .verify_cmds import register as _register_verify; _register_verify(app)  # noqa: E402, E702
+from .dilatancy_cmds import register as _register_dilatancy; _register_dilatancy(app)  # noqa: E402, E702
 
 
 def main():

@@ -124,6 +124,15 @@ class Simulation:
         self._apply_phase()
         self.start_fluid()
 
+    def set_loading_velocity(self, velocity: float):
+        """Step the spring's far end to `velocity` [v0] from now on (a velocity step): the anchor
+        moves so that the stretch V_s t_load + s0 - x_wall, hence the spring force, is continuous."""
+        s, p = self.state, self.params
+        if not velocity > 0:
+            raise ValueError(f"loading velocity {velocity!r} [v0] must be positive")
+        s.clock[L.C_ANCHOR] += (p[L.V_LOAD] - velocity) * s.clock[L.C_DRIVE_TIME]
+        p[L.V_LOAD] = velocity
+
     # ---- stepping ----------------------------------------------------------------------
     def _rebuild(self):
         s = self.state
