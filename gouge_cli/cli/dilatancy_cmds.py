@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List
+from typing import List, Optional
 
 import typer
 
@@ -25,7 +25,10 @@ def register(app: typer.Typer) -> None:
         slip: float = typer.Option(40.0, "--slip", help="slip of each segment [d]; its second half is averaged"),
         run_in: float = typer.Option(25.0, "--run-in", help="slip at V_1 before the steps [d]"),
         workers: int = typer.Option(1, "--workers", help="(seed, sigma) points run at once"),
-        out_dir: Path = typer.Option(Path("dilatancy"), "--out", help="output folder (kept runs are reused)"),
+        out_dir: Path = typer.Option(Path("dilatancy"), "--out", help="records folder (dilatancy_runs.json: kept "
+                                     "points are reused)"),
+        report: Optional[Path] = typer.Option(None, "--report", help="folder for segments.csv, summary.md, dilatancy.png "
+                                    "(default: --out)"),
         set_: List[str] = typer.Option([], "--set", help="config override"),
     ):
         """Dilatancy coefficient eps = dphi/dlnV from velocity steps, and the undrained strengthening it predicts."""
@@ -45,6 +48,7 @@ def register(app: typer.Typer) -> None:
         say = lambda m: out.print(m, highlight=False)  # noqa: E731
         runs = run_study(cfg, seed_list, sigmas, out_dir, workers=workers, on_progress=say, ratios=tuple(ratio),
                          perm=perm if perm > 0 else None, stiff=stiff, slip=slip, run_in=run_in)
-        for path in write_outputs(runs, out_dir):
+        report = report or out_dir
+        for path in write_outputs(runs, report):
             say(f"wrote {path}")
-        say((out_dir / "summary.md").read_text())
+        say((report / "summary.md").read_text())

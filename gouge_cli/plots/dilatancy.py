@@ -47,8 +47,8 @@ def plot_dilatancy(runs, cells, path: Path) -> Path:
         b.errorbar([cell.inertial], [cell.eps[0]], yerr=yerr, fmt="o" if cell.ratio == 10 else "s", color=col,
                    capsize=3, label=f"σ = {cell.sigma:g}, V₂/V₁ = {cell.ratio:g}")
     b.axhspan(*LAB_EPS, color="0.85", lw=0)
+    b.axhline(0.0, color="0.3", lw=0.8)
     b.set_xscale("log")
-    b.set_yscale("log")
     b.set_xlabel("inertial number I at V₂")
     b.set_ylabel("eps = Δφ / Δln V")
     b.set_title("(b) dilatancy coefficient (seed mean, 95 % t)")
