@@ -108,7 +108,9 @@ def open_campaign(spec_or_folder: Path | str) -> pd.DataFrame:
         >>> table = gouge.open_campaign("runs/sweep.yaml")  # doctest: +SKIP
         >>> table.groupby("loading.normal_stress")["stress_drop_mean"].mean()  # doctest: +SKIP
     """
-    from ..workflows.campaign import backfill, survey, table_rows
+    from ..workflows.campaign import backfill
+    from ..workflows.campaign_survey import survey
+    from ..workflows.campaign_tables import table_rows
     from ..workflows.campaign_spec import load_spec
 
     path = Path(spec_or_folder)
