@@ -17,6 +17,7 @@ from ..analysis.forkpairs import classify_fork, fork_branches, fork_dirs
 from ..config import Config, build_config
 from ..errors import AnalysisError, SlipNotFoundError
 from ..io.filedoc import TIME_ORIGIN
+from ..io.layout import ForkLayout
 from ..io.runreader import RunInfo, RunReader
 from ..units import pint_definitions, pint_registry, pint_unit
 from .frames import SLIP_UNITS, TIME_DOC, SeriesArray, pair_frame, to_si, var_attrs
@@ -278,7 +279,7 @@ class Run:
             >>> run.forks[slip].slip == slip
             True
         """
-        return {int(d.name.split("_")[-1]): Fork(d) for d in fork_dirs(self.path)}
+        return {ForkLayout(d).slip: Fork(d) for d in fork_dirs(self.path)}
 
     def fork(self, slip: int) -> "Fork":
         """The fork of slip ``slip`` (RUN/forks/slip_NNN, made by :func:`restart`).
@@ -292,9 +293,9 @@ class Run:
         """
         forks = fork_dirs(self.path)
         for d in forks:
-            if int(d.name.split("_")[-1]) == int(slip):
+            if ForkLayout(d).slip == int(slip):
                 return Fork(d)
-        listed = ", ".join(d.name.split("_")[-1].lstrip("0") for d in forks) or "none"
+        listed = ", ".join(str(ForkLayout(d).slip) for d in forks) or "none"
         raise SlipNotFoundError(f"{self.path} has no fork of slip {slip} (forked slips: {listed}); "
                                 f"`gouge restart {self.path} --slip {slip} --perm K` makes one")
 
@@ -362,7 +363,7 @@ class Fork:
 
     def __init__(self, fork_dir: Path | str):
         self.path = Path(fork_dir)
-        self.slip = int(self.path.name.split("_")[-1])
+        self.slip = ForkLayout(self.path).slip
         drained, undrained = fork_branches(self.path)
         self._drained_dir, self._undrained_dirs = drained, undrained
 
