@@ -289,7 +289,7 @@ def make_action(spec: CampaignSpec) -> Action:
     return {"run": Action, "study": StudyAction}[spec.action](spec)
 
 
-def studystudy_variants(spec: CampaignSpec) -> list[tuple[str, dict]] | None:
+def study_variants(spec: CampaignSpec) -> list[tuple[str, dict]] | None:
     """The study's variants as (name, fork overrides), or None without variants."""
     study = spec.study
     return list(study.variants.items()) if study and study.variants else None
