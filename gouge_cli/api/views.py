@@ -512,7 +512,7 @@ class Pair:
                 other = parts[1 - i]
                 for name in names:
                     if name not in p:
-                        p[name] = xr.full_like(p["wall_vx"], np.nan).assignvar_attrs(other[name].attrs)
+                        p[name] = xr.full_like(p["wall_vx"], np.nan).assign_attrs(other[name].attrs)
             ds = xr.concat(parts, dim="branch", join="outer", combine_attrs="drop_conflicts")
             ds = ds.assign_coords(branch=("branch", np.array(["drained", "undrained"]),
                                           var_attrs("-", f"drained: the dry twin; undrained: {self.branch}")))
