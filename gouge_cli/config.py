@@ -215,13 +215,13 @@ class FluidConfig(_Section):
     )
     compressibility: Compressibility = Field(36.0, gt=0, description="beta [1/E] (4.5e-10 1/Pa)")
     viscosity: Viscosity = Field(1.43e-7, gt=0, description="eta [E t0] (1e-3 Pa s)")
-    filter_width: float = Field(
+    filter_width: Length = Field(
         3.0, ge=0, le=40,
         description="[d] coarse-graining width w, a physical parameter of the model (the thesis's 'a few grains'): "
                     "solid fraction, solid velocity and drag are averaged with a Gaussian of standard deviation w/2 "
                     "that conserves the solid area, the drag going back through its transpose; 0: no filter, the "
                     "grid cell is the averaging width (the answers then depend on cell_size)")
-    cell_size: Optional[float] = Field(
+    cell_size: Optional[Length] = Field(
         None, ge=0.25, le=20,
         description="[d] pressure-grid spacing h, a numerical parameter: at a fixed filter_width the answers "
                     "converge as h falls (docs/validation.md); default filter_width / 2, at most filter_width")

@@ -2,7 +2,7 @@
 
 A run's row (:func:`run_row`) and a fork's pair rows (:func:`fork_rows`) are read from run files
 (through :mod:`gouge_cli.io.runreader`) once, when the piece finishes, into its results record;
-the table is assembled from those records (:func:`gouge_cli.workflows.campaign.table_rows`).
+the table is assembled from those records (:func:`gouge_cli.workflows.campaign_tables.table_rows`).
 Pairs are classified by :func:`~gouge_cli.analysis.forkpairs.classify_fork` (thesis Sections
 4.2-4.3: Type I / II, -C).
 Swept values are the resolved (dimensionless) config values; ``permeability`` of a pair row is

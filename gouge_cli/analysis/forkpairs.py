@@ -282,8 +282,9 @@ def pair_definition(info: RunInfo, main: str = "first") -> PairDefinition:
 def _refuse_interrupted(info, fork_dir: Path):
     """An interrupted branch ends before its window: its pair is not classified."""
     if info.status == "interrupted":
+        slip = ForkLayout(fork_dir).slip
         raise BranchInterruptedError(f"{info.run_dir} was interrupted before its end; its pair is not classified. Run "
-                            f"`gouge restart {fork_dir.parent.parent} --slip {_slip_number(fork_dir)} --perm K` "
+                            f"`gouge restart {fork_dir.parent.parent} --slip {slip} --perm K` "
                             "(or `gouge study`) again to finish it")
 
 
@@ -332,7 +333,7 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                                                 result.drained_peak_over_Vs * info.V_s)
             measured = PairMeasures(
                 run=str(info.parent_dir),      # parent_run is stored relative to the branch
-                slip=int(info.fork_slip) if info.fork_slip is not None else _slip_number(fork_dir),
+                slip=int(info.fork_slip) if info.fork_slip is not None else ForkLayout(fork_dir).slip,
                 branch=udir.name,
                 permeability=uinfo.permeability if uinfo.permeability is not None else _NAN,
                 filter_width=uinfo.filter_width if uinfo.filter_width is not None else _NAN,
@@ -374,14 +375,6 @@ def _mechanism(drained: dict, undrained: dict, d_main, u_main, uinfo: RunInfo, l
         diffusion_time=t_d, onset_window=u_onset - fork_time,
         pressure_from_rate=rate_pressure(undrained["time"], undrained["thickness"], undrained["pressure_mean"],
                                          u_onset, t_d, beta * phi))
-
-
-def _slip_number(fork_dir: Path) -> int:
-    try:
-        return int(Path(fork_dir).name.split("_")[-1])
-    except ValueError:
-        return -1
-
 
 
 def run_pairs(run_dir: Path, strict: bool = False, main: str = "first") -> tuple[list[ForkPair], list[str]]:

@@ -29,13 +29,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field, fields, replace
+from enum import Enum
 
 import numpy as np
 
 from .blockslider import BlockSliderFit, fit_block_slider
+from ..errors import ConfigError
 from ..model.slip_rule import Slip, SlipRule, WallSeries
 
-__all__ = ["PairDefinition", "PairResult", "classify_pair", "complexity_criteria", "campaign_summary",
+__all__ = ["MainEvent", "PairDefinition", "PairResult", "classify_pair", "complexity_criteria", "campaign_summary",
            "compared_event", "static_strength", "regime", "DRAINED_DE", "UNDRAINED_DE", "SLOW", "CRITERIA"]
 
 _NAN = float("nan")
@@ -43,6 +45,22 @@ CRITERIA = ("subevents", "restart", "creep", "fit", "slow")
 TYPES = ("I", "II", "I-C", "II-C")
 RATIOS = ("peak_velocity_ratio", "stress_drop_ratio", "duration_ratio")
 SLOW = "slow slip below trigger"
+
+
+class MainEvent(str, Enum):
+    """The event of each branch a pair compares (``--main``): ``first`` (the forked slip) or
+    ``largest`` (the largest slip distance). The one check of the option: :meth:`check`."""
+
+    FIRST = "first"
+    LARGEST = "largest"
+
+    @classmethod
+    def check(cls, value) -> str:
+        """``value`` (a name or a member) as its plain name; ConfigError naming ``--main`` otherwise."""
+        try:
+            return cls(value).value
+        except ValueError:
+            raise ConfigError(f"--main = {value!r}: use 'first' (the forked slip) or 'largest'") from None
 
 
 @dataclass(frozen=True)
@@ -70,16 +88,19 @@ class PairDefinition:
     min_fit_r2: float = 0.8
 
     def __post_init__(self):
-        if self.main not in ("first", "largest"):
-            raise ValueError(f"main must be 'first' or 'largest', got {self.main!r}")
+        object.__setattr__(self, "main", MainEvent.check(self.main))
 
     @classmethod
     def for_run(cls, rule: SlipRule | dict, **overrides) -> "PairDefinition":
         """The definition with a run's slip rule (``RunInfo.slip_rule``, or its config values as a
-        dict) and overrides (None: kept; unknown keys ignored)."""
+        dict) and overrides (None: kept). TypeError naming a key that is neither a field of the
+        definition nor a slip rule key."""
         values = {**(rule.config_values() if isinstance(rule, SlipRule) else rule), **overrides}
-        known = {f.name for f in fields(cls)} | set(SlipRule.CONFIG_KEYS)
-        return cls().with_(**{k: v for k, v in values.items() if k in known and v is not None})
+        known = [f.name for f in fields(cls) if f.name != "slips"] + list(SlipRule.CONFIG_KEYS)
+        unknown = [k for k in values if k not in known]
+        if unknown:
+            raise TypeError(f"PairDefinition.for_run: unknown key {unknown[0]!r}; the keys are {', '.join(known)}")
+        return cls().with_(**{k: v for k, v in values.items() if v is not None})
 
     def with_(self, **changes) -> "PairDefinition":
         """A copy with fields changed; the slip rule's keys (SlipRule.CONFIG_KEYS) change ``slips``

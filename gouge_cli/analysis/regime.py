@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..io.layout import perm_text
 from .seedboot import seed_fraction, seed_median
 
 __all__ = ["wilson", "bootstrap_median", "regime_rows", "thesis_point", "REGIME_COLUMNS",
@@ -327,6 +328,6 @@ def thesis_point(kappa_c: float = 1e-5, eta: float = 1.43e-7, beta: float = 36.0
                  # "undrained systems always slip at a lower velocity" (Sec. 4.2): all 39
                  "slower": wilson(n, n)}
     text = ("De = l u0 / D at the undrained peak: l = 25 d (12.5-25), u0 = 7.53 V_s (5-15 V_s), "
-            f"V_s = {v_med:g} v0 (Table 3 median; {v_lo:g}-{v_hi:g}), D at kappa_c = {kappa_c:g} d^2 "
+            f"V_s = {v_med:g} v0 (Table 3 median; {v_lo:g}-{v_hi:g}), D at kappa_c = {perm_text(kappa_c)} d^2 "
             "and porosity 0.15 (0.12-0.20)")
     return ThesisPoint(de[0], de[1], de[2], fractions, n, text)

@@ -17,6 +17,7 @@ from typing import List, Optional
 import typer
 
 from ..io.filedoc import json_safe
+from .common import main_event
 
 
 def _fmt(value, digits: int = 4) -> str:
@@ -165,15 +166,6 @@ def _print_campaign(out, summary: dict, n_runs: int):
         out.print(line, highlight=False)
 
 
-def _main(main: str) -> str:
-    """Validate --main (exit 2 naming the option)."""
-    if main not in ("first", "largest"):
-        from .common import fail
-
-        fail(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
-    return main
-
-
 def register(app: typer.Typer) -> None:
     """Add the `analyze` and `plot` commands to ``app``."""
 
@@ -183,8 +175,8 @@ def register(app: typer.Typer) -> None:
         notch: bool = typer.Option(True, "--notch/--no-notch",
                                    help="notch-filter the layer's natural vibration out of μ_d(t)"),
         as_json: bool = typer.Option(False, "--json", help="machine-readable output (NaN as null)"),
-        main: str = typer.Option("first", "--main", help="compared event of each branch: first (the forked "
-                                 "slip) or largest"),
+        main: str = typer.Option("first", "--main", callback=main_event, help="compared event of each branch: "
+                                 "first (the forked slip) or largest"),
         wide: bool = typer.Option(False, "--wide", help="one table per section at its full width, past the terminal's edge if "
                               "need be (default: split to fit)"),
     ):
@@ -203,7 +195,7 @@ def register(app: typer.Typer) -> None:
         done, failed, full = [], [], False
         for run_dir in run_dirs:
             try:
-                analysis = analyze_run(run_dir, notch=notch, main=_main(main), write=False)
+                analysis = analyze_run(run_dir, notch=notch, main=main, write=False)
                 written = write_analysis(analysis)
             except (AnalysisError, DamagedFileError, OSError) as exc:
                 if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
@@ -253,7 +245,8 @@ def register(app: typer.Typer) -> None:
         slip: Optional[int] = typer.Option(None, "--slip", help="also draw slip N (and its fork, if any)"),
         out_dir: Optional[Path] = typer.Option(None, "--out", help="figure directory (default RUN/figures)"),
         notch: bool = typer.Option(True, "--notch/--no-notch", help="notch-filter μ_d(t)"),
-        main: str = typer.Option("first", "--main", help="compared event of each branch: first or largest"),
+        main: str = typer.Option("first", "--main", callback=main_event,
+                                 help="compared event of each branch: first or largest"),
     ):
         """PNG figures: run overview, last grain snapshot, pair types per permeability; with --slip N the
         slip and its Eq. 3 fit, μ_d(t), and for its fork the drained branch against every permeability.
@@ -262,6 +255,6 @@ def register(app: typer.Typer) -> None:
         from ..plots.make import describe_figure
         from .common import guarded, out
 
-        files = guarded(figures)(run_dir=run_dir, slip=slip, out_dir=out_dir, notch=notch, main=_main(main))
+        files = guarded(figures)(run_dir=run_dir, slip=slip, out_dir=out_dir, notch=notch, main=main)
         for path in files:
             out.print(f"{path}\n    {describe_figure(path)}", highlight=False)

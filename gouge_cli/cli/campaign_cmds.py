@@ -51,7 +51,8 @@ def register(app: typer.Typer):
                                                  "this (default: the spec's max_points, 10,000 unless set)"),
     ):
         """Run a parameter sweep (runs, or studies = run + forks of every slip) on Dask; idempotent."""
-        from ..workflows.campaign import results_root, run_campaign, status_lines, survey
+        from ..workflows.campaign import run_campaign
+        from ..workflows.campaign_survey import results_root, status_lines, survey
         from ..workflows.campaign_results import Results, merge as merge_results
         from ..workflows.campaign_spec import load_spec
         from ..workflows.executors import ClusterOptions
@@ -105,7 +106,7 @@ def register(app: typer.Typer):
         """Write the regime map (per seed, pooled, seed-level and per-pair intervals) and the onset-delay
         view from a table of pairs; nothing is simulated."""
         from ..errors import InputError
-        from ..workflows.campaign import spec_pairs
+        from ..workflows.campaign_tables import spec_pairs
         from ..workflows.regime_report import read_pairs, select, write_groups, write_regime
 
         conditions = {}

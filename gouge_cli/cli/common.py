@@ -35,6 +35,17 @@ def fail(message: str, code: int = EXIT_BAD_INPUT):
 
 
 
+def main_event(value: str) -> str:
+    """The ``--main`` options' callback: the value through MainEvent.check (analysis.pairs, the one
+    check), exit 2 naming the option otherwise."""
+    from ..analysis.pairs import MainEvent
+
+    try:
+        return MainEvent.check(value)
+    except ConfigError as exc:
+        fail(str(exc))
+
+
 def interactive() -> bool:
     """Whether a person at a terminal can answer a question (stdin is a terminal)."""
     return sys.stdin.isatty()

@@ -90,12 +90,13 @@ def register(app: typer.Typer) -> None:
         """MP4 of one slip, drained and undrained side by side from the same packing: force chains,
         pore pressure P/sigma on a fixed colour scale, time since onset, v_w/V_s with a moving marker."""
         from ..errors import AnalysisError, DamagedFileError
+        from ..io.layout import perm_text
         from ..plots.movie import make_movie
         from .common import fail, out as console
 
         try:
             command = shlex.join(["gouge", "movie", str(run_dir), "--slip", str(slip)]
-                                 + (["--perm", f"{perm:g}"] if perm is not None else [])
+                                 + (["--perm", perm_text(perm)] if perm is not None else [])
                                  + (["--out", str(out), "--force"] if out is not None else [])
                                  + (["--fps", str(fps)] if fps != 12 else []))
             path, frames = make_movie(run_dir, slip, perm, out, fps=fps, force=force,      # progress lines on stderr

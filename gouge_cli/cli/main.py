@@ -9,7 +9,7 @@ from typing import List, Optional
 import typer
 
 from ..config import build_config, dump_config, load_config, parse_overrides
-from .common import err, fail, guarded, out
+from .common import err, fail, guarded, main_event, out
 from ..errors import EXIT_INTERRUPTED
 
 __all__ = ["app", "main"]
@@ -83,8 +83,8 @@ def restart(
                                          help="stop each branch when its first slip ends (default)"),
     force: bool = typer.Option(False, "--force", help="run an existing branch of the same permeability (and "
                                "the drained branch) again; without it, --perm K adds branch K to an existing fork"),
-    main: str = typer.Option("first", "--main", help="compared event of each branch in pair.json: first "
-                             "(the forked slip) or largest"),
+    main: str = typer.Option("first", "--main", callback=main_event, help="compared event of each branch in "
+                             "pair.json: first (the forked slip) or largest"),
     quiet: bool = typer.Option(False, "--quiet", help="no progress output"),
     as_json: bool = typer.Option(False, "--json", help="print the whole record (branches and pairs) as JSON"),
 ):

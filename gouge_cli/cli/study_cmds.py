@@ -7,7 +7,7 @@ from typing import List, Optional
 
 import typer
 
-from .common import guarded
+from .common import guarded, main_event
 
 
 #: The study table's columns on the terminal (study/table.csv holds every column).
@@ -29,7 +29,8 @@ def register(app: typer.Typer) -> None:
         perm: List[float] = typer.Option([], "--perm", help="kappa_c [d^2] of the undrained branches; repeatable"),
         slips: Optional[str] = typer.Option(None, "--slips", help="slips to fork, e.g. 3-12 or 3,5,7 "
                                             "(default: every non-transient slip)"),
-        main: str = typer.Option("first", "--main", help="compared event of each branch: first or largest"),
+        main: str = typer.Option("first", "--main", callback=main_event,
+                                 help="compared event of each branch: first or largest"),
         jobs: Optional[int] = typer.Option(None, "--jobs", help="parallel branches (default: all cores)"),
         out_dir: Optional[Path] = typer.Option(None, "--out", help="loading-run directory for a config"),
         set_: List[str] = typer.Option([], "--set", help="config override for the loading run"),

@@ -54,6 +54,7 @@ from ..kernels import layout as L
 from typing import Any
 
 from ..errors import PhysicsError
+from ..io.layout import perm_text
 from .callbacks import Callback
 from .schedules import Every
 
@@ -115,7 +116,7 @@ def _fluid_hint(sim: Sim) -> str:
         return ""
     f = sim.config.fluid
     return (f"; with pore fluid, also lower fluid.step (now {f.step:g} t0, the period of the drag update); "
-            f"the coupling stiffens as fluid.permeability (now {f.permeability:g} d^2) falls and as "
+            f"the coupling stiffens as fluid.permeability (now {perm_text(f.permeability)} d^2) falls and as "
             f"fluid.filter_width (now {f.filter_width:g} d, the averaging width) narrows")
 
 
@@ -251,7 +252,7 @@ class FluidSubstepGuard:
                 f"FTCS bound {bound:.3g} t0 and needs {substeps} sub-steps per update (limit {self.limit})",
                 "use fluid.solver=implicit (unconditionally stable), or raise fluid.cell_size "
                 f"(now {sim.config.fluid.grid_spacing:g} d); the diffusivity grows with fluid.permeability "
-                f"(now {sim.config.fluid.permeability:g} d^2)", sim.state.time)
+                f"(now {perm_text(sim.config.fluid.permeability)} d^2)", sim.state.time)
 
 
 class Guards(Callback):

@@ -26,7 +26,7 @@ import h5py
 
 from ..config import format_override
 from ..errors import RunDirError
-from .layout import OWNED, RUN_FILE, RunLayout, runs_under
+from .layout import OWNED, RUN_FILE, RunLayout, perm_text, runs_under
 
 LOCK_NAME = ".gouge.lock"
 CONTINUE = "; continued by: "       # in a lock file: the command that continues the holder's work
@@ -222,7 +222,7 @@ def restart_command(run_dir: Path, slip: int, perms: list[float], overrides: dic
     ``overrides``: {dotted key: value} (config.parse_overrides), written back as ``--set`` strings."""
     args = ["gouge", "restart", str(run_dir), "--slip", str(slip)]
     for perm in perms:
-        args += ["--perm", f"{perm:g}"]
+        args += ["--perm", perm_text(perm)]       # as its branch folder spells it (perm_<perm_text>)
     for key, value in (overrides or {}).items():
         args += ["--set", format_override(key, value)]
     if duration is not None:

@@ -27,7 +27,8 @@ gradient of s is taken from the same deposit, grad s_c = -sum_k a_k dW_kc/dx_k
 differencing s between cells: only this one cancels the change of s when the
 packing slides rigidly through the grid.
 
-Arrays and indices: :mod:`gouge_cli.kernels.layout` (CR_* corner rows, M_* moments).
+Arrays and indices: :mod:`gouge_cli.kernels.layout` (CR_* corner rows, M_* moments). One grain's
+in-domain area and cell weights: :mod:`gouge_cli.kernels.deposit_weights` (shared with the drag).
 """
 
 import math
@@ -38,116 +39,9 @@ from numba import njit, prange
 from . import NUMBA_CACHE
 from .layout import (CELL_BITS, CELL_CODE, CELL_OUTSIDE, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ, CR_U, CR_W,
                      DEPOSIT_GROUPS, M_FLAG, M_G, M_S, M_U, M_W, N_MOMENTS)
+from .deposit_weights import NEAR_PLANE, cell_weights, corner_shares, grain_area, near_side_area
 from .lanes import add2, add4, add4_scaled
 from .step import closed_velocity
-
-
-NEAR_PLANE = 1e-8      # |h| <= NEAR_PLANE R: a disc centred on a plane (in_domain_area, _near_side)
-
-
-@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def _near_side(h, radius):
-    """Area [d^2] of a disc on its centre's side of a line at signed distance h, for |h| <=
-    NEAR_PLANE radius: R (pi R/2 + 2h), the series of R^2 (pi - acos u + u sqrt(1 - u^2)), u = h/R,
-    to first order; the next term, R^2 u^3/3, is below 4e-25 R^2, far below round-off. Without
-    calls, branches or a division, so that the vector loop of _corners_range takes the wall
-    grains (centred on their plane to round-off: |h| ~ 1e-13 R) with in_domain_area's bits."""
-    return radius * (0.5 * math.pi * radius + 2.0 * h)
-
-
-@njit(cache=NUMBA_CACHE, error_model="numpy")
-def segment_area(h, radius):
-    """Area of a disc beyond a line at signed distance h from its centre.
-
-    h > 0: the centre is on the kept side. Returns 0 for h >= radius and
-    pi radius^2 for h <= -radius; R^2 (a - sin a)/2 with a the subtended
-    angle, by its series for small a (no cancellation near tangency).
-    """
-    if h >= radius:
-        return 0.0
-    if h <= -radius:
-        return math.pi * radius * radius
-    angle = 2.0 * math.atan2(math.sqrt((radius - h) * (radius + h)), h)
-    if angle < 0.1:
-        a2 = angle * angle
-        angle_minus_sine = angle * a2 / 6.0 * (1.0 - a2 / 20.0 * (1.0 - a2 / 42.0 * (1.0 - a2 / 72.0)))
-    else:
-        angle_minus_sine = angle - math.sin(angle)
-    return 0.5 * radius * radius * angle_minus_sine
-
-
-@njit(cache=NUMBA_CACHE, error_model="numpy")
-def in_domain_area(z, radius, z_bot, z_top):
-    """Area [d^2] of a disc (centre height z) between the planes z_bot and z_top.
-
-    The area above z_bot minus the area above z_top, each from the small
-    segment side so that a nearly tangent plane loses no precision, or for a
-    plane through the centre to within NEAR_PLANE R (a wall grain) by _near_side.
-    """
-    full = math.pi * radius * radius
-    h = z - z_bot
-    if abs(h) <= NEAR_PLANE * radius:
-        above_bot = _near_side(h, radius)
-    else:
-        above_bot = full - segment_area(h, radius) if h >= 0.0 else segment_area(-h, radius)
-    h = z_top - z
-    if abs(h) <= NEAR_PLANE * radius:
-        above_top = _near_side(-h, radius)
-    else:
-        above_top = segment_area(h, radius) if h >= 0.0 else full - segment_area(-h, radius)
-    area = above_bot - above_top
-    if area < 0.0:
-        return 0.0
-    return area
-
-
-@njit(cache=NUMBA_CACHE, error_model="numpy")
-def grain_area(z, radius, z_bot, z_top):
-    """In-domain area [d^2] with a fast path for a grain clear of both planes."""
-    if z - z_bot >= radius and z_top - z >= radius:
-        return math.pi * radius * radius
-    return in_domain_area(z, radius, z_bot, z_top)
-
-
-@njit(cache=NUMBA_CACHE, error_model="numpy")
-def cell_weights(x, z, inv_dx, inv_dz, z_bot, nx, nz):
-    """Bilinear (cloud-in-cell) weights of a point; inv_dx = 1/dx, inv_dz = 1/dz.
-
-    Returns (i0, i1, j0, fx, fz, slope_z): the point spreads (1-fx)(1-fz) on
-    (i0, j0), fx(1-fz) on (i1, j0), (1-fx) fz on (i0, j0+1) and fx fz on
-    (i1, j0+1). Periodic in x; in z a point outside the span of cell centres puts
-    all its weight on the nearest boundary cell, where the weights do not vary
-    with z: slope_z = d fz / dz is inv_dz inside and 0 there (a non-finite z
-    also lands there, so indices stay in range). Requires nz >= 2.
-    """
-    xi = x * inv_dx - 0.5
-    fi = math.floor(xi)
-    fx = xi - fi
-    i0 = int(fi)
-    if i0 < 0 or i0 >= nx:
-        i0 = i0 % nx
-    i1 = i0 + 1
-    if i1 == nx:
-        i1 = 0
-    zeta = (z - z_bot) * inv_dz - 0.5
-    fj = math.floor(zeta)
-    if fj >= nz - 1:
-        return i0, i1, nz - 2, fx, 1.0, 0.0
-    if fj >= 0.0:
-        return i0, i1, int(fj), fx, zeta - fj, inv_dz
-    return i0, i1, 0, fx, 0.0, 0.0
-
-
-@njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
-def corner_shares(area, i0, i1, j0, fx, fz, nz):
-    """Flat indices of the four cells around a point and the area each receives (same weights
-    for the deposit and the drag): (c00, c10, c01, c11, a00, a10, a01, a11)."""
-    c00 = np.uint64(i0 * nz + j0)
-    c10 = np.uint64(i1 * nz + j0)
-    a0 = area * (1.0 - fz)
-    a1 = area * fz
-    return (c00, c10, c00 + np.uint64(1), c10 + np.uint64(1),
-            a0 * (1.0 - fx), a0 * fx, a1 * (1.0 - fx), a1 * fx)
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
@@ -374,7 +268,7 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
     """corners[:, first:last]: grain_area, cell_weights and corner_shares, the same values.
     A loop without calls or branches (SIMD) for grains with x in [dx/2 - Lx, Lx + dx/2) (one
     periodic wrap at most) that are, for each plane, clear of it or centred on it to within
-    NEAR_PLANE R (the wall grains: in_domain_area with _near_side); it marks the
+    NEAR_PLANE R (the wall grains: in_domain_area with near_side_area); it marks the
     others (d fz/dz = -1), which then take the scalar path (grain_area, cell_weights), and
     skips that path when there are none."""
     inv_dx = nx / Lx
@@ -391,7 +285,7 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
         full = math.pi * r * r
         hb = zk - z_bot
         ht = z_top - zk
-        area = (full if hb >= r else _near_side(hb, r)) - (0.0 if ht >= r else _near_side(-ht, r))
+        area = (full if hb >= r else near_side_area(hb, r)) - (0.0 if ht >= r else near_side_area(-ht, r))
         xi = x[k] * inv_dx - 0.5
         fi = np.floor(xi)        # (a float: math.floor returns an int, a conversion AVX2 cannot vectorise)
         fx = xi - fi

@@ -22,7 +22,7 @@ from numba import njit, prange
 
 from . import NUMBA_CACHE
 from .layout import CELL_BITS, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ
-from .deposit import cell_weights, corner_shares, grain_area
+from .deposit_weights import cell_weights, corner_shares, grain_area
 from .lanes import bilinear_pairs
 from .pressure import cells, flat, flat_columns
 

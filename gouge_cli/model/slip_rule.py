@@ -40,18 +40,21 @@ Rule (velocity thresholds are multiples of the loading velocity ``V_s``):
   whose peak is below ``min_subevent_fraction * peak_velocity`` are dropped.
 
 :class:`SlipDetector` applies the same rule one sample at a time and gives
-exactly the events of :func:`detect_slips` (after :meth:`SlipDetector.flush`).
+exactly the events of :func:`detect_slips` (after :meth:`SlipDetector.flush`). The records (Slip,
+SubEvent) and the event both build are in :mod:`gouge_cli.model.slip_events`.
 """
 
 from __future__ import annotations
 
 import copy
 import math
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, fields, replace
 
 import numpy as np
 
 from ..config import SlipsConfig
+from .slip_events import (OpenEvent, Slip, SubEvent, crossing_fraction, finalize, lerp, merge_events, nanmin2, sub_list,
+                          sub_start, sub_step)
 
 __all__ = [
     "SlipRule",
@@ -64,47 +67,6 @@ __all__ = [
 ]
 
 _NAN = float("nan")
-
-
-@dataclass(frozen=True)
-class SubEvent:
-    """One local velocity maximum inside a slip (index: its series sample, -1 where not stored)."""
-
-    index: int
-    time: float
-    velocity: float
-
-
-@dataclass(frozen=True)
-class Slip:
-    """One detected slip event (dimensionless units; indices into the series). A run's catalog
-    keeps it as io.slipcatalog.SlipEntry, this record with its number and checkpoint."""
-
-    onset_index: int
-    onset_time: float
-    end_index: int
-    end_time: float
-    duration: float
-    slip: float
-    peak_velocity: float
-    peak_index: int
-    peak_time: float
-    mean_velocity: float
-    static_strength: float
-    tau_onset: float
-    tau_min: float
-    stress_drop: float
-    porosity_change: float
-    subevents: list[SubEvent] = field(default_factory=list)
-    n_merged: int = 1
-
-    @property
-    def n_subevents(self) -> int:
-        return len(self.subevents)
-
-    def to_dict(self) -> dict:
-        """Plain-dict form (sub-events as a list of dicts)."""
-        return asdict(self)
 
 
 @dataclass
@@ -198,152 +160,6 @@ class SlipRule:
         return cls(**{f.name: p[f.name] for f in fields(cls) if f.name in p})
 
 
-@dataclass
-class _SubTracker:
-    """Sub-event tracker of one raw event: the sub-events done ([index, time, velocity] each), the
-    current peak, and the lowest velocity since it (None: still rising)."""
-
-    done: list
-    peak_index: int
-    peak_time: float
-    peak_velocity: float
-    min_velocity: float | None = None
-
-    # the one- and two-letter keys of checkpoints written before these records were typed
-    OLD_KEYS = {"pi": "peak_index", "pt": "peak_time", "pv": "peak_velocity", "mv": "min_velocity"}
-
-    @classmethod
-    def from_state(cls, d: dict) -> "_SubTracker":
-        return cls(**{cls.OLD_KEYS.get(k, k): v for k, v in d.items()})
-
-
-@dataclass
-class _Event:
-    """A raw event (lo crossings of one run above lo) or several merged ones, while it is built."""
-
-    onset_index: int
-    onset_time: float
-    onset_x: float
-    onset_porosity: float
-    tau_onset: float
-    strength: float
-    peak_velocity: float
-    peak_index: int
-    peak_time: float
-    tau_min: float
-    n_merged: int = 1
-    end_index: int = -1
-    end_time: float = _NAN
-    end_x: float = _NAN
-    end_porosity: float = _NAN
-    subs: list = field(default_factory=list)
-    # streaming detector only: whether v reached hi, the sub-event tracker while the event runs,
-    # the lowest tau/sigma in the gap after it (merging)
-    triggered: bool = True
-    sub: _SubTracker | None = None
-    gap_min: float = _NAN
-
-    OLD_KEYS = {"a": "onset_index", "b": "end_index", "t_on": "onset_time", "x_on": "onset_x",
-                "phi_on": "onset_porosity", "t_end": "end_time", "x_end": "end_x", "phi_end": "end_porosity",
-                "tau_on": "tau_onset", "peak_v": "peak_velocity", "peak_i": "peak_index", "peak_t": "peak_time"}
-
-    def state(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_state(cls, d: dict | None) -> "_Event | None":
-        if d is None:
-            return None
-        values = {cls.OLD_KEYS.get(k, k): v for k, v in d.items()}
-        if values.get("sub") is not None:
-            values["sub"] = _SubTracker.from_state(values["sub"])
-        return cls(**values)
-
-
-def _lerp(y0: float, y1: float, f: float) -> float:
-    return y0 + f * (y1 - y0)
-
-
-def _crossing_fraction(v0: float, v1: float, level: float) -> float:
-    return (level - v0) / (v1 - v0)
-
-
-def _sub_start(i: int, t: float, v: float) -> _SubTracker:
-    return _SubTracker([], i, t, v, None)
-
-
-def _sub_step(s: _SubTracker, i: int, t: float, v: float, hi: float, frac: float) -> None:
-    """Advance the sub-event tracker ``s`` by one sample (shared by both detectors)."""
-    m = s.min_velocity
-    if m is None:
-        if v > s.peak_velocity:
-            s.peak_index, s.peak_time, s.peak_velocity = i, t, v
-        else:
-            s.min_velocity = v
-        return
-    low = min(s.peak_velocity, v)
-    if low >= hi and (m < frac * low or m < hi):
-        s.done.append([s.peak_index, s.peak_time, s.peak_velocity])
-        s.peak_index, s.peak_time, s.peak_velocity, s.min_velocity = i, t, v, None
-    elif v > s.peak_velocity:
-        s.peak_index, s.peak_time, s.peak_velocity, s.min_velocity = i, t, v, None
-    elif v < m:
-        s.min_velocity = v
-
-
-def _sub_list(s: _SubTracker) -> list[list]:
-    return s.done + [[s.peak_index, s.peak_time, s.peak_velocity]]
-
-
-def _nanmin2(a: float, b: float) -> float:
-    if math.isnan(a):
-        return b
-    if math.isnan(b):
-        return a
-    return a if a <= b else b
-
-
-def _merge(p: _Event, r: _Event, gap_min: float) -> _Event:
-    """Merge raw event ``r`` into pending event ``p``."""
-    out = replace(p)
-    if r.peak_velocity > p.peak_velocity:
-        out.peak_velocity, out.peak_index, out.peak_time = r.peak_velocity, r.peak_index, r.peak_time
-    out.tau_min = _nanmin2(_nanmin2(p.tau_min, gap_min), r.tau_min)
-    out.subs = p.subs + r.subs
-    out.end_index, out.end_time, out.end_x, out.end_porosity = r.end_index, r.end_time, r.end_x, r.end_porosity
-    out.n_merged = p.n_merged + r.n_merged
-    return out
-
-
-def _finalize(acc: _Event, rule: SlipRule) -> Slip | None:
-    duration = acc.end_time - acc.onset_time
-    slip = acc.end_x - acc.onset_x
-    if duration < rule.min_duration or slip < rule.min_slip:
-        return None
-    keep = rule.min_subevent_fraction * acc.peak_velocity
-    subs = [SubEvent(int(i), float(t), float(v)) for i, t, v in acc.subs if v >= keep]
-    tau_on = acc.tau_onset
-    return Slip(
-        onset_index=int(acc.onset_index),
-        onset_time=float(acc.onset_time),
-        end_index=int(acc.end_index),
-        end_time=float(acc.end_time),
-        duration=float(duration),
-        slip=float(slip),
-        peak_velocity=float(acc.peak_velocity),
-        peak_index=int(acc.peak_index),
-        peak_time=float(acc.peak_time),
-        mean_velocity=float(slip / duration) if duration > 0 else _NAN,
-        static_strength=float(acc.strength),
-        tau_onset=float(tau_on),
-        tau_min=float(acc.tau_min),
-        stress_drop=float(tau_on - acc.tau_min),
-        porosity_change=float(acc.end_porosity - acc.onset_porosity),
-        subevents=subs,
-        n_merged=int(acc.n_merged),
-    )
-
-
 def _nan_extreme(a: np.ndarray, fn) -> float:
     a = a[~np.isnan(a)]
     return float(fn(a)) if a.size else _NAN
@@ -404,7 +220,7 @@ def _detect(rule: SlipRule, t, v_wall, x_wall, tau_over_sigma, porosity) -> list
     above = np.concatenate(([False], v >= lo, [False]))
     edges = np.flatnonzero(np.diff(above.astype(np.int8)))
     starts, stops = edges[0::2], edges[1::2] - 1
-    raws: list[_Event] = []
+    raws: list[OpenEvent] = []
     window_start = 0
     for a, b in zip(starts, stops):
         if a == 0 or b == n - 1:
@@ -412,43 +228,43 @@ def _detect(rule: SlipRule, t, v_wall, x_wall, tau_over_sigma, porosity) -> list
         seg = v[a:b + 1]
         if seg.max() < hi:
             continue
-        fa = _crossing_fraction(v[a - 1], v[a], lo)
-        fb = _crossing_fraction(v[b], v[b + 1], lo)
+        fa = crossing_fraction(v[a - 1], v[a], lo)
+        fb = crossing_fraction(v[b], v[b + 1], lo)
         if rule.strength_window is None:
             strength = _nan_extreme(tau[window_start:a + 1], np.max)
         else:
             j0 = int(np.searchsorted(t, t[a] - rule.strength_window, side="left"))
             strength = _nan_extreme(tau[j0:a + 1], np.max)
         k = int(np.argmax(seg))
-        sub = _sub_start(int(a), float(t[a]), float(v[a]))
+        sub = sub_start(int(a), float(t[a]), float(v[a]))
         for j in range(a + 1, b + 1):
-            _sub_step(sub, j, float(t[j]), float(v[j]), hi, rule.subevent_fraction)
-        raws.append(_Event(
+            sub_step(sub, j, float(t[j]), float(v[j]), hi, rule.subevent_fraction)
+        raws.append(OpenEvent(
             onset_index=int(a), end_index=int(b),
-            onset_time=_lerp(float(t[a - 1]), float(t[a]), fa),
-            onset_x=_lerp(float(x[a - 1]), float(x[a]), fa),
-            onset_porosity=_lerp(float(phi[a - 1]), float(phi[a]), fa),
-            end_time=_lerp(float(t[b]), float(t[b + 1]), fb),
-            end_x=_lerp(float(x[b]), float(x[b + 1]), fb),
-            end_porosity=_lerp(float(phi[b]), float(phi[b + 1]), fb),
+            onset_time=lerp(float(t[a - 1]), float(t[a]), fa),
+            onset_x=lerp(float(x[a - 1]), float(x[a]), fa),
+            onset_porosity=lerp(float(phi[a - 1]), float(phi[a]), fa),
+            end_time=lerp(float(t[b]), float(t[b + 1]), fb),
+            end_x=lerp(float(x[b]), float(x[b + 1]), fb),
+            end_porosity=lerp(float(phi[b]), float(phi[b + 1]), fb),
             tau_onset=float(tau[a]),
             strength=strength,
             peak_velocity=float(seg[k]), peak_index=int(a + k), peak_time=float(t[a + k]),
             tau_min=_nan_extreme(tau[a:b + 2], np.min),
-            subs=_sub_list(sub),
+            subs=sub_list(sub),
             n_merged=1,
         ))
         window_start = b + 1
 
-    merged: list[_Event] = []
+    merged: list[OpenEvent] = []
     for r in raws:
         if merged and r.onset_time - merged[-1].end_time <= rule.merge_gap:
             prev = merged[-1]
             gap_min = _nan_extreme(tau[prev.end_index + 2:r.onset_index], np.min)
-            merged[-1] = _merge(prev, r, gap_min)
+            merged[-1] = merge_events(prev, r, gap_min)
         else:
             merged.append(r)
-    return [s for s in (_finalize(m, rule) for m in merged) if s is not None]
+    return [s for s in (finalize(m, rule) for m in merged) if s is not None]
 
 
 class SlipDetector:
@@ -484,8 +300,8 @@ class SlipDetector:
         self.prev: list[float] | None = None
         self.smax = _NAN
         self.sdeque: list[list[float]] = []
-        self.raw: _Event | None = None
-        self.pending: _Event | None = None
+        self.raw: OpenEvent | None = None
+        self.pending: OpenEvent | None = None
 
     def state_dict(self) -> dict:
         """Deep copy of the whole state as plain Python objects."""
@@ -502,7 +318,7 @@ class SlipDetector:
         s = copy.deepcopy(state)
         det.n, det.armed, det.prev = s["n"], s["armed"], s["prev"]
         det.smax, det.sdeque = s["smax"], s["sdeque"]
-        det.raw, det.pending = _Event.from_state(s["raw"]), _Event.from_state(s["pending"])
+        det.raw, det.pending = OpenEvent.from_state(s["raw"]), OpenEvent.from_state(s["pending"])
         return det
 
     def _strength_push(self, t: float, tau: float) -> None:
@@ -545,14 +361,14 @@ class SlipDetector:
 
         if raw is not None and v < lo:
             t0, x0, v0, _, phi0 = self.prev
-            fb = _crossing_fraction(v0, v, lo)
-            raw.end_index, raw.end_time, raw.end_x = i - 1, _lerp(t0, t, fb), _lerp(x0, x, fb)
-            raw.end_porosity, raw.tau_min = _lerp(phi0, phi, fb), _nanmin2(raw.tau_min, tau)
+            fb = crossing_fraction(v0, v, lo)
+            raw.end_index, raw.end_time, raw.end_x = i - 1, lerp(t0, t, fb), lerp(x0, x, fb)
+            raw.end_porosity, raw.tau_min = lerp(phi0, phi, fb), nanmin2(raw.tau_min, tau)
             self.raw = None
             if raw.triggered:
-                raw.subs, raw.sub = _sub_list(raw.sub), None
+                raw.subs, raw.sub = sub_list(raw.sub), None
                 if self.pending is not None:
-                    self.pending = _merge(self.pending, raw, self.pending.gap_min)
+                    self.pending = merge_events(self.pending, raw, self.pending.gap_min)
                 else:
                     self.pending = raw
                 self.pending.gap_min = _NAN
@@ -561,20 +377,20 @@ class SlipDetector:
             raw.triggered = raw.triggered or v >= hi
             if v > raw.peak_velocity:
                 raw.peak_velocity, raw.peak_index, raw.peak_time = v, i, t
-            raw.tau_min = _nanmin2(raw.tau_min, tau)
-            _sub_step(raw.sub, i, t, v, hi, rule.subevent_fraction)
+            raw.tau_min = nanmin2(raw.tau_min, tau)
+            sub_step(raw.sub, i, t, v, hi, rule.subevent_fraction)
 
         self._strength_push(t, tau)
 
         if self.raw is None and raw is None and self.armed and v >= lo:
             t0, x0, v0, _, phi0 = self.prev
-            fa = _crossing_fraction(v0, v, lo)
-            self.raw = _Event(
-                onset_index=i, onset_time=_lerp(t0, t, fa), onset_x=_lerp(x0, x, fa),
-                onset_porosity=_lerp(phi0, phi, fa), tau_onset=tau,
+            fa = crossing_fraction(v0, v, lo)
+            self.raw = OpenEvent(
+                onset_index=i, onset_time=lerp(t0, t, fa), onset_x=lerp(x0, x, fa),
+                onset_porosity=lerp(phi0, phi, fa), tau_onset=tau,
                 strength=self._strength(t), triggered=v >= hi,
                 peak_velocity=v, peak_index=i, peak_time=t, tau_min=tau,
-                sub=_sub_start(i, t, v), n_merged=1,
+                sub=sub_start(i, t, v), n_merged=1,
             )
         if v < lo:
             self.armed = True
@@ -584,7 +400,7 @@ class SlipDetector:
         if pend is None:
             return None
         if i > pend.end_index + 1:
-            pend.gap_min = _nanmin2(pend.gap_min, tau)
+            pend.gap_min = nanmin2(pend.gap_min, tau)
         cand = self.raw
         if cand is None:
             ready = t - pend.end_time > gap
@@ -593,12 +409,12 @@ class SlipDetector:
         if not ready:
             return None
         self.pending = None
-        return _finalize(pend, rule)
+        return finalize(pend, rule)
 
     def flush(self) -> Slip | None:
         """Finish the event waiting at the end of the series (if any)."""
         pend, self.pending = self.pending, None
-        return None if pend is None else _finalize(pend, self.rule)
+        return None if pend is None else finalize(pend, self.rule)
 
 
 def recurrence_intervals(slips: list[Slip]) -> np.ndarray:

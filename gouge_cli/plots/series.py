@@ -14,7 +14,7 @@ import numpy as np
 
 from ..analysis.catalog import fit_slip, series_envelope, slip_window, SlipFriction
 from ..analysis.forkpairs import ForkPair
-from ..io.layout import branch_perm_text
+from ..io.layout import branch_perm_text, perm_text
 from ..io.runreader import RunReader
 from ..io.slipcatalog import SlipEntry
 from ..units import ResultUnits
@@ -37,7 +37,7 @@ _QUANTITIES = (("tau_over_sigma", "tau"), ("wall_vx", "velocity"), ("porosity", 
 
 def _params_line(reader: RunReader) -> str:
     i = reader.info
-    fluid = f", κ_c = {i.permeability:g} d²" if i.permeability is not None else ", dry"
+    fluid = f", κ_c = {perm_text(i.permeability)} d²" if i.permeability is not None else ", dry"
     return f"N = {i.n_grains} grains, k = {i.k:g}, V_s = {i.V_s:g}, σ = {i.sigma:g}{fluid}"
 
 
@@ -250,8 +250,6 @@ def branch_colors(perms) -> dict:
 
 def branch_label(row: dict) -> str:
     """Legend text of an undrained branch: kappa_c, its Deborah number and drainage regime."""
-    from ..io.layout import perm_text
-
     de = row.get("deborah_slip")
     de = de if de is not None and np.isfinite(de) else row.get("deborah_mean", float("nan"))
     return f"κ_c = {perm_text(row['permeability'])} d², De = {de:.3g} ({row['regime']})"
@@ -302,8 +300,6 @@ def comparison_figure(drained: RunReader, branches: list, path: Path) -> Path:
     top.tick_params(labelsize=8)
     tidy(axes)
     slip = int(info.fork_slip) if info.fork_slip is not None else 0
-    from ..io.layout import perm_text
-
     perms = ", ".join(perm_text(p.row["permeability"]) for _, p in branches)
     title = f"Slip {slip}: drained branch and every permeability (κ_c = {perms} d²) from the same packing"
     fig.suptitle(title, fontsize=10.5, y=0.985)

@@ -15,18 +15,16 @@ share of an undrained step, the contact pass on the first m grains of the larges
 projected wall time of one loading cycle and of one slip of the thesis Run 24 scene
 (docs/physics/units.md, "Scale of real work") at the rates measured here. Where LAMMPS cannot
 be timed (no ``lmp``, no deck, a failed run), the results say why under ``lammps``.
+
+One job a module: the scene and its cache (bench_scene.py), the profiles (bench_profile.py),
+LAMMPS (bench_lammps.py); this one times the steps and assembles :class:`BenchResult`.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
-import math
 import os
-import re
 import resource
-import shutil
-import subprocess
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -34,21 +32,17 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from .. import __version__
 from ..io import provenance
-from ..config import build_config, find_config, load_config
+from ..config import find_config, load_config
 from ..kernels import layout as L
-from ..kernels import step as K
 from ..kernels.probe import stream_probe
 from ..driver.guards import check
-from ..driver.compaction import compact
 from ..driver.simulation import Simulation
 from ..model.timestep import choose_dt, slip_duration
+from .bench_lammps import LAMMPS_INSTALL, time_lammps
+from .bench_profile import allocations_per_step, footprint_profile, profile_fluid, profile_step
+from .bench_scene import bench_config, prepare, state_bytes
 
-CACHE = Path("runs/bench/cache")
-DRY_SOURCES = ("kernels/step.py", "kernels/neighbors.py", "kernels/contact.py", "kernels/reorder.py", "kernels/layout.py",
-               "model/packing.py", "model/params.py", "driver/simulation.py", "model/state.py", "config.py",
-               "model/timestep.py", "model/portable.py")     # (and bench_config below)
 RUN24_CYCLE = 1.6e7     # [t0] one loading cycle of thesis Run 24 (docs/physics/units.md)
 
 
@@ -128,55 +122,6 @@ def cpu_mhz() -> float | None:
     return None
 
 
-def bench_config(n_grains: int, dt: float, skin: float, permeability: float | None = None, solver: str = "auto"):
-    fluid = {"permeability": permeability, "solver": solver} if permeability else None
-    return build_config({
-        "fluid": fluid,
-        "name": f"bench{n_grains}",
-        "packing": {"n_grains": n_grains},
-        "loading": {"normal_stress": 3e-4, "spring_constant": 1e-2, "velocity": 1e-3},
-        "numerics": {"dt": dt, "skin": skin},
-        "compaction": {"min_time": 200.0, "max_time": 4000.0, "wall_velocity_tol": 1.0},
-    })
-
-
-def state_bytes(sim: Simulation) -> int:
-    s = sim.state
-    return sum(v.nbytes for v in vars(s).values() if isinstance(v, np.ndarray))
-
-
-def dry_digest() -> str:
-    """Hash of the sources a pre-sheared dry state depends on (the cache key)."""
-    h = hashlib.sha256(__version__.encode())
-    for name in DRY_SOURCES:
-        h.update((Path(__file__).resolve().parents[1] / name).read_bytes())
-    return h.hexdigest()[:16]
-
-
-def prepare(n_grains: int, dt: float, skin: float, cache: Path | None = None) -> tuple[Simulation, dict]:
-    """Compacted and pre-sheared scene, and its state arrays for identical restarts; read from
-    / written to `cache` (a folder) when given."""
-    path = None
-    if cache is not None:
-        path = Path(cache) / f"prep_{n_grains}_{dt:g}_{skin:g}_{dry_digest()}.npz"
-        if path.is_file():
-            with np.load(path) as saved:
-                arrays = {k: saved[k] for k in saved.files}
-            sim = Simulation(bench_config(n_grains, dt, skin), arrays=arrays)
-            return sim, sim.state.arrays()
-    sim = Simulation(bench_config(n_grains, dt, skin))
-    compact(sim)
-    sim.advance(int(80 * sim.state.width))
-    check(sim)
-    start = sim.state.arrays()
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp.npz")
-        np.savez(tmp, **start)
-        os.replace(tmp, path)
-    return sim, start
-
-
 def time_gouge(sim: Simulation, start: dict, threads: int | list[int], steps: int, repeats: int,
                probe_bytes: int = 0) -> tuple[dict[int, list[float]], dict[int, dict], dict[int, list[float]]]:
     """Grain-steps per second of `steps` steps from `start`, `repeats` times per thread count.
@@ -239,51 +184,6 @@ def paired_scaling(rates: dict[int, list[float]]) -> dict[int, float]:
     return {t: median_ratio(r, rates[base]) for t, r in rates.items() if t != base}
 
 
-LAMMPS_INSTALL = "apt-get install lammps (and openmpi-bin for 2+ ranks); or build LAMMPS with its GRANULAR package"
-
-
-def lammps_script() -> Path | None:
-    """The deck's driver: $GOUGE_LAMMPS_BENCH, else benchmarks/lammps/run.sh of this checkout."""
-    candidates = [os.environ.get("GOUGE_LAMMPS_BENCH", ""),
-                  Path(__file__).resolve().parents[2] / "benchmarks" / "lammps" / "run.sh"]
-    for c in candidates:
-        if c and Path(c).is_file():
-            return Path(c)
-    return None
-
-
-def lammps_missing(ranks: int = 1) -> str | None:
-    """Why LAMMPS cannot be timed here (None when it can): no deck, no `lmp`, no `mpirun`."""
-    if lammps_script() is None:
-        return ("the LAMMPS deck benchmarks/lammps/run.sh is not in this installation "
-                "(run from a checkout, or set GOUGE_LAMMPS_BENCH to its path)")
-    if shutil.which("lmp") is None:
-        return f"lmp is not on PATH: {LAMMPS_INSTALL}"
-    if ranks > 1 and shutil.which("mpirun") is None:
-        return f"mpirun is not on PATH (needed for {ranks} ranks): apt-get install openmpi-bin"
-    return None
-
-
-def time_lammps(n_grains: int, ranks: int, steps: int, dt: float, skin: float,
-                style: str) -> tuple[float | None, str | None]:
-    """(grain-steps per second, None), or (None, why LAMMPS gave no rate)."""
-    reason = lammps_missing(ranks)
-    if reason:
-        return None, reason
-    try:
-        proc = subprocess.run(["bash", str(lammps_script()), str(n_grains), str(ranks), str(steps), str(dt),
-                               str(skin), style], capture_output=True, text=True, timeout=1800)
-    except subprocess.TimeoutExpired:
-        return None, "LAMMPS took more than 30 minutes"
-    match = re.search(r"grain_steps_per_s=([\d.eE+-]+)", proc.stdout)
-    if match:
-        return float(match.group(1)), None
-    lines = [line.strip() for line in (proc.stderr + "\n" + proc.stdout).splitlines() if line.strip()]
-    errors = [line for line in lines if line.startswith("ERROR")]       # LAMMPS's own, before mpirun's
-    shown = errors[:2] or lines[-3:]
-    return None, f"LAMMPS failed (exit {proc.returncode}): {' | '.join(shown) or 'no output'}"
-
-
 def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability: float, threads: int,
                 steps: int, repeats: int, solver: str = "auto") -> dict:
     """Undrained (fluid.solver `solver`, kappa_c = permeability) vs dry from the same state: rates and the
@@ -315,184 +215,6 @@ def fluid_share(n_grains: int, start: dict, dt: float, skin: float, permeability
             "rate_dry": dry_rate, "rate_undrained": wet_rate, "fluid_share": 1.0 - wet_rate / dry_rate,
             "fluid_share_best": 1.0 - max(rates["undrained"]) / max(rates["dry"]),
             "fluid_share_paired": 1.0 - median_ratio(rates["undrained"], rates["dry"])}
-
-
-def profile_fluid(n_grains: int, start: dict, dt: float, skin: float, permeability: float, threads: int,
-                  calls: int = 30) -> dict:
-    """Microseconds of one fluid update's parts on the undrained scene (kernels.fluid_update), best
-    of 3 x `calls`: the deposit (with the owed half kick and, on one thread, in plain loops, as in
-    the running loop), the grid solve
-    (serial on any thread count; P and the fluid state restored before each call) and the drag."""
-    from ..kernels import fluid_update as F
-
-    sim = Simulation(bench_config(n_grains, dt, skin, permeability), arrays=start)
-    sim.threads = threads
-    numba.set_num_threads(threads)
-    sim.advance(2 * sim.fluid_interval)
-    s, fl = sim.state, sim.fluid.record()
-    z_bot, z_top = sim.wall_planes()[0], float(s.wall[L.W_Z])
-    dt_f = sim.fluid_interval * sim.dt
-    kick = (True, s.force_x, s.force_z, s.inv_mass, s.body, 0.5 * sim.dt, sim.params[L.BG_DAMPING],
-            s.wall[L.W_VX], s.wall[L.W_VZ])
-    fstate, pressure = fl.state.copy(), fl.pressure.copy()
-
-    def reset():
-        fl.state[:] = fstate
-        fl.pressure[:] = pressure
-
-    def begin():
-        F.fluid_begin(s.x, s.z, s.vx, s.vz, s.radius, s.n, s.width, z_bot, z_top, dt_f, fl, kick, threads <= 1)
-
-    def solve():
-        F.fluid_solve(s.width, z_bot, z_top, dt_f, fl)
-
-    out = {"n_grains": n_grains, "threads": threads, "dt": dt, "grid": list(fl.pressure.shape),
-           "deposit": best_seconds(begin, calls, 3) * 1e6,          # (reads neither P nor the solver state)
-           "solve": best_seconds(solve, calls, 3, reset) * 1e6,
-           "drag": best_seconds(lambda: F.fluid_drag(s.n, s.width, fl, *sim.drag, 0), calls, 3) * 1e6,
-           "cg_iterations": float(fl.state[L.S_ITERATIONS]),
-           "explicit": bool(fl.state[L.S_EXPLICIT_UPDATES] > fstate[L.S_EXPLICIT_UPDATES]),
-           "solver": sim.config.fluid.solver}
-    out["update"] = out["deposit"] + out["solve"] + out["drag"]
-    return out
-
-
-def allocations_per_step(sim: Simulation, start: dict, threads: int, steps: int = 400) -> float | None:
-    """numba runtime allocations per step: advance(steps) and advance(4 steps) from the same
-    state allocate the same fixed count per call (array arguments), so the difference / 3
-    steps is what the step loop allocates. None if NRT statistics are unavailable."""
-    try:
-        from numba.core.runtime import nrt
-        nrt._nrt.memsys_enable_stats()
-    except Exception:   # noqa: BLE001 - internal numba API; report unavailable instead
-        return None
-    sim.threads = threads
-    counts = []
-    for n in (steps, 4 * steps):
-        sim.state.restore(start)
-        before = nrt.rtsys.get_allocation_stats().alloc
-        sim.advance(n)
-        counts.append(nrt.rtsys.get_allocation_stats().alloc - before)
-    return (counts[1] - counts[0]) / (3 * steps)
-
-
-def best_seconds(fn, calls: int, repeats: int, reset=None) -> float:
-    """Seconds per call of fn(): the best over `repeats` of the mean over `calls` calls, timing
-    fn alone (reset(), if given, runs untimed before each call)."""
-    best = math.inf
-    for _ in range(repeats):
-        total = 0.0
-        for _ in range(calls):
-            if reset:
-                reset()
-            t0 = time.perf_counter()
-            fn()
-            total += time.perf_counter() - t0
-        best = min(best, total / calls)
-    return best
-
-
-def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) -> dict:
-    """Microseconds per step in each part: contact pass (law pass + sum pass, also timed alone),
-    the kick pass (the closing half kick of one step, the first of the next and the drift,
-    fused), and the neighbour rebuild with the arrays derived from the list (per rebuild, and
-    amortised over the measured steps between rebuilds)."""
-    sim.threads = threads
-    s, p = sim.state, sim.params.copy()
-    p[L.THREADS] = threads
-    numba.set_num_threads(threads)
-    s.restore(start)
-    r0, k0 = int(s.counters[L.K_REBUILDS]), s.step
-    sim.advance(2000)
-    per_rebuild_steps = (s.step - k0) / max(1, int(s.counters[L.K_REBUILDS]) - r0)
-    g, lists, pairs = s.grains(), s.lists(), s.pairs()
-    sort_every = int(p[L.SORT_EVERY])
-    p[L.SORT_EVERY] = 0        # rebuild alone; the re-numbering is timed on its own below
-    shear0 = s.shear.copy()
-    v0 = (s.vx.copy(), s.vz.copy(), s.spin.copy(), s.x.copy(), s.z.copy())
-
-    def timed(fn, n=repeats, reset=None):
-        return best_seconds(fn, n, 3, reset) * 1e6
-
-    def reset():
-        s.shear[:] = shear0
-        s.vx[:], s.vz[:], s.spin[:], s.x[:], s.z[:] = v0
-
-    nb = K.force_parts(threads, s.n, pairs.pair_buf.shape[0])
-    out = {
-        "contact_forces": timed(lambda: K.compute_forces(g, lists, pairs, s.wall, p, *sim.drag), reset=reset),
-        "law_pass": timed(lambda: K.law_pass(nb, g.x, g.z, g.vx, g.vz, g.spin, lists.start, pairs.pair_row,
-                                             lists.index, lists.shear, pairs.pair_const, pairs.sum_x, pairs.sum_z,
-                                             pairs.sum_t, pairs.pair_buf, p), reset=reset),
-        "sum_pass": timed(lambda: K.sum_pass(nb, pairs.sum_start, pairs.sum_end, pairs.sum_x, pairs.sum_z,
-                                             pairs.sum_t, g.force_x, g.force_z, g.torque, *sim.drag)),
-        "kick_drift": timed(lambda: K.kick_drift(g.x, g.z, g.vx, g.vz, g.spin, g.force_x, g.force_z, g.torque,
-                                                  g.inv_mass, g.inv_inertia, g.body, lists.x_build, lists.z_build,
-                                                  True, p, lists.cell_of), reset=reset),
-        "rebuild_each": timed(lambda: (K.rebuild(g, lists, p, s.counters, *sim.drag), K.derive_list(g, lists, pairs)),
-                              n=max(3, repeats // 10), reset=reset),
-        "steps_per_rebuild": per_rebuild_steps,
-        "renumber_each": timed(lambda: K.renumber(g, lists, *sim.drag, p[L.WIDTH]), n=max(3, repeats // 10)),
-        "rebuilds_per_renumber": sort_every,
-    }
-    out["rebuild_per_step"] = out["rebuild_each"] / per_rebuild_steps
-    out["renumber_per_step"] = out["renumber_each"] / (per_rebuild_steps * sort_every) if sort_every else 0.0
-    sim.threads = threads
-    s.restore(start)
-    t0 = time.perf_counter()
-    sim.advance(500)
-    out["whole_step"] = (time.perf_counter() - t0) / 500 * 1e6
-    s.restore(start)
-    return out
-
-
-def sub_system(s, m: int) -> tuple[L.Grains, L.Lists, L.Pairs]:
-    """Grains 0..m-1 of state s and the listed pairs among them (same order, shear copied), as the
-    records kernels.step.contact_forces takes for one thread (without drag): fields the contact
-    pass does not read are empty, every field has the state's dtype (an int64 list array here
-    once compiled the kernel a second time); the reverse list and pair constants are derived on
-    the first call."""
-    rows = np.repeat(np.arange(s.n), np.diff(s.start))
-    npairs = int(s.start[-1])
-    keep = (rows < m) & (s.index[:npairs] < m)
-    start = np.zeros(m + 1, s.start.dtype)
-    np.cumsum(np.bincount(rows[keep], minlength=m), out=start[1:])
-    per_grain = ("x", "z", "vx", "vz", "spin", "radius", "mass")
-    grains = L.Grains(**{name: getattr(s, name)[:m].copy() if name in per_grain else
-                         np.zeros(m if name in ("force_x", "force_z", "torque") else 0, getattr(s, name).dtype)
-                         for name in L.Grains._fields})
-    index = s.index[:npairs][keep].copy()
-    lists = L.Lists(**{name: np.zeros(1, getattr(s, name).dtype) for name in L.Lists._fields})._replace(
-        start=start, index=index, shear=s.shear[:npairs][keep].copy(), layout=np.full(L.N_LAYOUT, -1, s.layout.dtype),
-        rev_start=np.zeros(m + 1, s.rev_start.dtype), rev_slot=np.zeros(index.size, s.rev_slot.dtype))
-    pairs = L.Pairs(*(np.zeros(index.size) for _ in range(4)), np.zeros((L.N_PAIR_CONST, index.size)),
-                    np.zeros((1, L.N_BUF, L.PAIR_BUF)), np.zeros(index.size, s.pair_row.dtype),
-                    *(np.zeros(2 * index.size + 1) for _ in range(3)), np.zeros(m + 1, s.sum_start.dtype),
-                    np.zeros(2 * index.size + m + 2, s.sum_end.dtype))
-    return grains, lists, pairs
-
-
-def footprint_profile(sim: Simulation, start: dict, sizes, repeats: int = 5) -> list[dict]:
-    """Contact pass on one thread over the first m grains (in list order) of one packing, for each
-    m in sizes: the same kind of rows and pairs, working sets of different sizes. Nanoseconds
-    per grain (best of `repeats`), pairs per grain and the bytes the pass touches."""
-    s = sim.state
-    s.restore(start)
-    p = sim.params.copy()
-    p[L.THREADS] = 1
-    numba.set_num_threads(1)
-    out = []
-    for m in sorted(v for v in sizes if v <= s.n):
-        grains, lists, pairs = sub_system(s, m)
-        npairs = int(lists.start[-1])
-        none = np.zeros(0)
-        K.contact_forces(grains, lists, pairs, none, none, p)
-        best = best_seconds(lambda: K.contact_forces(grains, lists, pairs, none, none, p), max(3, 200000 // m),
-                            repeats)
-        touched = sum(a.nbytes for a in (*grains, lists.start, lists.index, lists.shear))   # grains, list, forces
-        out.append({"of_n_grains": s.n, "first_grains": m, "pairs_per_grain": npairs / m,
-                    "working_set_mb": touched / 2**20, "ns_per_grain": best * 1e9 / m})
-    return out
 
 
 def run24_config():

@@ -7,6 +7,7 @@ from pathlib import Path
 
 from rich.table import Table
 
+from ..io.layout import perm_text
 from .bench import BenchResult
 
 
@@ -134,7 +135,7 @@ def _fluid(r: BenchResult) -> list[str]:
                      f"{f['solve']:.0f} us (solver {f['solver']}: {solve}; on one thread: a run shares it), drag {f['drag']:.0f} us, "
                      f"together {f['update']:.0f} us")
     for f in r.fluid:
-        lines.append(f"undrained (kappa_c {f['permeability']:g}, solver {f['solver']}, "
+        lines.append(f"undrained (kappa_c {perm_text(f['permeability'])}, solver {f['solver']}, "
                      f"{100 * f['explicit_fraction']:.0f} % explicit steps, grid {f['grid'][0]}x{f['grid'][1]}, "
                      f"dt {f['dt']:.3g}, fluid update every {f['fluid_interval_steps']} steps), N {f['n_grains']}, "
                      f"{f['threads']} thread(s): {f['rate_undrained']:.3g} vs dry {f['rate_dry']:.3g} grain-steps/s, "

@@ -15,10 +15,10 @@ Layout of ``<out>/<name>/``::
     regime.csv  delay.csv       the regime map (two permeabilities or more; regime/<value>/ per swept value)
 
 A *piece* is one Dask task: "advance this run to completion" or "fork slip N of this run at the
-study's permeabilities" (:func:`advance_run`, :func:`advance_fork`). A run piece whose worker
+study's permeabilities" (campaign_tasks: advance_run, advance_fork). A run piece whose worker
 was lost resumes from ``checkpoints/latest.h5`` (at most one ``output.checkpoint_interval`` of
 work is repeated); a fork piece starts again from its slip checkpoint (forks are short). What a
-point does is an :class:`Action`; ``study`` = run, then fork every slip kept with a checkpoint.
+point does is an Action (campaign_tasks); ``study`` = run, then fork every slip kept with a checkpoint.
 
 A campaign finishes points before it starts new ones: at most as many points are in flight as
 the cluster has task slots, and a point's forks go before any new loading. Each finished piece
@@ -27,455 +27,33 @@ it would run with is done, whether or not its run folder is still there; a point
 not all recorded and whose run folder is gone runs its loading again (bitwise the same: the
 record's final state hash is compared) and then only the missing forks.
 
-Size (~500 lines): sweep expansion lives in campaign_spec.py and the executors in executors.py;
-what is left (ledger, survey, Dask tasks, tables) is one workflow.
+One job a module: the sweep's points (campaign_spec.py), the pieces and their Dask tasks
+(campaign_tasks.py), where each piece stands (campaign_survey.py), the results records
+(campaign_results.py), the tables and figures (campaign_tables.py), where the tasks run
+(executors.py); this module runs what is left of a campaign (:func:`run_campaign`).
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import os
 import shutil
-import socket
-import subprocess
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import yaml
 
 from ..driver.progress import format_eta
 from ..errors import CampaignConflict
-from ..config import Config, build_config
-from ..io.layout import CONFIG_FILE, OWNED, ForkLayout, RunLayout
-from ..io.rundir import pid_alive
-from .campaign_results import RUN_PIECE, PieceRecord, Results, diff_keys, fork_piece, settings_digest
-from .campaign_spec import CampaignSpec, Point, expand, load_spec
-
-
-# --------------------------------------------------------------------------- settings and ledger
-
-
-def run_settings(config: Config) -> dict:
-    """What a run's results depend on: its resolved config without numerics.threads (bitwise
-    the same for any thread count) and name (a label)."""
-    data = config.to_dict()
-    data.pop("name", None)
-    data["numerics"] = {k: v for k, v in data["numerics"].items() if k != "threads"}
-    return data
-
-
-digest = settings_digest      # the settings' hash (campaign_results owns it)
-
-
-def _write_json(path: Path, data: dict):
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".tmp{os.getpid()}")
-    tmp.write_text(json.dumps(data, indent=2, default=str))
-    os.replace(tmp, path)
-
-
-def read_ledger(path: Path) -> dict | None:
-    try:
-        return json.loads(Path(path).read_text())
-    except (OSError, ValueError):
-        return None
-
-
-# --------------------------------------------------------------------------- pieces and tasks
-
-
-@dataclass(frozen=True)
-class Piece:
-    """One task: the run of a point, or the forks of one of its slips."""
-
-    point: str
-    kind: str                       # "run" | "fork"
-    slip: int | None = None
-
-    @property
-    def label(self) -> str:
-        return RUN_PIECE if self.kind == "run" else fork_piece(self.slip)
-
-
-@dataclass(frozen=True)
-class RecordTarget:
-    """Where a piece's results record goes: the results folder, the campaign, the point and its
-    swept values (picklable: it travels with the Dask task)."""
-
-    results: str
-    campaign: str
-    point: str
-    values: dict
-
-    def write(self, piece: str, settings: dict, result: dict, wall_seconds: float) -> Path:
-        return Results(self.results).write(PieceRecord(self.campaign, self.point, piece, settings, result,
-                                                       wall_seconds=wall_seconds))
-
-
-def _task(ledger: Path, settings: dict, body, record=None) -> dict:
-    """Run ``body()`` with the piece's ledger kept: running -> done | failed (physics) | error.
-    ``record(result, wall_seconds)``: writes the piece's results record, before the ledger says done."""
-    from ..errors import PhysicsError
-
-    previous = read_ledger(ledger) or {}
-    entry = {"state": "running", "settings": settings, "host": socket.gethostname(), "pid": os.getpid(),
-             "attempts": int(previous.get("attempts", 0)) + 1, "started": time.time()}
-    if os.environ.get("SLURM_JOB_ID"):      # a worker started as a SLURM job (--slurm)
-        entry["slurm_job"] = os.environ["SLURM_JOB_ID"]
-    _write_json(ledger, entry)
-    t0 = time.perf_counter()
-    try:
-        result = body()
-    except PhysicsError as exc:
-        entry.update(state="failed", cause=f"physics failure: {exc}".splitlines()[0], finished=time.time())
-        _write_json(ledger, entry)
-        return {"state": "failed", "cause": entry["cause"]}
-    except BaseException as exc:
-        entry.update(state="error", cause=f"{type(exc).__name__}: {exc}".splitlines()[0])
-        _write_json(ledger, entry)
-        raise
-    wall = time.perf_counter() - t0
-    if record is not None:
-        record(result, wall)
-    result["wall_seconds"] = wall
-    entry.update(state="done", result=result, finished=time.time())
-    _write_json(ledger, entry)
-    return {"state": "done", **result}
-
-
-def run_result(run_dir: Path) -> dict:
-    """The results record's body of a finished loading run: its slips kept with checkpoints, its
-    transient slips, its table row (analysis.campaign_table.run_row) and its final state hash."""
-    from ..analysis.campaign_table import run_row
-    from ..io.runreader import RunReader
-    from ..io.slipcatalog import slip_catalog
-
-    catalog = slip_catalog(run_dir)
-    row, transient = run_row(run_dir)
-    with RunReader(run_dir) as reader:
-        final = str(reader.h5.attrs.get("final_state_hash", ""))
-    return {"n_slips": len(catalog), "slips": [e.number for e in catalog if e.checkpoint],
-            "transient": transient, "row": row, "final_state_hash": final}
-
-
-def advance_run(run_dir: str, config: dict, settings: dict, target: RecordTarget | None = None,
-                expect_hash: str | None = None) -> dict:
-    """Dask task: bring the point's run to 'finished'. Resumes from checkpoints/latest.h5 when an
-    earlier attempt left one; starts afresh otherwise. Returns the slips kept with checkpoints and
-    writes the run's results record to ``target``. ``expect_hash``: the final state hash a record
-    of this run holds (a loading run again after its folder was lost); RuntimeError if it differs."""
-    from ..io.runreader import run_status
-    from .run import resume_run, run_scene
-
-    run_dir = Path(run_dir)
-    layout = RunLayout(run_dir)
-
-    def body():
-        status = run_status(layout.run_file)
-        resumed = status in ("running", "interrupted") and layout.latest.is_file()
-        if status != "finished":
-            result = resume_run(run_dir, quiet=True) if resumed else \
-                run_scene(build_config(config), run_dir, force=True, quiet=True)
-            if result.status != "finished":
-                raise RuntimeError(f"{run_dir}: the run stopped with status {result.status!r}")
-        out = run_result(run_dir)
-        if expect_hash and out["final_state_hash"] != expect_hash:
-            raise RuntimeError(f"{run_dir}: the loading ran again ends in state {out['final_state_hash']}, its "
-                               f"results record in {expect_hash}: not the same run bit for bit")
-        return {"resumed": resumed, **out}
-
-    def record(result, wall):
-        if target is not None:
-            target.write(RUN_PIECE, settings, {"values": target.values, **result}, wall)
-
-    return _task(run_dir / "ledger" / "run.json", settings, body, record)
-
-
-VARIANTS = "variants"
-
-
-def variant_dir(run_dir: Path, name: str) -> Path:
-    """``<point>/variants/<name>``: a run directory whose run.h5, config.yaml and checkpoints/ are
-    links to the point's, so that a variant's forks (other fluid settings) start from the same
-    packing and sit in a fork layout of their own."""
-    vdir = Path(run_dir) / VARIANTS / name
-    (vdir / "ledger").mkdir(parents=True, exist_ok=True)
-    layout, target = RunLayout(vdir), RunLayout(run_dir)
-    for link, to in ((layout.run_file, target.run_file), (layout.config_file, target.config_file),
-                     (layout.checkpoints, target.checkpoints)):
-        if not link.is_symlink():
-            link.symlink_to(os.path.relpath(to, link.parent))
-    return vdir
-
-
-def _share_drained(base_fork: Path, fork: Path):
-    """The variant's fork gets the base fork's drained branch (a link: the drained twin has no
-    fluid, so it is the same for every variant) and loses its undrained branches (run afresh)."""
-    from ..io.layout import DRAINED
-
-    fork.mkdir(parents=True, exist_ok=True)
-    drained = fork / DRAINED
-    if drained.is_symlink() or drained.is_file():
-        drained.unlink()
-    elif drained.is_dir():
-        shutil.rmtree(drained)
-    drained.symlink_to(os.path.relpath(base_fork / DRAINED, fork))
-    for branch in ForkLayout(fork).undrained_dirs():
-        shutil.rmtree(branch)
-
-
-def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration: float | None,
-                 settings: dict, target: RecordTarget | None = None,
-                 variants: list[tuple[str, dict]] | None = None) -> dict:
-    """Dask task: drained + undrained branches of one slip (:func:`gouge_cli.workflows.fork.run_fork`),
-    started afresh from the slip checkpoint (any partial branches of a lost attempt are replaced),
-    then the fork's pair.json (the one pair definition, :mod:`gouge_cli.workflows.pairs`), once per
-    variant (name, fork overrides): the first in the point's forks/, the others in
-    variants/<name>/forks/ with the first's drained branch. Writes the fork's results record
-    (one pair row per variant and permeability) to ``target``."""
-    from .fork import ForkRequest, run_fork
-    from .pairs import write_pair_json
-
-    run_dir = Path(run_dir)
-    chosen = variants or [(None, {})]
-
-    def body():
-        statuses = {}
-        base_fork = RunLayout(run_dir).fork(slip).root
-        for i, (name, overrides) in enumerate(chosen):
-            vdir = run_dir if i == 0 else variant_dir(run_dir, name)
-            fork = RunLayout(vdir).fork(slip).root
-            if i:
-                _share_drained(base_fork, fork)
-            summary = run_fork(ForkRequest(vdir, slip, tuple(permeabilities), overrides, duration=duration,
-                                           force=(i == 0)), quiet=True)
-            write_pair_json(fork)
-            prefix = f"{name}/" if name else ""
-            statuses.update({prefix + k: b["status"] for k, b in summary["branches"].items()})
-        return {"branches": statuses, **fork_result(run_dir, slip, permeabilities, variants)}
-
-    def record(result, wall):
-        if target is not None:
-            target.write(fork_piece(slip), settings, {"slip": slip, **result}, wall)
-
-    return _task(run_dir / "ledger" / f"{fork_piece(slip)}.json", settings, body, record)
-
-
-def fork_result(run_dir: Path, slip: int, permeabilities: list[float],
-                variants: list[tuple[str, dict]] | None) -> dict:
-    """The results record's pairs and branch hashes of slip ``slip``'s forks (every variant), read
-    from the run folder: ``{"pairs": [pair rows, with 'variant' where the study has variants],
-    "final_state_hashes": {variant/branch: hash}}`` (a variant's linked drained branch once)."""
-    from ..analysis.campaign_table import fork_rows
-    from ..io.runreader import RunReader
-
-    pairs, hashes = [], {}
-    for i, (name, _) in enumerate(variants or [(None, {})]):
-        fork = RunLayout(run_dir if i == 0 else Path(run_dir) / VARIANTS / name).fork(slip).root
-        prefix = f"{name}/" if name else ""
-        for row in fork_rows(fork, permeabilities):
-            pairs.append({"variant": name, **row} if name else row)
-        for branch in sorted(fork.iterdir()):
-            if RunLayout(branch).run_file.is_file() and not (i and branch.is_symlink()):
-                with RunReader(branch) as reader:
-                    hashes[prefix + branch.name] = str(reader.h5.attrs.get("final_state_hash", ""))
-    return {"pairs": pairs, "final_state_hashes": hashes}
-
-
-class Action:
-    """What a point does: its first pieces, and the pieces a finished piece opens."""
-
-    name = "run"
-
-    def __init__(self, spec: CampaignSpec):
-        self.spec = spec
-
-    def after(self, point: str, piece: Piece, result: dict) -> list[Piece]:
-        return []
-
-    def settings(self, piece: Piece, run: dict) -> dict:
-        return run
-
-
-class StudyAction(Action):
-    """Run, then fork every slip kept with a checkpoint (every non-transient one with
-    ``study.skip_transient``) at the study's permeabilities, once per variant. (The per-slip step
-    is :func:`advance_fork`; a `gouge study` workflow can replace it here.)"""
-
-    name = "study"
-
-    def after(self, point, piece, result):
-        if piece.kind != "run" or result.get("state") != "done":
-            return []
-        skip = set(result.get("transient", ())) if self.spec.study.skip_transient else set()
-        return [Piece(point, "fork", n) for n in result["slips"] if n not in skip]
-
-    def settings(self, piece, run):
-        if piece.kind == "run":
-            return run
-        study = self.spec.study
-        out = {"run": digest(run), "slip": piece.slip, "permeabilities": list(study.permeabilities),
-               "duration": study.duration}
-        if study.variants:
-            out["variants"] = study.variants
-        return out
-
-
-def make_action(spec: CampaignSpec) -> Action:
-    return {"run": Action, "study": StudyAction}[spec.action](spec)
-
-
-# --------------------------------------------------------------------------- survey
-
-
-@dataclass
-class PieceState:
-    """Where one piece stands. ``record``: its ledger entry (or, for a piece known from its
-    results alone, one made from the results record); ``result``: its results record, if any."""
-
-    piece: Piece
-    state: str            # done | running | interrupted | failed | left | conflict
-    detail: str = ""
-    record: dict | None = None
-    result: PieceRecord | None = None
-
-
-@dataclass
-class Survey:
-    """Where every piece of a campaign stands, read from the point directories."""
-
-    spec: CampaignSpec
-    root: Path
-    points: list[Point]
-    results: Results
-    pieces: list[PieceState] = field(default_factory=list)
-    unknown_forks: list[str] = field(default_factory=list)   # runs not done yet: forks to come
-
-    def by_state(self, *states) -> list[PieceState]:
-        return [p for p in self.pieces if p.state in states]
-
-    def point(self, name: str) -> Point:
-        return next(p for p in self.points if p.name == name)
-
-    def point_dir(self, name: str) -> Path:
-        return self.root / name
-
-
-def _worker_gone(record: dict) -> bool:
-    """Whether the worker of a 'running' ledger record is known to be gone: its process on this
-    host, or else its SLURM job (ended: walltime, scancel), no longer exists."""
-    if record.get("host") == socket.gethostname():
-        return not pid_alive(int(record.get("pid", 0)))
-    if record.get("slurm_job"):
-        return slurm_job_alive(str(record["slurm_job"])) is False
-    return False
-
-
-def slurm_job_alive(job: str) -> bool | None:
-    """Whether SLURM job ``job`` is pending or running (``squeue``); None when squeue cannot tell."""
-    try:
-        out = subprocess.run(["squeue", "-h", "-j", job, "-o", "%T"], capture_output=True, text=True, timeout=60)
-    except (OSError, subprocess.TimeoutExpired):
-        return None
-    if out.returncode != 0:
-        return False if "Invalid job id" in out.stderr else None
-    return bool(out.stdout.strip())
-
-
-def _piece_state(piece: Piece, ledger: Path, settings: dict, output: Path,
-                 result: PieceRecord | None = None) -> PieceState:
-    record = read_ledger(ledger)
-    if result is not None and result.digest == settings_digest(settings):
-        entry = record if record and record.get("state") == "done" else \
-            {"state": "done", "settings": result.settings, "result": result.result, "finished": result.finished}
-        return PieceState(piece, "done", "" if entry is record else "from its results record", entry, result)
-    if record is None and result is not None:
-        record = {"state": "done", "settings": result.settings, "finished": result.finished}
-    if record is None:
-        if output.exists():
-            return PieceState(piece, "conflict", f"{output} exists but was not made by this campaign")
-        return PieceState(piece, "left")
-    old = record.get("settings") or {}
-    changed = diff_keys(old, settings)
-    perms_only = piece.kind == "fork" and changed and not diff_keys(
-        {k: v for k, v in old.items() if k != "permeabilities"},
-        {k: v for k, v in settings.items() if k != "permeabilities"})
-    state = record.get("state")
-    if state == "running":
-        if _worker_gone(record):
-            state, detail = "interrupted", f"worker lost after attempt {record.get('attempts')}; resumes"
-        else:
-            detail = f"on {record.get('host')} pid {record.get('pid')}, attempt {record.get('attempts')}"
-    elif state == "error":
-        state, detail = "interrupted", f"attempt {record.get('attempts')} stopped: {record.get('cause', '')}"
-    elif state == "failed":
-        detail = record.get("cause", "")
-    else:
-        detail = ""
-    if perms_only and state != "running":
-        return PieceState(piece, "left", "permeabilities changed: forked again", record)
-    if changed and state in ("done", "failed", "interrupted"):
-        return PieceState(piece, "conflict", "; ".join(changed), record, result)
-    return PieceState(piece, state, detail, record, result)
-
-
-def results_root(spec: CampaignSpec) -> Path:
-    """The campaign's results folder: the spec's ``results``, else ``<out>/<name>/results``."""
-    return Path(spec.results).resolve() if spec.results else Path(spec.out).resolve() / spec.name / "results"
-
-
-def survey(spec: CampaignSpec, spec_path: Path) -> Survey:
-    points = expand(spec, Path(spec_path))
-    root = Path(spec.out).resolve() / spec.name
-    results = Results(results_root(spec))
-    records = results.records()
-    out = Survey(spec, root, points, results)
-    action = make_action(spec)
-    for point in points:
-        pdir = root / point.name
-        run = run_settings(point.config)
-        rs = _piece_state(Piece(point.name, "run"), pdir / "ledger" / "run.json", run, RunLayout(pdir).run_file,
-                          records.get((point.name, RUN_PIECE)))
-        out.pieces.append(rs)
-        if rs.state == "done":
-            forks = []
-            for piece in action.after(point.name, rs.piece, rs.record.get("result", {}) | {"state": "done"}):
-                ledger = pdir / "ledger" / f"{piece.label}.json"
-                pair_file = RunLayout(pdir).fork(piece.slip).pair_file
-                forks.append(_piece_state(piece, ledger, action.settings(piece, run), pair_file,
-                                          records.get((point.name, piece.label))))
-            out.pieces += forks
-            missing = [f for f in forks if f.state in ("left", "interrupted")]
-            if missing and not RunLayout(pdir).run_file.is_file():
-                rs.state = "left"
-                rs.detail = (f"its run folder is gone and {len(missing)} forks are not recorded: the loading runs "
-                             "again (bitwise, checked against its record)")
-        elif spec.action == "study":
-            out.unknown_forks.append(point.name)
-    return out
-
-
-def status_lines(s: Survey) -> list[str]:
-    """`gouge campaign --status`: counts, then one line per piece that is not done."""
-    counts = {k: len(s.by_state(k)) for k in ("done", "running", "interrupted", "failed", "conflict", "left")}
-    head = (f"campaign {s.spec.name} ({s.root}): {len(s.points)} points, {len(s.pieces)} pieces known: "
-            f"{counts['done']} done, {counts['running']} running, {counts['failed']} failed, "
-            f"{counts['left'] + counts['interrupted']} left ({counts['interrupted']} to resume)")
-    if counts["conflict"]:
-        head += f", {counts['conflict']} with changed settings (need --force)"
-    lines = [head]
-    if s.unknown_forks:
-        lines.append(f"  + the forks of {len(s.unknown_forks)} runs not finished yet")
-    for p in s.pieces:
-        if p.state != "done":
-            lines.append(f"  {p.state:11s} {p.piece.point} {p.piece.label}" + (f": {p.detail}" if p.detail else ""))
-    return lines
-
-
-# --------------------------------------------------------------------------- execution
+from ..config import Config
+from ..io.layout import CONFIG_FILE, OWNED, RunLayout
+from .campaign_results import PieceRecord
+from .campaign_spec import Point, load_spec
+from .campaign_survey import PieceState, Survey, survey
+from .campaign_tables import results_stale, write_results
+from .campaign_tasks import (VARIANTS, RecordTarget, advance_fork, advance_run, fork_result, make_action, read_ledger,
+                             run_result, run_settings, study_variants, write_json)
 
 
 def _write_point(s: Survey, point: Point):
@@ -573,7 +151,7 @@ def run_campaign(spec_path: Path, *, client=None, cluster=None, force: bool = Fa
             with open_client(opts) as c:
                 finished = _execute(s, todo, c, opts, log)
     s = survey(spec, spec_path)
-    outputs = write_results(s, log) if (finished or _results_stale(s)) else {}
+    outputs = write_results(s, log) if (finished or results_stale(s)) else {}
     return CampaignReport(s, sum(finished.values()), finished, time.perf_counter() - t_start, outputs)
 
 
@@ -595,7 +173,7 @@ def backfill(s: Survey, log=print):
             if not RunLayout(pdir).fork(ps.piece.slip).root.is_dir():
                 continue
             result = {"slip": ps.piece.slip, "branches": ps.record["result"].get("branches", {}),
-                      **fork_result(pdir, ps.piece.slip, list(s.spec.study.permeabilities), _variants(s.spec))}
+                      **fork_result(pdir, ps.piece.slip, list(s.spec.study.permeabilities), study_variants(s.spec))}
         record = PieceRecord(s.spec.name, point.name, ps.piece.label, ps.record["settings"], result,
                              wall_seconds=float(ps.record.get("result", {}).get("wall_seconds", 0.0)),
                              finished=float(ps.record.get("finished", time.time())))
@@ -622,7 +200,7 @@ def reanalyse(s: Survey, log=print) -> int:
             result = {**ps.result.result, **run_result(pdir)}
         elif RunLayout(pdir).fork(ps.piece.slip).root.is_dir():
             result = {**ps.result.result, **fork_result(pdir, ps.piece.slip, list(s.spec.study.permeabilities),
-                                                        _variants(s.spec))}
+                                                        study_variants(s.spec))}
         else:
             continue
         result["reanalysed"] = {"git_commit": provenance.git_commit(), "time": time.time()}
@@ -637,9 +215,6 @@ def _target(s: Survey, point: Point) -> RecordTarget:
                         {k: _value(point.config, k) for k in s.spec.swept_keys()})
 
 
-def _variants(spec: CampaignSpec) -> list[tuple[str, dict]] | None:
-    study = spec.study
-    return list(study.variants.items()) if study and study.variants else None
 
 
 def _submit(client, s: Survey, ps: PieceState, retries: int, token: str):
@@ -656,7 +231,7 @@ def _submit(client, s: Survey, ps: PieceState, retries: int, token: str):
                              retries=retries, pure=False)
     study = s.spec.study
     return client.submit(advance_fork, pdir, piece.slip, list(study.permeabilities), study.duration,
-                         action.settings(piece, run), target, _variants(s.spec), key=key, retries=retries,
+                         action.settings(piece, run), target, study_variants(s.spec), key=key, retries=retries,
                          pure=False, priority=1)       # a point's forks go before a new loading
 
 
@@ -738,7 +313,7 @@ def _execute(s: Survey, todo: list[PieceState], client, opts, log) -> dict[str, 
             ledger = s.point_dir(piece.point) / "ledger" / f"{piece.label}.json"
             record = read_ledger(ledger) or {}
             record.update(state="failed", cause=cause, finished=time.time())
-            _write_json(ledger, record)
+            write_json(ledger, record)
             result = {"state": "failed", "cause": cause}
         state = result["state"]
         done[state] = done.get(state, 0) + 1
@@ -760,131 +335,9 @@ def _execute(s: Survey, todo: list[PieceState], client, opts, log) -> dict[str, 
     return done
 
 
-# --------------------------------------------------------------------------- results
-
-
-def _results_stale(s: Survey) -> bool:
-    table = s.root / "table.csv"
-    if not table.is_file():
-        return bool(s.by_state("done"))
-    newest = max((p.record or {}).get("finished", 0) for p in s.pieces) if s.pieces else 0
-    return newest > table.stat().st_mtime
-
-
-def table_rows(s: Survey) -> list[dict]:
-    """The campaign table's rows, from the results records alone: per point whose run is
-    recorded, its run row (``kind`` 'run': swept values, the run statistics and their
-    :func:`~gouge_cli.analysis.campaign_table.reload_columns`), then one row per
-    recorded pair (``kind`` 'pair': swept values, variant if the study has variants, the pair
-    columns, and ``transient``), in sweep then slip order."""
-    from ..analysis.campaign_table import reload_columns
-
-    swept = s.spec.swept_keys()
-    records = {(p.piece.point, p.piece.label): p.result for p in s.pieces
-               if p.state == "done" and p.result is not None}
-    rows = []
-    for point in s.points:
-        run = records.get((point.name, RUN_PIECE))
-        if run is None:
-            continue
-        values = {k: run.result["values"].get(k) for k in swept}
-        loading = point.config.loading
-        rows.append({"kind": "run", "point": point.name, **values, **run.result["row"],
-                     **reload_columns(run.result["row"], loading.normal_stress, loading.spring_constant,
-                                      loading.velocity)})
-        transient = set(run.result.get("transient", ()))
-        forks = sorted((r for (name, label), r in records.items() if name == point.name and label != RUN_PIECE),
-                       key=lambda r: r.result["slip"])
-        for fork in forks:
-            for pair in fork.result["pairs"]:
-                rows.append({"kind": "pair", "point": point.name, **values, **pair,
-                             "transient": int(pair["slip"]) in transient})
-    return rows
-
-
-def spec_pairs(spec_path: Path) -> tuple[list[dict], list[str]]:
-    """(pair rows, the keys they are never pooled over: the swept keys but the seed, and the study
-    variant) of a campaign, from its results records."""
-    spec = load_spec(spec_path)
-    rows = [r for r in table_rows(survey(spec, spec_path)) if r["kind"] == "pair"]
-    for r in rows:
-        r.setdefault("seed", "")
-    keys = [k for k in spec.swept_keys() if k != "seed"]
-    if spec.study and spec.study.variants:
-        keys.append("variant")
-    return rows, keys
-
-
-def done_points(s: Survey) -> list[str]:
-    """The points whose run is recorded (the rows of table.csv and gouge_cli.api.open_campaign)."""
-    return [p.piece.point for p in s.pieces if p.piece.kind == "run" and p.state == "done" and p.result is not None]
-
-
-def write_results(s: Survey, log=print) -> dict:
-    """table.csv (one row per run and per pair), phase_diagram.csv and the figures, from the
-    results records alone."""
-    from ..analysis.campaign_table import PHASE_COLUMNS, pairs_by_permeability, phase_cells, write_table
-    from ..plots.phase import pair_histograms, phase_diagram_figure, sweep_figure
-    from .campaign_spec import phase_axes
-
-    swept = [k for k in s.spec.swept_keys()]
-    rows = table_rows(s)
-    out = {"table": write_table(rows, swept, s.root / "table.csv")}
-    figs = s.root / "figures"
-    pair_rows = [r for r in rows if r["kind"] == "pair"]
-    if s.spec.action == "study":
-        x, y = phase_axes(s.spec)
-        for variant, vrows in _by_variant(pair_rows, s.spec):
-            cells = phase_cells(vrows, x, y)
-            where = f"_{variant}" if variant else ""
-            out[f"phase_csv{where}"] = write_table(cells, [], s.root / f"phase_diagram{where}.csv",
-                                                   columns=list(PHASE_COLUMNS))
-            if cells:
-                out[f"phase_diagram{where}"] = phase_diagram_figure(
-                    cells, x, y, figs / f"phase_diagram{where}.png",
-                    s.spec.name + (f", variant {variant}" if variant else ""))
-            out[f"pair_histograms{where}"] = pair_histograms(pairs_by_permeability(vrows),
-                                                             figs / variant if variant else figs)
-            for c in cells:
-                log(f"phase cell{' ' + variant if variant else ''} {x}={c['x']:g}" + (f", {y}={c['y']:g}" if y else "") +
-                    f": {c['n_pairs']} pairs, complex fraction {c['frac_complex']:.3g}, Type II fraction "
-                    f"{c['frac_type_II']:.3g}")
-    if s.spec.action == "study" and len(s.spec.study.permeabilities) >= 2:
-        out.update(_regime_outputs(pair_rows, s, figs))
-    sweep_keys = [k for k in swept if k != "seed"]
-    if sweep_keys:
-        out["slip_statistics"] = sweep_figure([r for r in rows if r["kind"] == "run"], sweep_keys,
-                                              figs / "slip_statistics.png", s.spec.name)
-    return out
-
-
-def _by_variant(pair_rows: list[dict], spec: CampaignSpec) -> list[tuple[str, list[dict]]]:
-    """The pair rows per study variant (never pooled); one group named '' without variants."""
-    names = list(spec.study.variants) if spec.study and spec.study.variants else [None]
-    return [(name or "", [r for r in pair_rows if r.get("variant") == name]) for name in names]
-
-
-def _regime_outputs(pair_rows: list[dict], s: Survey, figs: Path) -> dict:
-    """regime.csv, delay.csv, mechanism.csv and their figures (workflows.regime_report), for a study
-    campaign with two permeabilities or more; a campaign that sweeps more than seeds, or has study
-    variants, gets one set per value of those keys under regime/<key>-<value>_.../, with its
-    pairs.csv (permeabilities, variants and other swept values are never pooled)."""
-    from .regime_report import write_groups, write_regime
-
-    keys = [k for k in s.spec.swept_keys() if k != "seed"] + (["variant"] if _variants(s.spec) else [])
-    if not keys:
-        return write_regime(pair_rows, s.root, figs, s.spec.name)
-    return write_groups(pair_rows, keys, s.root / "regime", s.spec.name)
-
-
 def _value(config: Config, key: str) -> float:
     """The resolved (dimensionless) value of a dotted config key."""
     node = config.to_dict()
     for part in key.split("."):
         node = node[part]
     return node
-
-
-__all__ = ["Piece", "Survey", "advance_run", "advance_fork", "survey", "status_lines", "results_root", "backfill",
-           "spec_pairs",
-           "run_campaign", "write_results", "table_rows", "done_points", "run_settings", "load_spec"]

@@ -11,7 +11,7 @@ names another)::
 Every record names its campaign, point and piece, the settings the piece ran with and their
 digest, gouge's commit, the CPU and numba target, and the wall time: a few kilobytes, to be
 copied and committed beside the spec. The campaign's tables are built from these records alone
-(:mod:`gouge_cli.workflows.campaign`), so a machine that holds the results but not the run
+(:mod:`gouge_cli.workflows.campaign_tables`), so a machine that holds the results but not the run
 folders runs only what is missing, and two results folders of one spec merge (:func:`merge`;
 a record made with other settings is refused, naming the key).
 """

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..analysis.pairs import MainEvent
 from ..io.layout import RunLayout, branch_name
 from ..io import provenance
 from ..io.checkpoint import Checkpoint, read_checkpoint
@@ -95,12 +96,6 @@ def check_perms(perms) -> None:
             raise ConfigError(f"--perm = {perm:g}: the permeability prefactor kappa_c must be a positive number [d^2]")
 
 
-def check_main(main: str) -> None:
-    """ConfigError unless `main` names a compared event: 'first' (the forked slip) or 'largest'."""
-    if main not in ("first", "largest"):
-        raise ConfigError(f"--main = {main!r}: use 'first' (the forked slip) or 'largest'")
-
-
 @dataclass(frozen=True)
 class ForkRequest:
     """One fork (`gouge restart` and :func:`gouge_cli.api.restart` both build it), checked when built
@@ -132,7 +127,7 @@ class ForkRequest:
             raise ConfigError(f"--duration = {self.duration:g}: give a positive time [t0] of at most "
                               f"{MAX_BRANCH_DURATION:g} (a branch runs one slip's checkpoint through that slip and "
                               "what follows; the study scene's whole loading is 2.5e6 t0)")
-        check_main(self.main)
+        object.__setattr__(self, "main", MainEvent.check(self.main))
 
     def command(self) -> str:
         """The `gouge restart` line that runs this fork (named when one stops)."""

@@ -14,7 +14,7 @@ from ..errors import InputError
 
 def read_pairs(path: str | Path) -> list[dict]:
     """The pair rows (``kind == 'pair'``) of a campaign table or of a file of pairs (a campaign
-    file's: :func:`gouge_cli.workflows.campaign.spec_pairs`)."""
+    file's: :func:`gouge_cli.workflows.campaign_tables.spec_pairs`)."""
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: no such file (give a campaign's table.csv, a pairs.csv or a campaign file)")

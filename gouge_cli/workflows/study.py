@@ -32,15 +32,16 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..analysis.pairs import MainEvent
 from ..analysis.report import analyze_run, write_analysis
 from ..analysis.study import STUDY_COLUMNS, study_rows, study_summaries, summary_lines, transient_slips
 from ..io.checkpoint import read_checkpoint
 from ..config import load_config
 from ..errors import ConfigError, NoSpaceError, StudyInterrupted
 from ..io.slipcatalog import SlipEntry, slip_catalog
-from .fork import check_main, check_perms, run_branch
+from .fork import check_perms, run_branch
 from ..errors import RunDirError
-from ..io.layout import RunLayout, branch_name, perm_text
+from ..io.layout import RunLayout, branch_name, perm_text, slip_name
 from ..io.rundir import check_run_dir
 from .run import default_run_dir, resume_run, run_scene
 from ..io.filedoc import json_safe
@@ -192,7 +193,7 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
     if not perms:
         raise ConfigError("give at least one --perm K (kappa_c in d^2, e.g. --perm 1e-5)")
     check_perms(perms)
-    check_main(main)
+    main = MainEvent.check(main)
     say = on_progress or (lambda msg: None)
     run_dir, how = _loading_run(target, out, overrides, quiet, confirm)
     say(f"loading run {run_dir}: {how}")
@@ -214,7 +215,7 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
                         raise
                     for other in futures:
                         other.cancel()
-                    command = shlex.join(["gouge", "study", str(run_dir), *[a for k in perms for a in ("--perm", f"{k:g}")],
+                    command = shlex.join(["gouge", "study", str(run_dir), *[a for k in perms for a in ("--perm", perm_text(k))],
                                           "--slips", ",".join(map(str, chosen)), "--main", main])
                     raise NoSpaceError(exc.filename or str(run_dir), f"run `{command}` again (the branches that "
                                        "finished are kept)", getattr(exc, "need", None),
@@ -228,7 +229,7 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
             say(f"slip {slip}: no pair ({exc})")
     analysis = analyze_run(run_dir, main=main)
     result.damaged = [r for r in analysis.skipped if getattr(r, "damaged", True)
-                      and any(f"slip_{s:03d}" in r for s in chosen)]
+                      and any(slip_name(s) in r for s in chosen)]
     result.written.update(write_analysis(analysis))
     pairs = [p for p in analysis.pairs if int(p.row["slip"]) in set(chosen)
              and p.row["branch"] in {branch_name(k) for k in perms}]

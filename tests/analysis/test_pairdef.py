@@ -73,6 +73,15 @@ def test_definition_reads_run_thresholds_and_refuses_bad_main():
         PairDefinition(main="biggest")
 
 
+def test_definition_for_run_refuses_an_unknown_key_naming_it():
+    """A misspelt override is refused, not ignored (it would leave the default in force)."""
+    with pytest.raises(TypeError, match="'strenght_tol'"):
+        PairDefinition.for_run({"start_factor": 5.0}, strenght_tol=1e-2)
+    with pytest.raises(TypeError, match="'lead_stress'.*strength_tol"):      # a slips key that is not the rule's
+        PairDefinition.for_run({"start_factor": 5.0, "lead_stress": 0.1})
+    assert PairDefinition.for_run({"start_factor": 5.0}, strength_tol=None).strength_tol == 1e-3    # None: kept
+
+
 def test_fit_bar_sine_passes_noise_and_wrong_period_fail():
     t = np.arange(0.0, 40.0, 0.01)
     v = np.where((t > 5) & (t < 5 + DUR), 0.1 * np.sin(math.pi * (t - 5) / DUR), 0.0)

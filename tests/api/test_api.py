@@ -547,7 +547,8 @@ def test_docstring_examples_run(forked, tmp_path, monkeypatch):
     globs = {"gouge": gouge, "run": run, "slip": slip, "fork": run.fork(slip), "pair": run.pair(slip)}
     finder = doctest.DocTestFinder()
     runner_ = doctest.DocTestRunner(optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
-    tests = [t for t in finder.find(api, "gouge_cli.api", globs=globs) if t.examples]
+    tests = [t for name in api.__all__ for t in finder.find(getattr(api, name), f"gouge_cli.api.{name}", globs=globs)
+             if t.examples]       # the public names, wherever in the api package they are defined
     assert len(tests) >= 15
     for test in tests:
         runner_.run(test)

@@ -90,6 +90,9 @@ def test_cross_field_check_names_values():
     (("fluid", "permeability"), "2.5e-12 m2", 1e-5),
     (("fluid", "viscosity"), "1e-3 Pa s", 1e-3 / (8e10 * 5e-4 / math.sqrt(8e10 / 2460.0))),
     (("fluid", "compressibility"), "4.5e-10 1/Pa", 36.0),
+    (("fluid", "filter_width"), "1.5 mm", 3.0),            # the fluid's lengths are lengths like the others
+    (("fluid", "cell_size"), "0.75 mm", 1.5),
+    (("fluid", "filter_width"), 2, 2.0),                   # a plain number: [d], as in every config file
 ])
 def test_si_strings(field, text, expected):
     section, key = field

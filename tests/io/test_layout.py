@@ -87,3 +87,27 @@ def test_a_branch_is_known_by_its_place_in_the_layout(tmp_path):
     assert RunLayout(tmp_path / "run").fork_branch() is None
     assert RunLayout(tmp_path / "run" / "forks" / "slip_x" / "drained").fork_branch() is None
     assert RunLayout(fork.root / "notes").fork_branch() is None
+
+
+def test_a_stopped_forks_command_names_the_folder_of_a_long_permeability(tmp_path):
+    """The `gouge restart` line a stopped fork prints spells kappa_c as its branch folder does (perm_text):
+    every digit of 3.333333333e-6, so that running the printed line continues that very branch."""
+    import shlex
+
+    from gouge_cli.io.rundir import restart_command
+    from gouge_cli.workflows.fork import ForkRequest
+
+    perm = 3.333333333e-6
+    folder = RunLayout(tmp_path).fork(4).branch(perm).root.name
+    assert folder == "perm_3.333333333e-06"
+    for line in (restart_command(tmp_path, 4, [perm]), ForkRequest(tmp_path, 4, [perm]).command()):
+        args = shlex.split(line)
+        given = float(args[args.index("--perm") + 1])
+        assert RunLayout(tmp_path).fork(4).branch(given).root.name == folder, line
+
+
+def test_fork_folder_names_are_parsed_only_by_the_layout():
+    """A fork folder's slip number is read by ForkLayout.slip, nowhere by hand (``name.split("_")``)."""
+    found = [f"{p.relative_to(PACKAGE.parent)}:{i}" for p in sorted(PACKAGE.rglob("*.py")) if p != OWNER
+             for i, line in enumerate(p.read_text().splitlines(), 1) if re.search(r"name\.split\([\"']_", line)]
+    assert not found, "read the slip number with gouge_cli.io.layout.ForkLayout(...).slip:\n" + "\n".join(found)

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 
 import gouge_cli.kernels
-from gouge_cli.studies import bench
+from gouge_cli.studies import bench, bench_profile
 from gouge_cli.io.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.config import build_config
 from gouge_cli.kernels import layout as L
@@ -78,7 +78,7 @@ def reference():
     wet.start_fluid()
     step_and_observe(wet)
     start = dry.state.arrays()
-    bench.profile_step(dry, start, 1, repeats=1)
+    bench_profile.profile_step(dry, start, 1, repeats=1)
     K.contact_forces(*contact_forces_args(dry))
     yield dry, wet, start, specialisations()
     numba.set_num_threads(before)
@@ -116,7 +116,7 @@ def test_the_bench_cache_and_profiles_reuse_the_compiled_kernels(reference, tmp_
         bench.time_gouge(sim, arrays, 1, 20, 1)
     assert list(tmp_path.glob("prep_150_*.npz"))
     assert_no_new(sigs, "the bench's cached npz state")
-    bench.footprint_profile(dry, start, [50, 100], repeats=1)
+    bench_profile.footprint_profile(dry, start, [50, 100], repeats=1)
     assert_no_new(sigs, "the bench's footprint profile (contact pass on a sub-system)")
 
 

@@ -11,7 +11,7 @@ import pytest
 from gouge_cli.config import FluidConfig
 from gouge_cli.model.fluid import FluidGrid
 from gouge_cli.kernels import layout as L
-from gouge_cli.kernels import deposit as KD
+from gouge_cli.kernels import deposit_weights as KW
 from gouge_cli.kernels import drag as KG
 
 BETA = 36.0
@@ -220,7 +220,7 @@ def test_drag_equals_minus_integral_of_uniform_gradient():
     assert drag_z.sum() == pytest.approx(-slope * area, rel=1e-10)
     assert drag_x.sum() == pytest.approx(0.7 * slope * area, rel=1e-10)
     # the in-domain grain area, divided cell by cell by the solid fraction, is that area
-    in_domain = np.array([KD.in_domain_area(zk, rk, z_bot, z_top) for zk, rk in zip(z, radius)])
+    in_domain = np.array([KW.in_domain_area(zk, rk, z_bot, z_top) for zk, rk in zip(z, radius)])
     assert in_domain.sum() == pytest.approx((grid.solid_fraction * dx * dz).sum(), rel=1e-12)
 
 

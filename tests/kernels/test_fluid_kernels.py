@@ -12,6 +12,7 @@ from needs import skip_unless_two_threads
 from gouge_cli.model.fluid import FluidGrid
 from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import deposit as KD
+from gouge_cli.kernels import deposit_weights as KW
 from gouge_cli.kernels import drag as KG
 from gouge_cli.kernels import fluid_update as KF
 from gouge_cli.kernels import pressure as KP
@@ -31,25 +32,25 @@ def numeric_cap(h, r):
 
 def test_segment_and_in_domain_area():
     r = 0.6
-    assert KD.segment_area(r, r) == 0.0
-    assert KD.segment_area(-r, r) == pytest.approx(math.pi * r * r)
-    assert KD.segment_area(0.0, r) == pytest.approx(0.5 * math.pi * r * r)
-    assert KD.segment_area(0.23, r) == pytest.approx(numeric_cap(0.23, r), rel=1e-4)
-    assert KD.in_domain_area(5.0, r, 0.0, 10.0) == pytest.approx(math.pi * r * r)
-    assert KD.in_domain_area(0.0, r, 0.0, 10.0) == pytest.approx(0.5 * math.pi * r * r)
-    assert KD.in_domain_area(10.0 + r, r, 0.0, 10.0) == pytest.approx(0.0, abs=1e-15)
-    assert KD.in_domain_area(10.0 + 2 * r, r, 0.0, 10.0) == 0.0
-    assert KD.in_domain_area(-0.1, r, 0.0, 10.0) == pytest.approx(numeric_cap(0.1, r), rel=1e-4)
+    assert KW.segment_area(r, r) == 0.0
+    assert KW.segment_area(-r, r) == pytest.approx(math.pi * r * r)
+    assert KW.segment_area(0.0, r) == pytest.approx(0.5 * math.pi * r * r)
+    assert KW.segment_area(0.23, r) == pytest.approx(numeric_cap(0.23, r), rel=1e-4)
+    assert KW.in_domain_area(5.0, r, 0.0, 10.0) == pytest.approx(math.pi * r * r)
+    assert KW.in_domain_area(0.0, r, 0.0, 10.0) == pytest.approx(0.5 * math.pi * r * r)
+    assert KW.in_domain_area(10.0 + r, r, 0.0, 10.0) == pytest.approx(0.0, abs=1e-15)
+    assert KW.in_domain_area(10.0 + 2 * r, r, 0.0, 10.0) == 0.0
+    assert KW.in_domain_area(-0.1, r, 0.0, 10.0) == pytest.approx(numeric_cap(0.1, r), rel=1e-4)
 
 
 def test_cell_weights_periodic_and_clamped():
-    i0, i1, j0, fx, fz, slope = KD.cell_weights(-0.25, 0.0, 1.0, 1.0, 0.0, 4, 3)
+    i0, i1, j0, fx, fz, slope = KW.cell_weights(-0.25, 0.0, 1.0, 1.0, 0.0, 4, 3)
     assert (i0, i1) == (3, 0) and fx == pytest.approx(0.25)
     assert (j0, fz, slope) == (0, 0.0, 0.0)
-    i0, i1, j0, fx, fz, slope = KD.cell_weights(8.5, 2.9, 1.0, 1.0, 0.0, 4, 3)
+    i0, i1, j0, fx, fz, slope = KW.cell_weights(8.5, 2.9, 1.0, 1.0, 0.0, 4, 3)
     assert (i0, i1, fx) == (0, 1, 0.0)
     assert (j0, fz, slope) == (1, 1.0, 0.0)
-    _, _, j0, _, fz, slope = KD.cell_weights(0.5, 1.25, 1.0, 0.5, 0.0, 4, 3)
+    _, _, j0, _, fz, slope = KW.cell_weights(0.5, 1.25, 1.0, 0.5, 0.0, 4, 3)
     assert (j0, fz, slope) == (0, pytest.approx(0.125), 0.5)
 
 
@@ -95,7 +96,7 @@ def test_grouped_deposit_and_cached_drag():
             assert a.tobytes() == b.tobytes()
     for a, b in zip(serial, grouped[0]):
         assert np.allclose(a, b, rtol=1e-13, atol=1e-15 * np.abs(a).max())
-    assert np.sum(corners[L.CR_CELL] < 2.0 ** 52) == np.sum([KD.in_domain_area(zk, rk, z_bot, z_top) <= 0
+    assert np.sum(corners[L.CR_CELL] < 2.0 ** 52) == np.sum([KW.in_domain_area(zk, rk, z_bot, z_top) <= 0
                                              for zk, rk in zip(z, radius)]) > 0
     gx, gz = rng.normal(size=(2, 5, 4))
     s = rng.uniform(-0.2, 1.0, (5, 4))          # some cells without solid: zero density there
@@ -170,7 +171,7 @@ def test_deposit_conserves_area_and_is_periodic():
     s, ux, uz, gx, gz = (np.empty((5, 4)) for _ in range(5))
     _deposit(x, z, v, -v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s, ux, uz, gx, gz)
     cell_area = width / 5 * (z_top - z_bot) / 4
-    total = sum(KD.in_domain_area(zk, rk, z_bot, z_top) for zk, rk in zip(z, radius))
+    total = sum(KW.in_domain_area(zk, rk, z_bot, z_top) for zk, rk in zip(z, radius))
     assert (s * cell_area).sum() == pytest.approx(total, rel=1e-12)
     np.testing.assert_allclose(ux, 2e-3, rtol=1e-12)
     np.testing.assert_allclose(uz, -2e-3, rtol=1e-12)
@@ -518,13 +519,13 @@ def test_near_plane_area_matches_the_closed_form():
 
     for u in (0.0, 1e-14, -6e-14, 3e-10, -2.5e-9, 1e-8, -1e-8):
         z = z_bot + u * r
-        assert abs(KD.in_domain_area(z, r, z_bot, z_top) - side((z - z_bot) / r)) <= 3 * ulp, u
+        assert abs(KW.in_domain_area(z, r, z_bot, z_top) - side((z - z_bot) / r)) <= 3 * ulp, u
         z = z_top - u * r
-        assert abs(KD.in_domain_area(z, r, z_bot, z_top) - side((z_top - z) / r)) <= 3 * ulp, u
-    limit = KD.NEAR_PLANE * r
+        assert abs(KW.in_domain_area(z, r, z_bot, z_top) - side((z_top - z) / r)) <= 3 * ulp, u
+    limit = KW.NEAR_PLANE * r
     beyond = np.nextafter(limit, 1.0)
-    assert abs(limit) <= KD.NEAR_PLANE * r < abs(beyond)
-    near, closed = KD.in_domain_area(z_bot + limit, r, z_bot, z_top), KD.in_domain_area(z_bot + beyond, r, z_bot, z_top)
+    assert abs(limit) <= KW.NEAR_PLANE * r < abs(beyond)
+    near, closed = KW.in_domain_area(z_bot + limit, r, z_bot, z_top), KW.in_domain_area(z_bot + beyond, r, z_bot, z_top)
     assert abs(near - closed) <= 3 * ulp
 
 
@@ -543,13 +544,13 @@ def test_wall_grains_take_the_vector_path_with_the_bits_of_grain_area():
     _deposit(x, z, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, *out, corners,
                np.zeros((L.DEPOSIT_GROUPS, 20, L.N_MOMENTS)), None, True)
     for k in range(70):
-        area = KD.grain_area(z[k], radius[k], z_bot, z_top)
-        i0, i1, j0, fx, fz, slope = KD.cell_weights(x[k], z[k], 5 / width, 4 / (z_top - z_bot), z_bot, 5, 4)
-        c00, c10, _, _, *shares = KD.corner_shares(area, i0, i1, j0, fx, fz, 4)
+        area = KW.grain_area(z[k], radius[k], z_bot, z_top)
+        i0, i1, j0, fx, fz, slope = KW.cell_weights(x[k], z[k], 5 / width, 4 / (z_top - z_bot), z_bot, 5, 4)
+        c00, c10, _, _, *shares = KW.corner_shares(area, i0, i1, j0, fx, fz, 4)
         assert list(corners[[L.CR_A00, L.CR_A10, L.CR_A01, L.CR_A11, L.CR_DFZ], k]) == [*shares, slope], k
         assert corners[L.CR_CELL].view(np.int64)[k] - L.CELL_BITS == c00 and c10 == (c00 + 4) % 20, k
     u = (z[0] - z_bot) / radius[0]                                 # -1e-8: a little less than half inside
-    assert KD.grain_area(z[0], radius[0], z_bot, z_top) == pytest.approx(radius[0] ** 2 * (0.5 * math.pi + 2 * u),
+    assert KW.grain_area(z[0], radius[0], z_bot, z_top) == pytest.approx(radius[0] ** 2 * (0.5 * math.pi + 2 * u),
                                                                         rel=1e-15)
     pairs = np.random.default_rng(9).normal(size=2 * 20)
     expected, cached = np.zeros((2, x.size)), np.zeros((2, x.size))

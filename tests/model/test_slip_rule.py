@@ -9,7 +9,8 @@ import math
 import numpy as np
 
 from gouge_cli.config import SlipsConfig, build_config
-from gouge_cli.model.slip_rule import SlipDetector, SlipRule, _Event, _SubTracker
+from gouge_cli.model.slip_events import OpenEvent, SubTracker
+from gouge_cli.model.slip_rule import SlipDetector, SlipRule
 
 
 def _series(n=6000, seed=3):
@@ -26,8 +27,8 @@ def _series(n=6000, seed=3):
 
 def _old_keys(state: dict) -> dict:
     """A detector state as checkpoints written before the typed records held it."""
-    ev = {v: k for k, v in _Event.OLD_KEYS.items()}
-    sub = {v: k for k, v in _SubTracker.OLD_KEYS.items()}
+    ev = {v: k for k, v in OpenEvent.OLD_KEYS.items()}
+    sub = {v: k for k, v in SubTracker.OLD_KEYS.items()}
     out = json.loads(json.dumps(state))
     for key in ("raw", "pending"):
         if out[key] is not None:

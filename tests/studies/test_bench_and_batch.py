@@ -12,7 +12,8 @@ import numba
 import numpy as np
 from rich.console import Console
 
-from gouge_cli.studies.bench import footprint_profile, paired_scaling, prepare, run_benchmark, sub_system
+from gouge_cli.studies.bench import paired_scaling, prepare, run_benchmark
+from gouge_cli.studies.bench_profile import footprint_profile, sub_system
 from gouge_cli.studies.bench_report import bench_report
 from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from gouge_cli.studies import bench
+from gouge_cli.studies import bench_lammps as bench
 
 ROOT = Path(__file__).resolve().parents[2]
 DECK = ROOT / "benchmarks" / "lammps"

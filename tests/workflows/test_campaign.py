@@ -22,7 +22,9 @@ from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.io.slipcatalog import slip_catalog
-from gouge_cli.workflows.campaign import read_ledger, run_campaign, status_lines, survey
+from gouge_cli.workflows.campaign import run_campaign
+from gouge_cli.workflows.campaign_survey import status_lines, survey
+from gouge_cli.workflows.campaign_tasks import read_ledger
 from gouge_cli.workflows.campaign_spec import load_spec
 from gouge_cli.workflows.executors import ClusterOptions, local_cluster, slurm_cluster
 

@@ -17,7 +17,8 @@ import pytest
 import yaml
 
 from gouge_cli.errors import CampaignConflict
-from gouge_cli.workflows.campaign import run_campaign, status_lines, survey
+from gouge_cli.workflows.campaign import run_campaign
+from gouge_cli.workflows.campaign_survey import status_lines, survey
 from gouge_cli.workflows.campaign_results import PieceRecord, Results, merge
 from gouge_cli.workflows.campaign_spec import load_spec
 from gouge_cli.workflows.executors import ClusterOptions

@@ -168,7 +168,7 @@ def test_restart_on_a_full_disk(forked, small_fs):
     shutil.rmtree(target / "forks")
     filler = fill(small_fs, 300_000)
     message = full_disk_message(gouge("restart", target, "--slip", slip, "--perm", 1e-3, "--quiet"))
-    assert "MB" in message and "--perm 0.001" in message
+    assert "MB" in message and "--perm 1e-03" in message
     assert not (target / "forks" / f"slip_{slip:03d}" / "drained" / "run.h5").exists()
     assert readable(target / "run.h5") == "finished" and not temp_files(small_fs)
     assert gouge("verify", target).returncode == 0

@@ -100,7 +100,7 @@ def test_full_disk_in_restart_names_the_command_that_continues(loaded, monkeypat
     result = _restart(run_dir, slip)
     assert result.exit_code == EXIT_PHYSICS, result.output
     text = " ".join(result.output.split())
-    assert "no space left on device" in text and f"gouge restart {run_dir} --slip {slip} --perm 0.001" in text
+    assert "no space left on device" in text and f"gouge restart {run_dir} --slip {slip} --perm 1e-03" in text
     assert "no --force needed" in text and "gouge resume" not in text
     assert branch_status(fork / "drained") == "finished"
     assert branch_status(fork / "perm_1e-03") == "missing"      # nothing half-written under run.h5
@@ -125,7 +125,7 @@ def test_ctrl_c_in_restart_exits_130_and_classifies_nothing(loaded, monkeypatch)
     assert result.exit_code == EXIT_INTERRUPTED, result.output
     text = " ".join(result.output.split())
     assert "branch drained of slip" in text and "no pair was classified" in text
-    assert f"gouge restart {run_dir} --slip {slip} --perm 0.001" in text
+    assert f"gouge restart {run_dir} --slip {slip} --perm 1e-03" in text
     assert branch_status(fork / "drained") == "interrupted"
     assert not (fork / "pair.json").exists()
     with pytest.raises(AnalysisError, match="interrupted"):

@@ -20,7 +20,7 @@ import h5py
 import pytest
 import yaml
 
-from gouge_cli.workflows.campaign import read_ledger
+from gouge_cli.workflows.campaign_tasks import read_ledger
 from gouge_cli.workflows.pairs import branch_status
 from gouge_cli.workflows.watchdog import POLL
 from slipping import slipping_run

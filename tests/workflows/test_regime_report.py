@@ -97,7 +97,7 @@ def test_the_verdict_summary_counts_the_committed_records():
     that hold the pooled fraction."""
     from pathlib import Path
 
-    from gouge_cli.workflows.campaign import spec_pairs
+    from gouge_cli.workflows.campaign_tables import spec_pairs
     from gouge_cli.workflows.regime_report import SUMMARY_HEADER, by_swept, summary_lines
 
     spec = Path(__file__).resolve().parents[2] / "examples" / "verdict_seeds.yaml"
@@ -154,7 +154,8 @@ def test_the_verdict_runs_recur_about_as_the_spring_reloads_their_drops():
     the catalog's drops or recurrences, or the columns, are wrong."""
     from pathlib import Path
 
-    from gouge_cli.workflows.campaign import survey, table_rows
+    from gouge_cli.workflows.campaign_survey import survey
+    from gouge_cli.workflows.campaign_tables import table_rows
     from gouge_cli.workflows.campaign_spec import load_spec
 
     path = Path(__file__).resolve().parents[2] / "examples" / "verdict_seeds.yaml"

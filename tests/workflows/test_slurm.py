@@ -29,7 +29,7 @@ import pytest
 import yaml
 
 from gouge_cli.io.slipcatalog import slip_catalog
-from gouge_cli.workflows.campaign import read_ledger
+from gouge_cli.workflows.campaign_tasks import read_ledger
 
 ROOT = Path(__file__).resolve().parents[2]
 DAEMONS = ("munged", "slurmctld", "slurmd")
