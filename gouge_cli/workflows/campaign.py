@@ -176,7 +176,8 @@ def backfill(s: Survey, log=print):
                       **fork_result(pdir, ps.piece.slip, list(s.spec.study.permeabilities), study_variants(s.spec))}
         record = PieceRecord(s.spec.name, point.name, ps.piece.label, ps.record["settings"], result,
                              wall_seconds=float(ps.record.get("result", {}).get("wall_seconds", 0.0)),
-                             finished=float(ps.record.get("finished", time.time())))
+                             finished=float(ps.record.get("finished", time.time())),
+                             cpu_seconds=float(ps.record.get("result", {}).get("cpu_seconds", 0.0)))
         ps.result = record
         s.results.write(record)
         log(f"results record written for {point.name} {ps.piece.label} (from its run folder)")

@@ -73,6 +73,7 @@ class PieceRecord:
                    fork: {slip, pairs: [pair rows], branches: {folder: final_state_hash}}
     machine        :func:`machine` of the worker that ran it
     wall_seconds   the piece's wall time [s]; ``finished``: when it ended (Unix time)
+    cpu_seconds    the worker process's CPU time over the piece [s] (0: a record from before it was kept)
     """
 
     campaign: str
@@ -83,6 +84,7 @@ class PieceRecord:
     machine: dict = field(default_factory=machine)
     wall_seconds: float = 0.0
     finished: float = field(default_factory=time.time)
+    cpu_seconds: float = 0.0
     schema: str = SCHEMA
 
     @property

@@ -71,14 +71,16 @@ class RecordTarget:
     point: str
     values: dict
 
-    def write(self, piece: str, settings: dict, result: dict, wall_seconds: float) -> Path:
+    def write(self, piece: str, settings: dict, result: dict, wall_seconds: float, cpu_seconds: float = 0.0) -> Path:
         return Results(self.results).write(PieceRecord(self.campaign, self.point, piece, settings, result,
-                                                       wall_seconds=wall_seconds))
+                                                       wall_seconds=wall_seconds, cpu_seconds=cpu_seconds))
 
 
 def _task(ledger: Path, settings: dict, body, record=None) -> dict:
     """Run ``body()`` with the piece's ledger kept: running -> done | failed (physics) | error.
-    ``record(result, wall_seconds)``: writes the piece's results record, before the ledger says done."""
+    ``record(result, wall_seconds, cpu_seconds)``: writes the piece's results record, before the ledger
+    says done (cpu_seconds: the worker process's CPU time over the piece, what it costs a core
+    whatever else shares the machine)."""
     from ..errors import PhysicsError
 
     previous = read_ledger(ledger) or {}
@@ -87,7 +89,7 @@ def _task(ledger: Path, settings: dict, body, record=None) -> dict:
     if os.environ.get("SLURM_JOB_ID"):      # a worker started as a SLURM job (--slurm)
         entry["slurm_job"] = os.environ["SLURM_JOB_ID"]
     write_json(ledger, entry)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     try:
         result = body()
     except PhysicsError as exc:
@@ -98,10 +100,11 @@ def _task(ledger: Path, settings: dict, body, record=None) -> dict:
         entry.update(state="error", cause=f"{type(exc).__name__}: {exc}".splitlines()[0])
         write_json(ledger, entry)
         raise
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     if record is not None:
-        record(result, wall)
+        record(result, wall, cpu)
     result["wall_seconds"] = wall
+    result["cpu_seconds"] = cpu
     entry.update(state="done", result=result, finished=time.time())
     write_json(ledger, entry)
     return {"state": "done", **result}
@@ -148,9 +151,9 @@ def advance_run(run_dir: str, config: dict, settings: dict, target: RecordTarget
                                f"results record in {expect_hash}: not the same run bit for bit")
         return {"resumed": resumed, **out}
 
-    def record(result, wall):
+    def record(result, wall, cpu):
         if target is not None:
-            target.write(RUN_PIECE, settings, {"values": target.values, **result}, wall)
+            target.write(RUN_PIECE, settings, {"values": target.values, **result}, wall, cpu)
 
     return _task(run_dir / "ledger" / "run.json", settings, body, record)
 
@@ -218,9 +221,9 @@ def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration:
             statuses.update({prefix + k: b["status"] for k, b in summary["branches"].items()})
         return {"branches": statuses, **fork_result(run_dir, slip, permeabilities, variants)}
 
-    def record(result, wall):
+    def record(result, wall, cpu):
         if target is not None:
-            target.write(fork_piece(slip), settings, {"slip": slip, **result}, wall)
+            target.write(fork_piece(slip), settings, {"slip": slip, **result}, wall, cpu)
 
     return _task(run_dir / "ledger" / f"{fork_piece(slip)}.json", settings, body, record)
 

@@ -90,6 +90,9 @@ def test_records_are_small_and_self_describing(reference):
         data = json.loads(path.read_text())
         assert data["campaign"] == "durable" and data["digest"] == PieceRecord.from_json(path.read_text()).digest
         assert {"git_commit", "cpu", "numba_target"} <= set(data["machine"])
+        # the piece's CPU time: spent (compiles and steps), and no more than its wall time allows
+        # (one numba thread and the worker's own threads: at most ~2 cores' worth)
+        assert 0.0 < data["cpu_seconds"] <= 2.0 * data["wall_seconds"] + 1.0
         if data["piece"] == "run":
             assert len(data["result"]["final_state_hash"]) == 16 and data["result"]["values"]["seed"] in (1, 2)
 
