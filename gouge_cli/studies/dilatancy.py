@@ -155,7 +155,8 @@ def run_study(config: Config, seeds, sigmas, out: Path, *, workers: int = 1, on_
           "slip": kw.get("slip", SLIP), "run_in": kw.get("run_in", RUN_IN)}
     records = Records.open(Path(out) / "dilatancy_runs.json",
                            scene_digest(config, kw["ratios"], kw["perm"], kw["stiff"], kw["slip"], kw["run_in"]))
-    todo = [(config, int(s), float(g), kw) for g in sigmas for s in seeds if not records.has(int(s), float(g))]
+    todo = [(config, int(s), float(g), kw) for s in seeds for g in sigmas      # seed by seed: every stress
+            if not records.has(int(s), float(g))]                            # has a seed early
     say = on_progress or (lambda m: None)
     say(f"{len(todo)} of {len(seeds) * len(sigmas)} (seed, sigma) points to run, {workers} at a time")
     if workers <= 1:
