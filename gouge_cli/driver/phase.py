@@ -21,7 +21,7 @@ from typing import Callable
 
 from ..io.checkpoint import Checkpoint
 from ..io.runwriter import RunFile
-from .callbacks import Callback, schedules, states
+from .callbacks import Callback, schedules
 from .schedules import Every
 from .simulation import Simulation
 
@@ -47,10 +47,6 @@ class Phase:
         it when a callback may change the step (Callback.changes_step; schedules are step counts)."""
         build = partial(schedules, sim, self.callbacks)
         return build if any(cb.changes_step for cb in self.callbacks) else build()
-
-    def states(self) -> tuple[dict, dict]:
-        """({callback name: state}, attached checkpoints) to save (callbacks.states)."""
-        return states(self.callbacks)
 
     def restore(self, sim: Simulation, ck: Checkpoint, writer: RunFile | None = None, *, states: bool = True,
                 attached: dict | None = None) -> None:

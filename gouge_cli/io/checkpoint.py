@@ -21,7 +21,7 @@ from __future__ import annotations
 import io
 import json
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import h5py
@@ -77,7 +77,7 @@ class CheckpointHeader:
                    None if record.get("onset_time") is None else float(record["onset_time"]))
 
 
-HEADER_FIELDS = ("phase", "slips", "series_tail", "slip", "onset_time")
+HEADER_FIELDS = tuple(f.name for f in fields(CheckpointHeader))
 
 
 def split_extra(extra: dict) -> tuple[CheckpointHeader, dict]:

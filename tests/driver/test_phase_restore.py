@@ -32,8 +32,7 @@ from gouge_cli.driver.phases import SeriesWriter, load_phase
 from gouge_cli.driver.simulation import Simulation
 from gouge_cli.driver.slips import SlipRecorder, ring_attachments
 from gouge_cli.driver.stick_scaling import TrueInertia
-from gouge_cli.io.checkpoint import (DIGEST_PREFIX, LEGACY_START, SETTLING, SLIP_RECORDER, read_checkpoint,
-                                     write_checkpoint)
+from gouge_cli.io.checkpoint import DIGEST_PREFIX, LEGACY_START, SETTLING, SLIP_RECORDER, read_checkpoint
 from gouge_cli.io.integrity import content_digest
 from gouge_cli.io.layout import RunLayout
 from gouge_cli.io.runwriter import RunFile
