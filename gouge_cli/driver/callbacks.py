@@ -7,11 +7,12 @@ states, series writer, snapshots, checkpoint keeper, stick scaling) is an object
   changes (stick scaling), since schedules are step counts;
 * ``act(sim)``: what it does when due;
 * ``state_dict()`` / ``load_state_dict(state, attached)``: its state (None: nothing to save), and
-  ``attachments()``: checkpoints to attach to the one written (the slip recorder's ring).
+  ``attachments()``: checkpoints to attach to the one written (the slip recorder's ring);
+* ``changes_step``: True if ``act`` may change the step (stick scaling: schedules are rebuilt).
 
-:func:`states` collects the states by name for a checkpoint and :func:`restore` gives each callback
-its own back, so no module reads another's state by key. The loading phase
-(:func:`gouge_cli.driver.phases.load_phase`) lists its callbacks in firing order.
+:func:`states` collects the states by name for a checkpoint, and
+:meth:`gouge_cli.driver.phase.Phase.restore` alone gives each callback its own back, so no module
+reads another's state by key. A phase (driver.phase.Phase) lists its callbacks in firing order.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ class Callback:
     """Base of a run-time piece (module doc); the defaults: not scheduled, stateless."""
 
     name: str = ""
+    changes_step: bool = False
 
     def every(self, sim) -> Every | None:
         return None
@@ -58,9 +60,3 @@ def states(callbacks) -> tuple[dict, dict]:
             attached.update(cb.attachments())
     return saved, attached
 
-
-def restore(callbacks, saved: dict, attached: dict | None = None):
-    """Give each callback its own state from `saved` (a checkpoint's extra), if there is one."""
-    for cb in callbacks:
-        if cb.name in saved:
-            cb.load_state_dict(saved[cb.name], attached)

@@ -1,17 +1,19 @@
 """Compaction, a phase like loading: the packing settles under the normal stress alone until the
 top wall and grains are still (driver.settling's criterion), then loading starts.
 
-    compact(sim, callbacks, start):
-        settling = Settling(sim, start)      # a check every CHECK_INTERVAL [t0] from where compaction began
-        Simulation.run(no end, [settling, *callbacks] on the checks, stop when settling.settled is not None)
+    compact(sim, callbacks, settling, resume_from):
+        phase = Phase("compaction", [settling, *callbacks], stop=settling.settled is not None)
+        phase.restore(sim, resume_from)      # (a resume: the settling state, i.e. compaction's start)
+        Simulation.run(no end, phase.callbacks on the checks, every CHECK_INTERVAL [t0] from that start)
         sim.start_loading()                  # (and the pore fluid, if any)
 
 Its callbacks (driver.callbacks) fire on the checks, in list order after the settling check:
 :class:`SettleProgress` (progress toward the criterion), :class:`CompactionCheckpoint`
 (checkpoints/latest.h5 every output.checkpoint_interval rounded to whole checks, for `gouge
 resume`), or a :class:`~gouge_cli.driver.guards.Guards` (driver.phases.guarded_run). The
-compaction's start travels in a checkpoint as the settling callback's state, so that a compaction
-resumed from any step checks, and ends, on the steps where it would have.
+compaction's start travels in a checkpoint as the settling callback's state (older checkpoints:
+io.checkpoint.split_extra maps their LEGACY_START onto it), so that a compaction resumed from any
+step checks, and ends, on the steps where it would have.
 """
 
 from __future__ import annotations
@@ -20,18 +22,18 @@ import sys
 
 from pathlib import Path
 
-from ..io.checkpoint import Checkpoint, snapshot_of, state_bytes, write_checkpoint
+from ..io.checkpoint import SETTLING, Checkpoint, CheckpointHeader, snapshot_of, state_bytes, write_checkpoint
 from ..io.layout import RunLayout
 from ..io.rundir import ensure_space
-from .callbacks import Callback, restore, states
+from .callbacks import Callback, states
 from .guards import check
+from .phase import Phase
 from .progress import SettleReport
 from .schedules import Every
 from .settling import SettleCheck, settle_check
 from .simulation import Simulation
 
 CHECK_INTERVAL = 100.0      # [t0] between compaction's checks
-LEGACY_START = "compaction_start"   # where checkpoints written before the callback model keep [t0, step0]
 
 
 class Settling(Callback):
@@ -43,7 +45,7 @@ class Settling(Callback):
     settled  None while compacting; True once settled; False when compaction.max_time passed first
     """
 
-    name = "settling"
+    name = SETTLING
 
     def __init__(self, sim: Simulation, start: tuple[float, int] | None = None):
         cfg = sim.config.compaction
@@ -79,12 +81,6 @@ class Settling(Callback):
         t0, step0 = state["start"]
         self.start = (float(t0), int(step0))
 
-    def restore(self, ck: Checkpoint):
-        """Its start from a compaction checkpoint (older ones keep it under LEGACY_START)."""
-        if LEGACY_START in ck.extra and self.name not in ck.extra:
-            self.load_state_dict({"start": ck.extra[LEGACY_START]})
-        restore([self], ck.extra)
-
 
 class SettleProgress(Callback):
     """Progress toward the settling criterion on each check (progress.SettleReport)."""
@@ -114,23 +110,27 @@ class CompactionCheckpoint(Callback):
     def save(self, sim: Simulation):
         ensure_space(self.out_dir, self.need)
         saved, _ = states([self.settling])
-        write_checkpoint(RunLayout(self.out_dir).latest, snapshot_of(sim, {"phase": "compaction", **saved}))
+        write_checkpoint(RunLayout(self.out_dir).latest, snapshot_of(sim, CheckpointHeader("compaction"), saved))
 
 
-def compact(sim: Simulation, callbacks: list[Callback] = (), settling: Settling | None = None) -> Settling:
+def compact(sim: Simulation, callbacks: list[Callback] = (), settling: Settling | None = None,
+            resume_from: Checkpoint | None = None) -> Settling:
     """Settle under the normal stress alone until the top wall and grains are still (or until
     compaction.max_time), then start loading (and the fluid). ``callbacks`` fire on each check after
-    ``settling`` (default: a new one from now). A compaction resumed on a check step runs that check
-    first. Returns the settling callback (its last check, row and outcome)."""
+    ``settling`` (default: a new one from now). `resume_from`: a compaction checkpoint put back
+    first (Phase.restore: the state and compaction's start); a compaction resumed on a check step
+    runs that check first. Returns the settling callback (its last check, row and outcome)."""
     settling = settling if settling is not None else Settling(sim)
+    phase = Phase("compaction", [settling, *callbacks], stop=lambda: settling.settled is not None)
+    if resume_from is not None:
+        phase.restore(sim, resume_from)
     checks = settling.every(sim)
-    order = [settling, *callbacks]
     if sim.state.step > checks.offset and checks.due(sim.state.step):      # resumed on a check
-        for cb in order:
+        for cb in phase.callbacks:
             cb.act(sim)
-    if settling.settled is None:
-        sim.run(None, [Every(checks.steps, cb.act, cb.name, offset=checks.offset) for cb in order],
-                should_stop=lambda: settling.settled is not None)
+    if not phase.stop():
+        sim.run(None, [Every(checks.steps, cb.act, cb.name, offset=checks.offset) for cb in phase.callbacks],
+                should_stop=phase.stop)
     sim.start_loading()
     return settling
 
@@ -141,8 +141,6 @@ def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False, res
     (`resume_from`: that checkpoint, whose compaction start it goes on from). Progress is shown
     toward the settling criterion (progress.SettleReport)."""
     settling = Settling(sim)
-    if resume_from is not None:
-        settling.restore(resume_from)
     checks = max(1, int(round(sim.config.output.checkpoint_interval / CHECK_INTERVAL)))
     keeper = CompactionCheckpoint(settling, out_dir, checks, 2.0 * state_bytes(sim))
     note = None if quiet else sim.compile_note()
@@ -151,7 +149,7 @@ def compaction_phase(sim: Simulation, out_dir: Path, live=None, quiet=False, res
     report = None if quiet else SettleReport(sim.config.compaction.max_time, sim.state.n, live=live)
     callbacks = ([SettleProgress(settling, report)] if report else []) + [keeper]
     try:
-        return compact(sim, callbacks, settling)
+        return compact(sim, callbacks, settling, resume_from)
     except KeyboardInterrupt:
         keeper.save(sim)
         raise

@@ -6,8 +6,6 @@ accuracy study alike."""
 
 from __future__ import annotations
 
-import json
-from functools import partial
 import signal
 import sys
 import threading
@@ -15,68 +13,66 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from ..io import provenance
-from ..io.checkpoint import snapshot_of, state_bytes, write_checkpoint
+from ..io.checkpoint import Checkpoint, CheckpointHeader, snapshot_of, state_bytes, write_checkpoint
 from ..io.layout import RunLayout
 from ..io.rundir import ensure_space
 from ..io.runwriter import RunFile
 from ..kernels import layout as L
 from ..model.timestep import slip_duration
-from .callbacks import Callback, restore, schedules, states
+from .callbacks import Callback, schedules, states
 from . import compaction
 from .guards import Guards
+from .phase import Phase
 from .progress import ProgressReport
 from ..errors import ConfigError, PhysicsError
 from .schedules import Every
 from .simulation import Simulation
-from .slips import SlipRecorder
+from .slips import SlipRecorder, ring_attachments
+from .stick_scaling import StickScaling, TrueInertia, controller
 
 
 def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float, *, live=None,
-               quiet=False, label="loading", resume_from=None,
-               checkpoints: bool = True, stop_after_slip: bool = False) -> tuple[str, SlipRecorder]:
+               quiet=False, label="loading", resume_from: Checkpoint | None = None,
+               fork_from: Checkpoint | None = None, checkpoints: bool = True,
+               stop_after_slip: bool = False) -> tuple[str, SlipRecorder]:
     """Shear until sim time reaches end_time, firing the loading phase's callbacks (driver.callbacks),
     in this order on a step where several are due: guards, slip_frames, series (+ slip recorder,
-    stick scaling, progress), snapshots, ring (pre-slip states), checkpoint (latest.h5 with every
-    callback's state under its name). `resume_from`: the Checkpoint (latest.h5) whose callback
-    states (slip recorder with its ring, energy guard, stick scaling) carry on. Returns (status,
-    recorder); raises PhysicsError after recording it."""
+    stick scaling, progress), snapshots, ring (pre-slip states, with the guards' state), checkpoint
+    (latest.h5 with every callback's state under its name). `resume_from`: the Checkpoint
+    (latest.h5) the run goes on from: Phase.restore puts its state back (stick scaling, guards,
+    slip recorder with its ring) and cuts `writer` back to it. `fork_from`: a fork's start (the
+    arrays alone, Phase.restore with states=False). Returns (status, recorder); raises
+    PhysicsError after recording it."""
     config = sim.config
     layout = RunLayout(out_dir) if checkpoints else None
-    recorder = SlipRecorder(config, sim, writer, layout)
     guards = Guards()
-    scaling = None
-    if config.numerics.stick_scaling > 1.0:     # stick scaling: the controller (sets the inertia)
-        from .stick_scaling import StickScaling
-        try:
-            scaling = StickScaling(config, sim, quiet=quiet)
-            if resume_from is not None:
-                restore([scaling], resume_from.extra)
-        except ConfigError as err:
-            writer.close(f"refused: {err}", provenance.sim_hash(sim))
-            raise
+    recorder = SlipRecorder(config, sim, writer, layout, kept_with=[guards])
+    try:
+        scaling = controller(config, sim, quiet=quiet)     # stick scaling (sets the inertia) or true inertia
+    except ConfigError as err:
+        writer.close(f"refused: {err}", provenance.sim_hash(sim))
+        raise
+    progress = None if quiet else ProgressReport(label, end_time - sim.state.time, sim.state.n, live=live)
+    need = 2.0 * (config.slips.ring + 2) * state_bytes(sim)
+    series = SeriesWriter(writer, recorder, scaling, progress, out_dir, need, sim.state.time, stop_after_slip)
+    callbacks = [scaling, guards, SlipFrames(writer, recorder), series, Snapshots(writer), Ring(recorder)]
+    keeper = CheckpointKeeper(writer, layout, callbacks, recorder)
+    callbacks += [keeper, recorder]
+    phase = series.phase = Phase("loading", callbacks, stop=lambda: series.stopped)
     if resume_from is not None:
-        restore([recorder, guards], resume_from.extra, resume_from.attached)
-    companions = [guards] if scaling is not None else []     # stick scaling: kept with the ring states
+        phase.restore(sim, resume_from, writer)
+    elif fork_from is not None:
+        phase.restore(sim, fork_from, states=False)
     note = None if quiet else sim.compile_note()
     if note:
         print(note, file=sys.stderr, flush=True)
-    progress = None if quiet else ProgressReport(label, end_time - sim.state.time, sim.state.n, live=live)
-    need = 2.0 * (config.slips.ring + 2) * state_bytes(sim)
-    series = SeriesWriter(writer, recorder, scaling, companions, progress, out_dir, need, sim.state.time,
-                          stop_after_slip)
-    callbacks = [guards, SlipFrames(writer, recorder), series, Snapshots(writer), Ring(recorder, companions)]
-    callbacks += [recorder] + ([scaling] if scaling is not None else [])
-    keeper = CheckpointKeeper(writer, layout, callbacks)
-    callbacks.insert(callbacks.index(recorder), keeper)
 
-    build = partial(schedules, sim, callbacks)     # step counts: stick scaling rebuilds them when dt changes
     status = "finished"
     try:
         with deferred_interrupt() as interrupted:
-            if end_time - sim.state.time > 0.5 * sim.dt:     # (a run resumed at its end: no step more;
-                # stick scaling changes the step: callbacks rebuilt)
-                sim.run(end_time - sim.state.time, build if scaling is not None else build(),
-                        should_stop=lambda: series.stopped or interrupted())
+            if end_time - sim.state.time > 0.5 * sim.dt:     # (a run resumed at its end: no step more)
+                sim.run(end_time - sim.state.time, phase.schedules(sim),
+                        should_stop=lambda: phase.stop() or interrupted())
             if interrupted():
                 status = "interrupted"
             keeper.act(sim)
@@ -89,27 +85,25 @@ def load_phase(sim: Simulation, writer: RunFile, out_dir: Path, end_time: float,
     finally:
         if progress:
             progress.close()
-    if scaling is not None:
-        scaling.tally(sim)
-        writer.set_attr("stick_scaling_counts", json.dumps(scaling.state_dict()))
-        if not quiet:
-            print(scaling.summary(), file=sys.stderr, flush=True)
+    scaling.finish(sim, writer)
     return status, recorder
 
 
 class SeriesWriter(Callback):
     """The series row every output.series_interval: measured, widened by stick scaling's columns,
-    appended to the run file, fed to the slip recorder and stick scaling, shown as progress.
+    appended to the run file, fed to the slip recorder and stick scaling (whose rollback it has
+    ``phase`` perform: Phase.restore of the ring state, then after_rewind), shown as progress.
     ``stopped``: a slip ended and the phase was asked to stop after one (stop_after_slip)."""
 
     name = "series"
 
-    def __init__(self, writer: RunFile, recorder: SlipRecorder, scaling, companions: list, progress,
+    def __init__(self, writer: RunFile, recorder: SlipRecorder, scaling: StickScaling | TrueInertia, progress,
                  out_dir: Path, need: float, t_begin: float, stop_after_slip: bool):
-        self.writer, self.recorder, self.scaling, self.companions = writer, recorder, scaling, companions
+        self.writer, self.recorder, self.scaling = writer, recorder, scaling
         self.progress, self.out_dir, self.need, self.t_begin = progress, out_dir, need, t_begin
         self.stop_after_slip = stop_after_slip
         self.stopped = False
+        self.phase: Phase | None = None      # set by load_phase
 
     def every(self, sim):
         return Every.t0(sim, sim.config.output.series_interval, self.act, self.name)
@@ -117,13 +111,15 @@ class SeriesWriter(Callback):
     def act(self, sim: Simulation):
         ensure_space(self.out_dir, self.need)
         row = sim.measure()             # (the guards' row when they ran on this step)
-        if self.scaling is not None:            # stick scaling: lambda, I (and De) columns
-            row.update(self.scaling.columns(sim, row))
+        row.update(self.scaling.columns(sim, row))      # stick scaling: lambda, I (and De) columns
         self.writer.append(row)
         slip = self.recorder.observe(row)
-        if self.scaling is not None and self.scaling.after_row(sim, row, self.recorder, self.writer,
-                                                               self.companions, slip):
-            return                              # stick scaling: went back to a pre-slip state
+        rollback = self.scaling.after_row(sim, row, self.recorder, slip)
+        if rollback is not None:                # stick scaling: back to true inertia at an onset
+            if rollback.to is not None:
+                self.phase.restore(sim, rollback.to, self.writer, attached=ring_attachments([rollback.to]))
+                self.scaling.after_rewind(sim)
+            return
         if slip is not None and self.stop_after_slip:
             self.stopped = True
         if self.progress:
@@ -169,33 +165,31 @@ class SlipFrames(Callback):
 
 
 class Ring(Callback):
-    """The slip recorder's ring of pre-slip states, every lead / RING_PER_LEAD, with the states of
-    ``companions`` (stick scaling: the guards', so that a rollback restores them too)."""
+    """The slip recorder's ring of pre-slip states, every lead / RING_PER_LEAD (SlipRecorder.keep:
+    with the states of its kept_with callbacks)."""
 
     name = "ring"
 
-    def __init__(self, recorder: SlipRecorder, companions: list):
-        self.recorder, self.companions = recorder, companions
+    def __init__(self, recorder: SlipRecorder):
+        self.recorder = recorder
 
     def every(self, sim):
         self.recorder.ring_every = self.recorder.ring_steps(sim)
         return Every(self.recorder.ring_every, self.act, self.name)
 
     def act(self, sim):
-        if self.companions:
-            self.recorder.keep(sim, states(self.companions)[0])
-        else:
-            self.recorder.keep(sim)
+        self.recorder.keep(sim)
 
 
 class CheckpointKeeper(Callback):
     """checkpoints/latest.h5 every output.checkpoint_interval and when the phase ends: the state
-    with every callback's own state under its name (callbacks.states) and the phase."""
+    with every callback's own state under its name (callbacks.states) and the header (phase
+    'loading', the slips recorded, the series tail)."""
 
     name = "checkpoint"
 
-    def __init__(self, writer: RunFile, layout: RunLayout | None, callbacks: list, phase: str = "loading"):
-        self.writer, self.layout, self.callbacks, self.phase = writer, layout, callbacks, phase
+    def __init__(self, writer: RunFile, layout: RunLayout | None, callbacks: list, recorder: SlipRecorder):
+        self.writer, self.layout, self.callbacks, self.recorder = writer, layout, callbacks, recorder
 
     def every(self, sim):
         return Every.t0(sim, sim.config.output.checkpoint_interval, self.act, self.name)
@@ -207,8 +201,8 @@ class CheckpointKeeper(Callback):
         for cb in self.callbacks:
             cb.sync(sim)
         saved, attached = states(self.callbacks)
-        extra = {"phase": self.phase, **saved, **self.writer.series_tail().as_extra()}
-        write_checkpoint(self.layout.latest, snapshot_of(sim, extra, attached))
+        header = CheckpointHeader("loading", self.recorder.count, self.writer.series_tail())
+        write_checkpoint(self.layout.latest, snapshot_of(sim, header, saved, attached))
 
 
 #: the signals that stop a run cleanly: Ctrl-C, and what schedulers, `timeout` and systemd send

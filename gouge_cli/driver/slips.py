@@ -14,18 +14,28 @@ drops (too small) discards its pending state.
 
 from __future__ import annotations
 
+import math
 from collections import deque
+from dataclasses import replace
+
 import numpy as np
 
-from ..io.checkpoint import SLIP_RECORDER, Checkpoint, snapshot_of, write_checkpoint
+from ..io.checkpoint import SLIP_RECORDER, Checkpoint, CheckpointHeader, snapshot_of, write_checkpoint
 from ..io.layout import RunLayout
 from ..io.slipcatalog import SlipEntry
 from ..config import Config
 from ..model.slip_rule import Slip, SlipDetector, SlipRule
-from .callbacks import Callback
+from .callbacks import Callback, states
 from ..kernels.layout import W_VX
 
 RING_PER_LEAD = 4      # pre-slip ring states kept per slips.lead (spaced lead / RING_PER_LEAD)
+RING = "ring_"         # attached ring states are ring_000, ring_001, ... (oldest first)
+
+
+def ring_attachments(ring) -> dict:
+    """{ring_NNN: state} of ring states (oldest first), as a checkpoint attaches them and
+    SlipRecorder.load_state_dict takes them back."""
+    return {f"{RING}{i:03d}": ck for i, ck in enumerate(ring)}
 
 
 def lead_time(config: Config) -> float:
@@ -40,12 +50,13 @@ def lead_time(config: Config) -> float:
 class SlipRecorder(Callback):
     """Time-series callback: detect slips, persist the pre-slip checkpoint, write the catalog.
     Fed by the series writer (not scheduled itself); its checkpoint state (``state_dict`` and
-    ``attachments``: the ring and the pending pre-slip state) is saved under ``name``."""
+    ``attachments``: the ring and the pending pre-slip state) is saved under ``name``.
+    ``kept_with``: the callbacks whose states each ring state keeps too (the guards': a stick
+    scaling rollback puts them back with it)."""
 
     name = SLIP_RECORDER
 
-    def __init__(self, config: Config, sim, run_file, layout: RunLayout | None, state: dict | None = None,
-                 attached: dict | None = None):
+    def __init__(self, config: Config, sim, run_file, layout: RunLayout | None, kept_with=()):
         """`layout`: the run directory whose slip checkpoints it writes (None: none written)."""
         self.config = config
         self.run_file = run_file
@@ -58,7 +69,8 @@ class SlipRecorder(Callback):
         self.peak_band = 0.25 * config.slips.lead_stress
         self.slips: list[SlipEntry] = []      # recorded since this process started
         self._start_time = sim.state.time
-        self.load_state_dict(state or {}, attached)
+        self.kept_with = list(kept_with)
+        self.load_state_dict({})          # (the initial state)
 
     def load_state_dict(self, state: dict, attached: dict | None = None):
         """Go on from a saved state (state_dict) and its attached checkpoints (attachments)."""
@@ -71,7 +83,7 @@ class SlipRecorder(Callback):
         self.peak_time = float(state.get("peak_time", self._start_time))
         self.pending: Checkpoint | None = None
         self._deborah: list[float] = [float(v) for v in state.get("deborah", [])]
-        ring = [ck for key, ck in sorted((attached or {}).items()) if key.startswith("ring_")]
+        ring = [ck for key, ck in sorted((attached or {}).items()) if key.startswith(RING)]
         self.ring.clear()
         self.ring.extend(ring)
         if "pending" in (attached or {}):
@@ -80,7 +92,9 @@ class SlipRecorder(Callback):
             self.pending = ring[int(state["pending_in_ring"])]
 
     def ring_state(self) -> dict:
-        """The state kept with each ring state (rewind_to goes back to it)."""
+        """The state kept with each ring state: load_state_dict with that ring state alone attached
+        (ring_attachments) goes back to the moment it was kept (no pending state, no Deborah
+        samples: a stick scaling rollback)."""
         return {"detector": self.detector.state_dict(), "count": self.count,
                 "last_quiet": self.last_quiet, "above": self.above,
                 "peak_tau": self.peak_tau, "peak_time": self.peak_time}
@@ -96,38 +110,24 @@ class SlipRecorder(Callback):
         return state
 
     def attachments(self) -> dict:
-        attached = {f"ring_{i:03d}": ck for i, ck in enumerate(self.ring)}
+        attached = ring_attachments(self.ring)
         if self.pending is not None and not any(ck is self.pending for ck in self.ring):
             attached["pending"] = self.pending
         return attached
 
-    def keep(self, sim, extra: dict | None = None, always: bool = False):
+    def keep(self, sim, always: bool = False):
         """Ring callback (every lead/4): keep the state if the wall is quiet (v < end threshold),
-        so that the ring always reaches back from the last quiet moment before an onset.
-        `extra`: more callback states to keep with it (stick scaling: the energy guard's);
-        `always`: keep it whatever the wall does (stick scaling: the moment scaling resumes)."""
+        so that the ring always reaches back from the last quiet moment before an onset, with
+        ring_state() and the states of ``kept_with``; `always`: keep it whatever the wall does
+        (stick scaling: the moment scaling resumes)."""
         tau = sim.tau_over_sigma()
         if always or (sim.state.wall[W_VX] < self.lo and tau >= self.peak_tau - self.peak_band):
-            self.ring.append(snapshot_of(sim, {self.name: self.ring_state(), **(extra or {})}))
+            kept = {self.name: self.ring_state(), **states(self.kept_with)[0]}
+            self.ring.append(snapshot_of(sim, CheckpointHeader(slips=self.count), kept))
 
     def ring_steps(self, sim) -> int:
         """Steps between ring states at sim's current dt: lead / RING_PER_LEAD."""
         return sim.steps_for(self.lead / RING_PER_LEAD)
-
-    def rewind_to(self, ck: Checkpoint):
-        """Stick scaling: back to the moment ring state `ck` was kept (detector, peak, count as
-        then; the pending state and every other ring state dropped: the run goes on from `ck` at
-        true inertia, so no older state leads to what it computes next, and a pre-slip
-        checkpoint from before `ck` would not retrace it)."""
-        state = ck.extra[self.name]
-        self.detector = SlipDetector.from_state_dict(state["detector"])
-        self.count = int(state["count"])
-        self.last_quiet, self.above = float(state["last_quiet"]), bool(state["above"])
-        self.peak_tau, self.peak_time = float(state["peak_tau"]), float(state["peak_time"])
-        self.pending = None
-        self._deborah.clear()
-        self.ring.clear()
-        self.ring.append(ck)
 
     def closed(self) -> bool:
         """Nothing open: no raw or pending detector event and no pending pre-slip state (every
@@ -139,11 +139,21 @@ class SlipRecorder(Callback):
         afresh (as after a slip), so that the scaled stretch keeps ring states near its own peak."""
         self.peak_tau = -np.inf
 
-    def choose_pre_slip(self, onset_estimate: float) -> Checkpoint | None:
-        """Newest kept state at least `lead` before the onset estimate, else the oldest kept
-        (a shorter lead); None if nothing was kept since the previous slip."""
+    def choose_pre_slip(self, onset: float = math.inf, not_before: float = -math.inf) -> Checkpoint | None:
+        """The pre-slip state of an onset at `onset` [t0] (default: the trigger crossed now): the
+        one set aside at the trigger if any, else the newest kept state at least `lead` before
+        min(last quiet row, stress peak, onset), else the oldest kept (a shorter lead); none from
+        before `not_before` [t0] (stick scaling: where it last resumed), the oldest kept since
+        then instead; None if nothing fits."""
+        ck = self.pending if self.pending is not None else self._kept_before(min(self.last_quiet, self.peak_time,
+                                                                                  onset))
+        if ck is not None and ck.time < not_before:
+            ck = next((c for c in self.ring if c.time >= not_before), None)
+        return ck
+
+    def _kept_before(self, estimate: float) -> Checkpoint | None:
         for ck in reversed(self.ring):
-            if ck.time <= onset_estimate - self.lead:
+            if ck.time <= estimate - self.lead:
                 return ck
         return self.ring[0] if self.ring else None
 
@@ -155,7 +165,7 @@ class SlipRecorder(Callback):
         if row["tau_over_sigma"] > self.peak_tau and self.pending is None:
             self.peak_tau, self.peak_time = row["tau_over_sigma"], t
         if v >= self.hi and not self.above and self.pending is None:
-            self.pending = self.choose_pre_slip(min(self.last_quiet, self.peak_time))
+            self.pending = self.choose_pre_slip()
         self.above = v >= self.hi
         slip = self.detector.update(t, row["wall_x"], v, row["tau_over_sigma"], row["porosity"])
         if "deborah" in row and (self.detector.raw is not None or slip is not None):
@@ -185,11 +195,8 @@ class SlipRecorder(Callback):
         checkpoint, checkpoint_time = "", float("nan")
         if self.pending is not None and self.layout is not None:
             path = self.layout.slip_checkpoint(self.count)
-            extra = dict(self.pending.extra)
-            extra.update(slip=self.count, onset_time=slip.onset_time)
-            write_checkpoint(path,
-                             Checkpoint(self.pending.config, self.pending.state, self.pending.fluid, extra,
-                                        provenance=self.pending.provenance))
+            header = replace(self.pending.header, slip=self.count, onset_time=slip.onset_time)
+            write_checkpoint(path, replace(self.pending, header=header))
             checkpoint, checkpoint_time = self.layout.relative(path), self.pending.time
         entry = SlipEntry.from_slip(slip, self.count, deborah=deborah, checkpoint=checkpoint,
                                     checkpoint_time=checkpoint_time)

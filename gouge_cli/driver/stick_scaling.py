@@ -18,12 +18,13 @@ Rules of :class:`StickScaling` (checked on every time-series row):
   slip recorder's pre-slip state (the newest ring state at least slips.lead before the onset
   estimate, driver.slips.SlipRecorder.choose_pre_slip; the oldest kept one if none is that old; never one
   from before scaling last resumed, whose state is put in the ring then, since the stretch
-  before it was at true inertia already: so a run cannot loop). The ring then holds that state
-  alone (an older one would not retrace the recomputation: the pre-slip checkpoint is it or a
-  later one, kept at true inertia). Rows,
-  snapshots and catalog entries after it are dropped (RunFile.truncate_after), the recorder
-  and the energy guard are restored to that moment, lambda becomes 1 and the run computes
-  again from there. Without a kept state it switches to lambda = 1 where it is (``in_place``).
+  before it was at true inertia already: so a run cannot loop). The controller asks for that
+  rewind (after_row returns a :class:`Rollback`) and performs none: the loading phase puts the
+  state back (driver.phase.Phase.restore with that ring state alone attached: the recorder and
+  the energy guard as they were then, the ring holding that state alone, since an older one would
+  not retrace the recomputation; rows, snapshots and catalog entries after it dropped,
+  RunFile.truncate_after), then calls after_rewind: lambda becomes 1 and the run computes again
+  from there. Without a kept state it switches to lambda = 1 where it is (``in_place``).
 * **Resume.** Scaling resumes once the true-inertia stretch has moved (v_wall >= start_factor
   V_s, or tau/sigma lead_stress / 4 below its peak since the rollback), the slip detector has
   closed what it saw (no raw or pending event, no pending pre-slip state: the slip is in the
@@ -63,16 +64,19 @@ unscaled run (and a fork) computes from the same state.
 
 from __future__ import annotations
 
+import json
 import math
 import sys
+from dataclasses import dataclass
 
 from ..config import Config
 from ..errors import ConfigError
+from ..io.checkpoint import Checkpoint
 from ..kernels import layout as L
 from ..model.portable import sphere_mass
 from ..model.timestep import choose_dt
-from .callbacks import Callback, restore, states
-from .slips import RING_PER_LEAD, lead_time
+from .callbacks import Callback
+from .slips import RING_PER_LEAD, SlipRecorder, lead_time
 
 # The largest lambda the ladder found within the seed spread with every smaller rung
 # (README: configs/scaling_long.yaml, 16 seeds: 64 fails on slip duration; 8 seeds had given 64).
@@ -80,6 +84,7 @@ from .slips import RING_PER_LEAD, lead_time
 LADDER_DEFAULT = 16.0
 # a rollback lands at least one lead and at most one ring spacing more before the onset: 1.25 leads
 ROLLBACK_LEADS = 1.0 + 1.0 / RING_PER_LEAD
+STICK_SCALING = "stick_scaling"     # the controller's name (its state's key in a checkpoint)
 
 
 def set_inertia(sim, lam: float, dt_true: float):
@@ -114,13 +119,47 @@ def stick_deborah_bound(config: Config, lam: float, diffusivity: float, half_thi
     return math.sqrt(lam) * half_thickness * config.loading.velocity / max(diffusivity, 1e-300)
 
 
+@dataclass(frozen=True)
+class Rollback:
+    """after_row's request at a scaled onset: put ring state ``to`` back (Phase.restore), then call
+    after_rewind; ``to`` None: no state was kept, the run switched to lambda = 1 where it is."""
+
+    to: Checkpoint | None
+
+
+class TrueInertia(Callback):
+    """Stick scaling off (numerics.stick_scaling = 1): the controller's interface at lambda = 1
+    throughout (no columns, never a rollback, nothing saved)."""
+
+    name = STICK_SCALING
+
+    def columns(self, sim, row: dict) -> dict:
+        return {}
+
+    def after_row(self, sim, row: dict, recorder: SlipRecorder, slip=None) -> Rollback | None:
+        return None
+
+    def after_rewind(self, sim) -> None:
+        pass
+
+    def finish(self, sim, writer) -> None:
+        pass
+
+
+def controller(config: Config, sim, quiet: bool = False) -> "StickScaling | TrueInertia":
+    """The loading phase's controller: StickScaling (which sets the inertia; ConfigError for a
+    wet run above the Deborah bound) when numerics.stick_scaling > 1, else TrueInertia."""
+    return StickScaling(config, sim, quiet=quiet) if config.numerics.stick_scaling > 1.0 else TrueInertia()
+
+
 class StickScaling(Callback):
     """The controller: lambda schedule, rollback to true inertia, guard; checkpointable (its state
     under ``name``). Not scheduled: the series writer calls after_row on every row."""
 
-    name = "stick_scaling"
+    name = STICK_SCALING
+    changes_step = True      # lambda sets the step: schedules are rebuilt
 
-    def __init__(self, config: Config, sim, state: dict | None = None, quiet: bool = False):
+    def __init__(self, config: Config, sim, quiet: bool = False):
         n = config.numerics
         self.config = config
         self.target = float(n.stick_scaling)
@@ -136,7 +175,7 @@ class StickScaling(Callback):
         self.sim = sim
         if sim.fluid is not None and self.target > 1.0:
             self._check_wet(sim)
-        self.load_state_dict(state or {})
+        self.load_state_dict({})          # (the initial state: lambda = target)
 
     def load_state_dict(self, state: dict, attached: dict | None = None):
         """The controller's saved state; sets the inertia of its lambda."""
@@ -197,23 +236,20 @@ class StickScaling(Callback):
         return out
 
     # ---- control --------------------------------------------------------------------------
-    def after_row(self, sim, row: dict, recorder, writer, companions=None, slip=None) -> bool:
+    def after_row(self, sim, row: dict, recorder: SlipRecorder, slip=None) -> Rollback | None:
         """Called after the recorder saw `row` (`slip`: the slip it closed on this row, if any);
-        True if the run went back in time. `companions`: the callbacks whose states travel with
-        the ring states and come back on a rollback (the guards)."""
-        companions = companions or []
+        a Rollback when a scaled stretch ended at an onset (the phase performs it), else None."""
         self.tally(sim)
         t, v = row["time"], row["wall_vx"]
         if self.scaled:
             self.peak_tau = max(self.peak_tau, row["tau_over_sigma"])
             if v >= max(self.lo, self.hi / math.sqrt(self.lam)) or row["tau_over_sigma"] < self.peak_tau - self.drop:
-                self._rollback(sim, recorder, writer, companions, t)
-                return True
+                return self._rollback(sim, recorder, t)
             if v < self.lo:     # the guard watches the quiet stick phase; onsets are rolled back
                 self._guard(sim, row)
-            return False
+            return None
         if self.target <= 1.0:
-            return False
+            return None
         # true-inertia stretch after a rollback (or a lowered-to-1 guard)
         self.peak_tau = max(self.peak_tau, row["tau_over_sigma"])
         if v >= self.hi or row["tau_over_sigma"] < self.peak_tau - self.drop:
@@ -239,12 +275,12 @@ class StickScaling(Callback):
                     self._set(sim, self.target)
                     self.resumed_at = t         # kept in the ring: no later rollback goes back past it
                     recorder.forget_peak()      # else a stale peak (a slow slip) keeps the ring empty
-                    recorder.keep(sim, states(companions)[0], always=True)
+                    recorder.keep(sim, always=True)
                     self.onset_scaled, self.triggered, self.quiet_since, self.missed_now = None, False, None, False
                     self.slip_span = 0.0
                 else:
                     self.quiet_since, self.quiet_x = t, x
-        return False
+        return None
 
     def _guard(self, sim, row: dict):
         cols = self.columns(sim, row)
@@ -262,29 +298,26 @@ class StickScaling(Callback):
                       f"t0: lambda lowered from {self.lam:g} to {lam:.3g} until the next slip")
             self._set(sim, lam)
 
-    def _rollback(self, sim, recorder, writer, companions, t_onset: float):
-        ck = recorder.pending if recorder.pending is not None else \
-            recorder.choose_pre_slip(min(recorder.last_quiet, recorder.peak_time, t_onset))
-        if ck is not None and ck.time < self.resumed_at:      # never redo a true-inertia stretch
-            later = [c for c in recorder.ring if c.time >= self.resumed_at]
-            ck = later[0] if later else None
+    def _rollback(self, sim, recorder: SlipRecorder, t_onset: float) -> Rollback:
+        """The scaled onset at `t_onset` [t0]: the pre-slip state to go back to (never one from
+        before scaling last resumed: a true-inertia stretch is not redone), or lambda = 1 in place."""
+        ck = recorder.choose_pre_slip(t_onset, not_before=self.resumed_at)
         self.onset_scaled, self.triggered, self.quiet_since, self.missed_now = t_onset, False, None, False
         self.slip_span = 0.0
         if ck is None:
             self.counts["in_place"] += 1
             self.triggered = True
             self._set(sim, 1.0)
-            return
+            return Rollback(None)
         self.counts["rollbacks"] += 1
         self.counts["steps_discarded"] += sim.state.step - ck.step
-        sim.state.restore(ck.state)
         self.peak_tau = -math.inf
-        if sim.fluid is not None:
-            sim.fluid.restore(ck.fluid)
-        recorder.rewind_to(ck)
-        restore(companions, ck.extra)
-        writer.truncate_after(ck.time, ck.step, recorder.count)
-        self._set(sim, 1.0, rescale=False)      # the stored state as it is: a fork from it computes the same
+        return Rollback(ck)
+
+    def after_rewind(self, sim):
+        """After the phase put the rollback's state back: lambda = 1 with the stored state as it is
+        (no rescaling: a fork from it computes the same)."""
+        self._set(sim, 1.0, rescale=False)
 
     def _set(self, sim, lam: float, rescale: bool = True):
         """Switch to lambda; `rescale`: velocities times sqrt(old / new), so that the switch
@@ -307,6 +340,13 @@ class StickScaling(Callback):
             print(line, file=sys.stderr, flush=True)
 
     # ---- counts ---------------------------------------------------------------------------
+    def finish(self, sim, writer):
+        """At the phase's end: the steps counted, the counts into the run file's attribute
+        stick_scaling_counts (JSON), the summary on stderr."""
+        self.tally(sim)
+        writer.set_attr("stick_scaling_counts", json.dumps(self.state_dict()))
+        self._say(self.summary())
+
     def tally(self, sim):
         """Count the steps since the last tally as scaled or true (lambda changes only in
         after_row, which tallies first; the loop is Simulation.run with rebuilt callbacks)."""

@@ -3,8 +3,10 @@
 A checkpoint is an HDF5 file: datasets ``state/<name>`` (see State.EVOLVING) and, with fluid,
 ``fluid/<name>``; states attached to it (the slip recorder's pre-slip ring, see driver/slips.py) under
 ``attached/<key>/{state,fluid}/<name>`` with their own ``extra`` attribute; attributes
-``config`` (YAML of the validated config), ``extra`` (JSON: detector state, slip number, parent
-run, ...), ``provenance`` (JSON, see :mod:`gouge_cli.io.provenance`) and ``checksum``:
+``config`` (YAML of the validated config), ``extra`` (JSON: the :class:`CheckpointHeader` fields
+io may read, and under ``states`` each callback's state by its name, read only by
+:meth:`gouge_cli.driver.phase.Phase.restore`; older files' flat extra is mapped onto the two,
+:func:`split_extra`), ``provenance`` (JSON, see :mod:`gouge_cli.io.provenance`) and ``checksum``:
 ``sha256-v2:`` and the SHA-256 over everything else the file holds, every dataset's path,
 dtype, shape and bytes and every attribute of every group and dataset (config and extra
 included; :func:`gouge_cli.io.integrity.content_digest`). A checkpoint written before that
@@ -19,7 +21,7 @@ from __future__ import annotations
 import io
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 
 import h5py
@@ -33,21 +35,83 @@ from ..errors import CheckpointError, ConfigError, DamagedFileError
 from .filedoc import document_checkpoint
 from .integrity import content_digest
 from .outputs import write_file
+from .recovery import SeriesTail
 from .rundir import pid_alive
 
 
-SLIP_RECORDER = "slip_recorder"     # the slip recorder's key in a checkpoint's extra (driver.slips)
+SLIP_RECORDER = "slip_recorder"     # the slip recorder's name (driver.slips): its state's key
+LEGACY_START = "compaction_start"   # where checkpoints before the callback model keep compaction's [t0, step0]
+SETTLING = "settling"               # the name of compaction's settling callback (driver.compaction)
+STATES = "states"                   # the key of the callback states in the extra attribute
+
+
+@dataclass(frozen=True)
+class CheckpointHeader:
+    """What io and the studies may read of a checkpoint (its callbacks' states are Phase.restore's).
+
+    phase        'compaction' or 'loading' (latest.h5); None: a state kept in memory (ring, slip)
+    slips        slips the run had recorded when the state was taken (a resume keeps that many)
+    series_tail  the series rows latest.h5 lines up with (loading; io.recovery)
+    slip         the slip whose pre-slip state this is (checkpoints/slip_NNN.h5)
+    onset_time   [t0] that slip's onset
+    """
+
+    phase: str | None = None
+    slips: int = 0
+    series_tail: SeriesTail | None = None
+    slip: int | None = None
+    onset_time: float | None = None
+
+    def to_dict(self) -> dict:
+        """The JSON fields (those not set left out)."""
+        out = {"phase": self.phase, "slips": self.slips, "slip": self.slip, "onset_time": self.onset_time,
+               "series_tail": asdict(self.series_tail) if self.series_tail is not None else None}
+        return {key: value for key, value in out.items() if value is not None}
+
+    @classmethod
+    def from_dict(cls, record: dict) -> "CheckpointHeader":
+        tail = record.get("series_tail")
+        return cls(record.get("phase"), int(record.get("slips", 0)),
+                   None if tail is None else SeriesTail(int(tail["rows"]), dict(tail["digests"])),
+                   None if record.get("slip") is None else int(record["slip"]),
+                   None if record.get("onset_time") is None else float(record["onset_time"]))
+
+
+HEADER_FIELDS = tuple(f.name for f in fields(CheckpointHeader))
+
+
+def split_extra(extra: dict) -> tuple[CheckpointHeader, dict]:
+    """(header, {callback name: state}) of a stored extra: {header fields, "states": {...}}; the
+    flat extra of older files (header fields and callback states side by side, the recorded slips
+    in the recorder's state, compaction's start under LEGACY_START) is mapped onto the two."""
+    if STATES in extra:
+        return CheckpointHeader.from_dict(extra), dict(extra[STATES])
+    states = {key: value for key, value in extra.items() if key not in HEADER_FIELDS and key != LEGACY_START}
+    header = dict(extra, slips=int(states.get(SLIP_RECORDER, {}).get("count", 0)))
+    if LEGACY_START in extra and SETTLING not in states:
+        states[SETTLING] = {"start": extra[LEGACY_START]}
+    return CheckpointHeader.from_dict(header), states
 
 
 @dataclass
 class Checkpoint:
+    """A saved state: the scene's evolving arrays, its header (io's) and its callbacks' states.
+
+    state     State.arrays(): grains (N,), pairs (npairs,), wall, clock, counters
+    fluid     FluidGrid.arrays() ({} when dry or not started)
+    header    what io reads (CheckpointHeader)
+    states    {callback name: state}, put back by driver.phase.Phase.restore only
+    attached  key -> Checkpoint (same config) kept with it: the slip recorder's ring
+    """
+
     config: Config
     state: dict
     fluid: dict
-    extra: dict
+    header: CheckpointHeader = field(default_factory=CheckpointHeader)
+    states: dict = field(default_factory=dict)
     path: Path | None = None
     provenance: dict = field(default_factory=dict)
-    attached: dict = field(default_factory=dict)     # key -> Checkpoint (same config), e.g. the slip ring
+    attached: dict = field(default_factory=dict)
 
     @property
     def time(self) -> float:
@@ -57,10 +121,10 @@ class Checkpoint:
     def step(self) -> int:
         return int(self.state["counters"][0])
 
-    @property
-    def slips_recorded(self) -> int:
-        """Slips the run's slip recorder had recorded when this checkpoint was written (0: none)."""
-        return int(self.extra.get(SLIP_RECORDER, {}).get("count", 0))
+
+def _stored_extra(checkpoint: Checkpoint) -> str:
+    """The extra attribute (JSON): the header's fields and the states under "states"."""
+    return json.dumps({**checkpoint.header.to_dict(), STATES: checkpoint.states}, default=_plain)
 
 
 def _plain(value):
@@ -72,10 +136,12 @@ def _plain(value):
     raise TypeError(f"cannot store {type(value).__name__} in a checkpoint")
 
 
-def snapshot_of(sim, extra: dict | None = None, attached: dict | None = None) -> Checkpoint:
-    """In-memory copy of the simulation's evolving state (cheap enough to keep a few)."""
+def snapshot_of(sim, header: CheckpointHeader | None = None, states: dict | None = None,
+                attached: dict | None = None) -> Checkpoint:
+    """In-memory copy of the simulation's evolving state (cheap enough to keep a few), with its
+    header, callback states ({name: state}) and attached checkpoints."""
     fluid = sim.fluid.arrays() if sim.fluid is not None else {}
-    return Checkpoint(sim.config, sim.state.arrays(), fluid, dict(extra or {}),
+    return Checkpoint(sim.config, sim.state.arrays(), fluid, header or CheckpointHeader(), dict(states or {}),
                       provenance=provenance.collect(sim.threads), attached=dict(attached or {}))
 
 
@@ -122,9 +188,9 @@ def write_checkpoint(path: Path, checkpoint: Checkpoint) -> float:
                 for name, arr in arrays.items():
                     g.create_dataset(name, data=arr)
             for key, child in checkpoint.attached.items():
-                h5[f"attached/{key}"].attrs["extra"] = json.dumps(child.extra, default=_plain)
+                h5[f"attached/{key}"].attrs["extra"] = _stored_extra(child)
             h5.attrs["config"] = dump_config(checkpoint.config)
-            h5.attrs["extra"] = json.dumps(checkpoint.extra, default=_plain)
+            h5.attrs["extra"] = _stored_extra(checkpoint)
             h5.attrs["version"] = __version__
             h5.attrs["provenance"] = provenance.dumps(checkpoint.provenance or provenance.collect())
             h5.attrs["checksum"] = ""          # set below; named in attribute_units
@@ -191,5 +257,6 @@ def read_checkpoint(path: Path, overrides: list[str] | dict | None = None) -> Ch
         raise CheckpointError(f"checkpoint {path}: its config attribute is not valid YAML "
                               f"({str(err).splitlines()[0][:160]})") from None
     attached = {key: Checkpoint(config, groups[f"attached/{key}/state"], groups[f"attached/{key}/fluid"],
-                                child_extra[key], provenance=stored) for key in keys}
-    return Checkpoint(config, groups["state"], groups["fluid"], extra, path, provenance=stored, attached=attached)
+                                *split_extra(child_extra[key]), provenance=stored) for key in keys}
+    return Checkpoint(config, groups["state"], groups["fluid"], *split_extra(extra), path, provenance=stored,
+                      attached=attached)

@@ -140,7 +140,9 @@ CHECKPOINT = {
 
 CHECKPOINT_ATTRS = {
     "config": RUN_ATTRS["config"],
-    "extra": ("-", "callback state (JSON): slip detector, slip number, onset time, parent run"),
+    "extra": ("-", "JSON: the header (phase, slips recorded, series tail; slip number and onset time of a "
+                   "slip checkpoint) and, under 'states', each callback's state by name (slip detector, guards, "
+                   "stick scaling, compaction's start)"),
     "version": RUN_ATTRS["version"],
     "checksum": ("-", "'sha256-v2:' + SHA-256 over every dataset (path, dtype, shape, bytes) and every "
                       "attribute of the file but this one"),

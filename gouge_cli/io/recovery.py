@@ -6,7 +6,7 @@ a file holding an object that cannot be opened (:func:`rebuild_openable`)."""
 from __future__ import annotations
 
 import hashlib
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
@@ -31,19 +31,9 @@ class SeriesTail:
     rows: int
     digests: dict = field(default_factory=dict)
 
-    KEY = "series_tail"         # its key in a checkpoint's extra
-
     @property
     def start(self) -> int:
         return self.rows - self.rows % SERIES_CHUNK
-
-    @classmethod
-    def from_extra(cls, extra: dict) -> "SeriesTail | None":
-        record = extra.get(cls.KEY)
-        return None if record is None else cls(int(record["rows"]), dict(record["digests"]))
-
-    def as_extra(self) -> dict:
-        return {self.KEY: asdict(self)}
 
 
 def torn_series_tail(path: Path, tail: SeriesTail | None) -> dict[str, tuple[bytes, np.ndarray]]:

@@ -25,7 +25,7 @@ from .checkpoint import read_checkpoint
 from .layout import RUN_FILE, ForkLayout, RunLayout, branch_flag
 from .integrity import STRUCTURE_ERRORS, check_seal, damaged_rows, read, stored_seal, structure_error, walk_objects
 from .integrity import attr_value
-from .recovery import SeriesTail, torn_series_tail
+from .recovery import torn_series_tail
 from .runreader import checked_time, run_status
 
 
@@ -212,7 +212,7 @@ def verify_run(run_dir: Path) -> dict:
         elif p.part == "series" and p.rows and (p.object.rsplit("/", 1)[-1], p.rows[0]) in torn:
             p.recompute = (f"`gouge resume {root}`, which mends it: a stop inside a write left this chunk's "
                            "checksum stale, and its rows up to checkpoints/latest.h5 match that checkpoint's record")
-        elif latest is not None and _follows(p, layout.run_file, latest.time, latest.step, latest.slips_recorded):
+        elif latest is not None and _follows(p, layout.run_file, latest.time, latest.step, latest.header.slips):
             p.recompute = f"`gouge resume {root}`, which drops it and computes it again from checkpoints/latest.h5"
         else:
             p.recompute = _source(checkpoints, p.time)
@@ -254,7 +254,7 @@ def _torn_tail(layout: RunLayout, latest) -> set[tuple[str, int]]:
     if latest is None:
         return set()
     try:
-        tail = SeriesTail.from_extra(latest.extra)
+        tail = latest.header.series_tail
         return {(name, tail.start) for name in torn_series_tail(layout.run_file, tail)}
     except (OSError, KeyError, ValueError, TypeError, RuntimeError):
         return set()

@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.checkpoint import read_checkpoint
+from ..io.checkpoint import CheckpointHeader, read_checkpoint
 from ..config import build_config, Config
 from ..errors import ConfigError
 from ..driver.guards import Guards
@@ -115,17 +115,17 @@ class LevelResult:
     measures: dict = field(default_factory=dict)
 
 
-def slip_end(path: Path, extra: dict) -> float | None:
-    """End time of the slip a checkpoint was kept for, from the run's catalog (RUN/run.h5 next
-    to RUN/checkpoints/), or None."""
+def slip_end(path: Path, header: CheckpointHeader) -> float | None:
+    """End time of the slip a checkpoint was kept for (its header's slip), from the run's catalog
+    (RUN/run.h5 next to RUN/checkpoints/), or None."""
     from ..io.layout import RunLayout
     from ..io.slipcatalog import slip_catalog
 
     run = RunLayout.of_checkpoint(path)
-    if "slip" not in extra or not run.run_file.is_file():
+    if header.slip is None or not run.run_file.is_file():
         return None
     for entry in slip_catalog(run.root):
-        if entry.number == int(extra["slip"]):
+        if entry.number == header.slip:
             return entry.end_time
     return None
 
@@ -146,8 +146,8 @@ def start_from_checkpoint(path: Path, config: Config | None = None, interval: fl
     cfg = config or ck.config
     state, fluid, time = ck.state, ck.fluid, ck.time
     if interval is None:
-        end = slip_end(path, ck.extra)
-        onset = ck.extra.get("onset_time")
+        end = slip_end(path, ck.header)
+        onset = ck.header.onset_time
         if onset is not None:
             sim = Simulation(cfg, arrays=state, fluid_arrays=fluid or None)
             duration = slip_duration(cfg, sim.wall_mass_per_length)

@@ -15,7 +15,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -196,7 +196,8 @@ def _run_branch(run_dir: Path, slip: int, entry: SlipEntry, ck: Checkpoint, scen
             writer.append(sim.observe())
             status, recorder = load_phase(sim, writer, out_dir, ck.time + duration, live=live, quiet=quiet,
                                           label=f"slip {slip} {name}", checkpoints=False,
-                                          stop_after_slip=stop_after_slip)
+                                          stop_after_slip=stop_after_slip,
+                                          fork_from=replace(ck, fluid={}))     # (a branch's fluid starts at P = 0)
         except PhysicsFailure as err:           # closed 'failed: ...' (load_phase): kept, then raised
             writer.close(f"failed: {err}", provenance.sim_hash(sim))
             failure = err

@@ -15,7 +15,7 @@ from ..config import Config, dump_config, load_config
 from ..errors import ConfigError, DamagedFileError, hdf5_os_error
 from ..kernels import layout as L
 from ..io.layout import RunLayout
-from ..io.recovery import SeriesTail, mend_series_tail, rebuild_openable
+from ..io.recovery import mend_series_tail, rebuild_openable
 from ..io.runwriter import RunFile
 from ..io.verify import continued_problems
 from ..model.scene import Scene
@@ -46,7 +46,8 @@ def default_run_dir(config: Config, runs_root: Path = Path("runs")) -> Path:
 def _drive(sim: Simulation, writer: RunFile, out_dir: Path, *, live=None, quiet=False, label="loading",
            resume_from=None) -> RunResult:
     """Compaction (if the state is still compacting) then loading to the run's end; closes the
-    run file with the final status. `resume_from`: the checkpoint the state came from."""
+    run file with the final status. `resume_from`: the checkpoint the state came from (put back,
+    callback states and run file, by the phase it was written in: driver.phase.Phase.restore)."""
     config = sim.config
     t_start = time.perf_counter()
     n, steps0 = sim.state.n, sim.state.step
@@ -174,8 +175,8 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
             with open_run_file(layout.run_file) as h5:
                 if str(h5.attrs["status"]) == "finished":
                     raise RunDirError(f"{run_dir} already finished; nothing to resume")
-            count = ck.slips_recorded
-            mended = mend_series_tail(layout.run_file, SeriesTail.from_extra(ck.extra))
+            count = ck.header.slips
+            mended = mend_series_tail(layout.run_file, ck.header.series_tail)
             if mended:
                 print(f"mended the series' last chunk in {len(mended)} column(s) ({', '.join(mended[:3])}"
                       f"{', ...' if len(mended) > 3 else ''}): its checksum was stale after the stop, its rows "
@@ -185,8 +186,7 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
                 print(f"rebuilt {layout.run_file} without what could not be opened after the checkpoint (a snapshot "
                       "or slip whose write the stop cut short)", file=sys.stderr, flush=True)
             writer = RunFile(layout.run_file, ck.config, sim.dt, mode="a", threads=sim.threads)
-            writer.truncate_after(ck.time, ck.step, count)
-            writer.set_attr("status", "running")
+            writer.set_attr("status", "running")        # (cut back to the checkpoint by load_phase: Phase.restore)
         return _drive(sim, writer, run_dir, live=live, quiet=quiet, label=f"resume {ck.config.name}",
                       resume_from=ck)
 

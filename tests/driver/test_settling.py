@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import math
 import time
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -17,6 +16,7 @@ from gouge_cli.io.provenance import sim_hash
 from gouge_cli.driver.settling import SettleCheck, SettleTracker
 from gouge_cli.driver.callbacks import Callback
 from gouge_cli.driver.compaction import Settling, compact
+from gouge_cli.io.checkpoint import LEGACY_START, Checkpoint, split_extra
 from gouge_cli.driver.simulation import Simulation
 
 SCENE = {"packing": {"n_grains": 300, "width": 15}}     # default compaction: min_time 500, max_time 50,000 t0
@@ -125,10 +125,11 @@ def test_compaction_resumed_on_a_check_ends_where_it_would_have(single_thread):
     resumed = Simulation(config, arrays=saved["arrays"])
     again = []
     restored = Settling(resumed)            # (a checkpoint before the callback model: its legacy key)
-    restored.restore(SimpleNamespace(extra={"phase": "compaction", "compaction_start": saved["state"]["start"]}))
-    assert restored.start == settling.start
+    legacy = split_extra({"phase": "compaction", LEGACY_START: saved["state"]["start"]})
     compact(resumed, [OnCheck(restored, lambda s, st: again.append((s.state.step, st.check.elapsed,
-                                                                     st.check.settled)))], restored)
+                                                                     st.check.settled)))], restored,
+            resume_from=Checkpoint(config, saved["arrays"], {}, *legacy))
+    assert restored.start == settling.start
     assert again == checks[1:] and restored.settled
     assert sim_hash(resumed) == sim_hash(plain)
 

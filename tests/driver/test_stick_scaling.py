@@ -64,14 +64,14 @@ def test_inertial_number_and_guard_lower_lambda(capsys):
     expected = v / 6.0 * 1.0 * math.sqrt(16.0 / 3e-4)
     assert ctl.columns(sim, _row(sim, v))["inertial_number"] == pytest.approx(expected, rel=1e-12)
     assert expected > 1e-4
-    ctl.after_row(sim, _row(sim, v), None, None, None)
+    ctl.after_row(sim, _row(sim, v), None)
     lowered = 16.0 * (0.5 * 1e-4 / expected) ** 2
     assert ctl.lam == pytest.approx(lowered if lowered >= 2 else 1.0)
     assert ctl.counts["lowered"] == 1 and "lowered" in capsys.readouterr().err
     assert sim.params[K.DT] == pytest.approx(choose_dt(sim.config) * math.sqrt(ctl.lam), rel=1e-15)
     # a quiet row below the bound changes nothing
     lam = ctl.lam
-    ctl.after_row(sim, _row(sim, 1e-9), None, None, None)
+    ctl.after_row(sim, _row(sim, 1e-9), None)
     assert ctl.lam == lam
 
 
@@ -148,7 +148,7 @@ def _feed(ctl, sim, recorder, rows):
     row at which scaling resumed (None if it did not)."""
     for row in rows:
         slip = recorder.observe(row)
-        ctl.after_row(sim, row, recorder, None, None, slip)
+        ctl.after_row(sim, row, recorder, slip)
         if ctl.scaled:
             return row["time"]
     return None
@@ -192,7 +192,7 @@ def test_scaling_resumes_after_the_closed_slip_and_a_quiet_window_tied_to_it(mer
     assert ctl.lam == 16.0 and ctl.resumed_at == resumed and ctl.slip_span == 0.0
     assert recorder.ring[-1].time == sim.state.time                  # the resume state is kept
     assert recorder.peak_tau == -np.inf                              # with the stress peak afresh
-    assert recorder.ring[-1].extra["slip_recorder"]["peak_tau"] == -np.inf
+    assert recorder.ring[-1].states["slip_recorder"]["peak_tau"] == -np.inf
     assert ctl.state_dict()["slip_span"] == 0.0
 
 

@@ -22,7 +22,7 @@ import pytest
 
 import gouge_cli.kernels
 from gouge_cli.studies import bench, bench_profile
-from gouge_cli.io.checkpoint import read_checkpoint, snapshot_of, write_checkpoint
+from gouge_cli.io.checkpoint import CheckpointHeader, read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.config import build_config
 from gouge_cli.kernels import layout as L
 from gouge_cli.kernels import step as K
@@ -60,8 +60,8 @@ def step_and_observe(sim: Simulation, steps: int = 30) -> Simulation:
     return sim
 
 
-def via_hdf5(sim: Simulation, path, extra=None):
-    write_checkpoint(path, snapshot_of(sim, extra or {"phase": "loading"}))
+def via_hdf5(sim: Simulation, path, phase="loading"):
+    write_checkpoint(path, snapshot_of(sim, CheckpointHeader(phase)))
     return read_checkpoint(path)
 
 
@@ -102,7 +102,7 @@ def test_restarts_and_forks_reuse_the_compiled_kernels(reference, tmp_path):
     step_and_observe(Simulation(ck.config, arrays=ck.state, fluid_arrays=ck.fluid))
     assert_no_new(sigs, "a restart from a wet HDF5 checkpoint")
     compacting = Simulation(build_config(SCENE))
-    ck = via_hdf5(compacting, tmp_path / "compaction.h5", {"phase": "compaction"})
+    ck = via_hdf5(compacting, tmp_path / "compaction.h5", "compaction")
     resumed = Simulation(ck.config, arrays=ck.state)
     compact(resumed)
     step_and_observe(resumed)

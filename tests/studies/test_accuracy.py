@@ -55,7 +55,7 @@ def test_start_is_before_a_slip(start):
     assert re.search(r"checkpoints/slip_\d{3}\.h5$", start.source), start.source
     ck = read_checkpoint(start.source)
     sim = Simulation(start.config, arrays=ck.state)
-    onset, end = float(ck.extra["onset_time"]), slip_end(start.source, ck.extra)
+    onset, end = float(ck.header.onset_time), slip_end(start.source, ck.header)
     begin = max(ck.time, onset - MAX_LEAD_SLIPS * slip_duration(start.config, sim.wall_mass_per_length))
     assert begin < onset < end
     assert start.interval == pytest.approx(1.1 * (end - begin), abs=1.1 * sim.dt)

@@ -56,7 +56,7 @@ def _wait_for(path: Path, proc: subprocess.Popen, limit: float = 120.0):
 
 def _phase(latest: Path) -> str | None:
     try:
-        return read_checkpoint(latest).extra.get("phase")
+        return read_checkpoint(latest).header.phase
     except (OSError, ValueError, KeyError, CheckpointError):       # (not there yet)
         return None
 
@@ -157,7 +157,7 @@ def kill_and_resume(reference, out: Path, kind: str, rng: random.Random) -> dict
             assert "gouge resume" in proc.stderr.read().decode()
             assert not [p for p in out.rglob("*") if ".tmp" in p.name]
     latest = out / "checkpoints" / "latest.h5"
-    phase = read_checkpoint(latest).extra.get("phase") if latest.exists() else "none"
+    phase = read_checkpoint(latest).header.phase if latest.exists() else "none"
     leftovers = [p.name for p in (out / "checkpoints").glob(".*tmp*")] if (out / "checkpoints").exists() else []
     result = CliRunner().invoke(app, ["resume", str(out), "--quiet"])
     assert result.exit_code == 0, result.output

@@ -135,7 +135,7 @@ def test_stop_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_pa
     with h5py.File(cut / "run.h5", "r") as h5:
         assert h5.attrs["status"] == "interrupted"
     ck = read_checkpoint(cut / "checkpoints" / "latest.h5")
-    state = ck.extra["stick_scaling"]
+    state = ck.states["stick_scaling"]
     assert state["lam"] == 1.0 and state["onset_scaled"] is not None      # inside a recomputation
     assert entry.onset_time < ck.time < entry.end_time
     result = gouge("resume", cut, "--quiet")
@@ -144,7 +144,7 @@ def test_stop_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_pa
     b = read_checkpoint(cut / "checkpoints" / "latest.h5")
     for name in a.state:
         assert np.array_equal(a.state[name], b.state[name]), name
-    assert a.extra["stick_scaling"] == b.extra["stick_scaling"]
+    assert a.states["stick_scaling"] == b.states["stick_scaling"]
     sa, sb = series(out / "run.h5"), series(cut / "run.h5")
     for name in ("time", "wall_vx", "tau_over_sigma", "stick_scaling", "inertial_number"):
         assert np.array_equal(sa[name], sb[name], equal_nan=True), name
@@ -182,7 +182,7 @@ def test_kill_9_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_
         while time.time() < deadline and proc.poll() is None:
             if latest.exists():
                 try:
-                    state = read_checkpoint(latest).extra.get("stick_scaling", {})
+                    state = read_checkpoint(latest).states.get("stick_scaling", {})
                 except Exception:           # being replaced just now
                     state = {}
                 if state.get("lam") == 1.0 and state.get("onset_scaled") is not None:
@@ -200,7 +200,7 @@ def test_kill_9_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_
     b = read_checkpoint(latest)
     for name in a.state:
         assert np.array_equal(a.state[name], b.state[name]), name
-    assert a.extra["stick_scaling"] == b.extra["stick_scaling"]
+    assert a.states["stick_scaling"] == b.states["stick_scaling"]
     sa, sb = series(straight / "run.h5"), series(cut / "run.h5")
     for name in ("time", "wall_vx", "tau_over_sigma", "stick_scaling"):
         assert np.array_equal(sa[name], sb[name], equal_nan=True), name

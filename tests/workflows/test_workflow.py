@@ -21,7 +21,6 @@ from gouge_cli.io.checkpoint import DIGEST_PREFIX, read_checkpoint, snapshot_of,
 from gouge_cli.io.integrity import content_digest
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
-from gouge_cli.io.recovery import SeriesTail
 from gouge_cli.io.runfile import SERIES_CHUNK
 from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.io.verify import verify_run
@@ -193,13 +192,13 @@ def test_bad_config_writes_nothing(scene_file, tmp_path):
 
 WRITER = """
 import sys, numpy as np
-from gouge_cli.io.checkpoint import Checkpoint, write_checkpoint
+from gouge_cli.io.checkpoint import Checkpoint, CheckpointHeader, write_checkpoint
 from gouge_cli.config import build_config
 cfg = build_config({})
 i = 0
 while True:
     i += 1
-    write_checkpoint(sys.argv[1], Checkpoint(cfg, {"x": np.full(3_000_000, float(i))}, {}, {"i": i}))
+    write_checkpoint(sys.argv[1], Checkpoint(cfg, {"x": np.full(3_000_000, float(i))}, {}, CheckpointHeader(slips=i)))
 """
 
 
@@ -215,7 +214,7 @@ def test_killed_writer_leaves_a_valid_checkpoint(tmp_path):
         proc.send_signal(signal.SIGKILL)
         proc.wait()
     ck = read_checkpoint(path)           # verifies the checksum
-    assert np.all(ck.state["x"] == ck.extra["i"])
+    assert np.all(ck.state["x"] == ck.header.slips)
 
 
 @pytest.fixture(scope="module")
@@ -232,7 +231,7 @@ def killed_run(scene_file, tmp_path_factory):
         while time.time() < deadline and proc.poll() is None:
             if latest.exists():
                 ck = read_checkpoint(latest)
-                if ck.time > 30000 and SeriesTail.from_extra(ck.extra).rows % SERIES_CHUNK:
+                if ck.time > 30000 and ck.header.series_tail.rows % SERIES_CHUNK:
                     break
             time.sleep(0.1)
         assert proc.poll() is None, "the run finished before it could be killed"
@@ -271,7 +270,7 @@ def test_resume_after_kill_9_matches_uninterrupted(killed_run, finished_run, tmp
 
 def _tail_chunk(run: Path, column: str):
     """(SeriesTail of latest.h5, byte offset of `column`'s chunk holding the tail rows in run.h5)."""
-    tail = SeriesTail.from_extra(read_checkpoint(run / "checkpoints" / "latest.h5").extra)
+    tail = read_checkpoint(run / "checkpoints" / "latest.h5").header.series_tail
     assert tail is not None and tail.rows % SERIES_CHUNK, tail      # (killed_run)
     with h5py.File(run / "run.h5", "r") as h5:
         return tail, h5["series"][column].id.get_chunk_info_by_coord((tail.start,)).byte_offset
