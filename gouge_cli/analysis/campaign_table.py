@@ -58,7 +58,7 @@ def fork_rows(fork_dir: Path, permeabilities: list[float]) -> list[dict]:
     """The pair rows (:data:`PAIR_COLUMNS` but ``run``) of one fork's undrained branches at the
     listed permeabilities, classified by :func:`~gouge_cli.analysis.forkpairs.classify_fork`."""
     return [{c: pair.row[c] for c in PAIR_COLUMNS if c != "run"} for pair in classify_fork(fork_dir)
-            if _listed(float(pair.row["permeability"]), permeabilities)]
+            if _listed(float(pair.permeability), permeabilities)]
 
 
 @dataclass(frozen=True)

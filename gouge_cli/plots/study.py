@@ -85,13 +85,13 @@ def study_figures(run_dir: Path, pairs: list[ForkPair], rows: list[dict], out: P
     with RunReader(run_dir) as reader:
         catalog = read_catalog(reader)
         written.append(overview_figure(reader, catalog, out / "overview.png"))
-        for n in sorted({int(p.row["slip"]) for p in pairs}):
+        for n in sorted({int(p.slip) for p in pairs}):
             fr = slip_friction(reader, find_slip(catalog, n), notch=notch)
             drained_mean[n] = fr.mean_mu_d
             written.append(friction_figure(fr, reader.info.V_s, out / f"friction_slip_{n:03d}.png",
                                            title=f"Slip {n}, drained: dynamic friction μ_d(t) (Eq. 7)"))
     for p in pairs:
-        n, branch = int(p.row["slip"]), p.row["branch"]
+        n, branch = int(p.slip), p.branch
         with RunReader(p.drained_dir) as d, RunReader(p.undrained_dir) as u:
             written.append(pair_figure(d, u, p, out / f"pair_slip_{n:03d}_{branch}.png"))
             if p.result.undrained_slip is not None:
