@@ -91,8 +91,8 @@ def test_drained_fork_retraces_the_scaled_runs_slip(scaled_run):
     ck = read_checkpoint(out / entry.checkpoint)
     assert ck.config.numerics.stick_scaling == 16.0
     summary = run_fork(ForkRequest(out, entry.number), quiet=True)
-    drained = summary["branches"]["drained"]
-    assert drained["first_slip"] is not None
+    drained = summary.branches["drained"]
+    assert drained.first_slip is not None
     original = series(out / "run.h5")
     branch = out / "forks" / f"slip_{entry.number:03d}" / "drained" / "run.h5"
     with h5py.File(branch, "r") as h5:
@@ -104,7 +104,7 @@ def test_drained_fork_retraces_the_scaled_runs_slip(scaled_run):
         assert np.array_equal(original[name][idx], fork[name][1:]), name
     with h5py.File(out / "run.h5", "r") as h5:          # restart reports times since loading began
         origin = float(h5["series/time"][0] - h5["series/load_time"][0])
-    assert drained["first_slip"]["onset_time"] == pytest.approx(entry.onset_time - origin, abs=1e-9)
+    assert drained.first_slip.onset_time == pytest.approx(entry.onset_time - origin, abs=1e-9)
 
 
 def test_stop_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_path, monkeypatch):

@@ -123,8 +123,8 @@ def test_drained_fork_retraces_the_original(tiny):
     _, finished_run, kept = tiny
     n = kept[1]
     summary = run_fork(ForkRequest(finished_run, n), quiet=True)
-    drained = summary["branches"]["drained"]
-    assert drained["status"] == "finished" and drained["first_slip"] is not None
+    drained = summary.branches["drained"]
+    assert drained.status == "finished" and drained.first_slip is not None
     original = series(finished_run / "run.h5")
     fork = series(finished_run / "forks" / f"slip_{n:03d}" / "drained" / "run.h5")
     idx = np.searchsorted(original["time"], fork["time"][1:])
@@ -134,7 +134,7 @@ def test_drained_fork_retraces_the_original(tiny):
     entry = next(e for e in slip_catalog(finished_run) if e.number == n)
     with h5py.File(finished_run / "run.h5", "r") as h5:          # restart reports times since loading began
         origin = float(h5["series/time"][0] - h5["series/load_time"][0])
-    assert drained["first_slip"]["onset_time"] == pytest.approx(entry.onset_time - origin, abs=1e-9)
+    assert drained.first_slip.onset_time == pytest.approx(entry.onset_time - origin, abs=1e-9)
     # the fork wrote dense snapshots while its wall slipped (output.slip_frames, 30 by default)
     with h5py.File(finished_run / "forks" / f"slip_{n:03d}" / "drained" / "run.h5", "r") as h5:
         interval, dt = h5.attrs["snapshot_dense_interval"], h5.attrs["dt"]
@@ -387,8 +387,8 @@ def test_moved_run_directory_still_forks(finished_run, tmp_path):
     with h5py.File(branch / "run.h5", "r") as h5:
         assert (branch / h5.attrs["parent_run"]).resolve() == moved.resolve()
         assert re.fullmatch(r"[0-9a-f]{16}", h5.attrs["final_state_hash"])
-    assert (branch.parent / summary["run"]).resolve() == moved.resolve()
-    assert summary["branches"]["drained"]["dir"] == "drained" and summary["library_differences_from_parent"] == []
+    assert (branch.parent / summary.run).resolve() == moved.resolve()
+    assert summary.branches["drained"].dir == "drained" and summary.library_differences_from_parent == []
 
 
 def test_restart_names_library_differences_from_the_parent(finished_run, tmp_path):
