@@ -16,7 +16,8 @@ from ..io.layout import ForkLayout, RunLayout
 from ..io.records import plain, unit
 from ..io.runreader import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
-from .pairs import DRAINED_DE, UNDRAINED_DE, PairCounts, PairDefinition, PairResult, campaign_summary, classify_pair, regime  # noqa: F401
+from .pairs import (DRAINED_DE, UNDRAINED_DE, PairCounts, PairDefinition, PairResult,  # noqa: F401
+                    campaign_summary, classify_pair, regime)
 
 _NAN = float("nan")
 
