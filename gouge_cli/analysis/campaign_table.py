@@ -63,10 +63,19 @@ def fork_rows(fork_dir: Path, permeabilities: list[float]) -> list[dict]:
 
 @dataclass(frozen=True)
 class RowPair:
-    """A classified pair rebuilt from its table row (what the campaign figures read: ``row`` and
-    a ``result`` with type, base_type, complex, undrained_event, criteria and the ratios)."""
+    """A classified pair rebuilt from its table row (what the campaign figures read, as of a
+    ForkPair: ``permeability``, ``regime`` and a ``result`` with type, base_type, complex,
+    undrained_event, criteria and the ratios)."""
 
     row: dict
+
+    @property
+    def permeability(self) -> float:
+        return float(self.row["permeability"])
+
+    @property
+    def regime(self) -> str:
+        return self.row["regime"]
 
     @property
     def result(self):

@@ -209,6 +209,11 @@ class ForkPair:
         """The undrained branch's folder name (perm_K)."""
         return self.measured.branch
 
+    @property
+    def regime(self) -> str:
+        """The undrained branch's drainage regime (analysis.pairs.regime)."""
+        return self.measured.regime
+
 
 
 def _r2(fit) -> float:
@@ -438,7 +443,8 @@ class Skipped(str):
 
 def by_permeability(pairs: list[ForkPair]) -> dict[float, list[ForkPair]]:
     """The pairs grouped by kappa_c, in increasing order (pairs at different permeabilities are
-    never pooled)."""
+    never pooled). ``pairs``: ForkPair, or anything with its ``permeability``, ``regime`` and
+    ``result`` (analysis.campaign_table.RowPair, a pair read back from a table)."""
     groups: dict[float, list[ForkPair]] = {}
     for p in pairs:
         groups.setdefault(float(p.permeability), []).append(p)
@@ -482,6 +488,6 @@ def campaign(pairs: list[ForkPair]) -> Campaign:
     """Counts per type and undrained/drained ratio statistics, one group per permeability (of one
     or more runs); never pooled over permeabilities."""
     return Campaign(len(pairs), tuple(
-        PermeabilityGroup(perm, regime_counts(p.measured.regime for p in members),
+        PermeabilityGroup(perm, regime_counts(p.regime for p in members),
                           campaign_summary([p.result for p in members]))
         for perm, members in by_permeability(pairs).items()))
