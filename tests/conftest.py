@@ -39,3 +39,14 @@ def free_grains():
     from gouge_cli.studies.analytic import free_grains
 
     return free_grains
+
+
+@pytest.fixture(scope="session")
+def tiny_run(tmp_path_factory):
+    """The tiny scene's loading run (tests/slipping.TINY, two or more slips with checkpoints),
+    run once per test process (a worker of ``pytest -n``): a factories.SharedRun, never written
+    to; a module forks its own ``tiny_run.copy(folder)``."""
+    from factories import SharedRun
+    from slipping import TINY, slipping_run
+
+    return SharedRun(*slipping_run(TINY, tmp_path_factory.mktemp("tiny_run")))

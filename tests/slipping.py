@@ -17,16 +17,11 @@ from typer.testing import CliRunner
 
 from gouge_cli.cli.main import app
 from gouge_cli.io.slipcatalog import slip_catalog
+from factories import scene
 
-TINY = {        # 300 grains: two or more slips with checkpoints in 80,000 t0 for most packings
-    "name": "tiny",
-    "seed": 4,
-    "packing": {"n_grains": 300, "width": 15},
-    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-    "numerics": {"dt_safety": 0.3, "threads": 1},
-    "run": {"duration": 80000},
-    "output": {"series_interval": 10, "snapshot_interval": 20000},
-}
+# 300 grains: two or more slips with checkpoints in 80,000 t0 for most packings
+TINY = scene("tiny", 4, numerics={"threads": 1}, run={"duration": 80000},
+             output={"series_interval": 10, "snapshot_interval": 20000})
 
 
 def _next_packing(scene: dict, k: int, grow: float) -> dict:

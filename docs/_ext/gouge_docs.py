@@ -219,6 +219,15 @@ def file_layout(name: str) -> str:
                 + ", ".join(f"``{c}``" for c in PAIR_COLUMNS) + ".\n\n"
                 + list_table(["column", "unit", "description"], [[c.name, c.unit, c.doc] for c in PAIR_TABLE],
                              "25 10 65"))
+    if name == "study":
+        from dataclasses import fields
+
+        from gouge_cli.analysis.study import STUDY_COLUMNS, StudyRow
+
+        return ("Columns of ``table.csv`` (one row per pair, ``StudyRow``): "
+                + ", ".join(f"``{c}``" for c in STUDY_COLUMNS) + ".\n\n"
+                + list_table(["column", "unit", "description"],
+                             [[f.name, f.metadata["unit"], f.metadata["doc"]] for f in fields(StudyRow)], "25 10 65"))
     if name == "campaign":
         from gouge_cli.analysis import campaign_table as ct
 

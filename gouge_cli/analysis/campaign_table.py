@@ -58,15 +58,24 @@ def fork_rows(fork_dir: Path, permeabilities: list[float]) -> list[dict]:
     """The pair rows (:data:`PAIR_COLUMNS` but ``run``) of one fork's undrained branches at the
     listed permeabilities, classified by :func:`~gouge_cli.analysis.forkpairs.classify_fork`."""
     return [{c: pair.row[c] for c in PAIR_COLUMNS if c != "run"} for pair in classify_fork(fork_dir)
-            if _listed(float(pair.row["permeability"]), permeabilities)]
+            if _listed(float(pair.permeability), permeabilities)]
 
 
 @dataclass(frozen=True)
 class RowPair:
-    """A classified pair rebuilt from its table row (what the campaign figures read: ``row`` and
-    a ``result`` with type, base_type, complex, undrained_event, criteria and the ratios)."""
+    """A classified pair rebuilt from its table row (what the campaign figures read, as of a
+    ForkPair: ``permeability``, ``regime`` and a ``result`` with type, base_type, complex,
+    undrained_event, criteria and the ratios)."""
 
     row: dict
+
+    @property
+    def permeability(self) -> float:
+        return float(self.row["permeability"])
+
+    @property
+    def regime(self) -> str:
+        return self.row["regime"]
 
     @property
     def result(self):

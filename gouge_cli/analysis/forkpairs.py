@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from functools import cached_property
 from typing import Any, Callable
 from pathlib import Path
 
@@ -12,9 +13,11 @@ import numpy as np
 
 from ..errors import AnalysisError, BranchInterruptedError, DamagedFileError, NotARunError, RunStillRunningError
 from ..io.layout import ForkLayout, RunLayout
+from ..io.records import plain, unit
 from ..io.runreader import RunInfo, RunReader
 from .catalog import nan_mean, wall_series
-from .pairs import DRAINED_DE, UNDRAINED_DE, PairDefinition, PairResult, campaign_summary, classify_pair, regime  # noqa: F401
+from .pairs import (DRAINED_DE, UNDRAINED_DE, PairCounts, PairDefinition, PairResult,  # noqa: F401
+                    campaign_summary, classify_pair, regime)
 
 _NAN = float("nan")
 
@@ -69,6 +72,11 @@ class Column:
     get: Callable[[PairResult, PairMeasures], Any]
 
 
+def fired_criteria(r: PairResult) -> str:
+    """The complexity criteria that fired on the pair, comma-separated ("" for none)."""
+    return ",".join(name for name, on in r.criteria.items() if on)
+
+
 def _fit_reason(r: PairResult) -> str:
     return "; ".join(f"{b}: {f.verdict_reason}" for b, f in (("drained", r.drained_fit), ("undrained", r.undrained_fit))
                      if f is not None and f.verdict_reason)
@@ -101,8 +109,7 @@ PAIR_TABLE = (
     _result("type", "-", "pair type (analysis.pairs), or failed"),
     _result("base_type", "-", "type before the complex mark"),
     Column("complex", "-", "whether the pair is complex", lambda r, m: bool(r.complex)),
-    Column("criteria", "-", "criteria that fired, comma-separated",
-           lambda r, m: ",".join(name for name, on in r.criteria.items() if on)),
+    Column("criteria", "-", "criteria that fired, comma-separated", lambda r, m: fired_criteria(r)),
     _result("undrained_event", "-", "slip, slow slip below trigger, none (or failed)"),
     _result("drained_strength", "sigma", "static strength of the drained compared slip"),
     _result("undrained_strength", "sigma", "static strength of the undrained compared slip"),
@@ -172,15 +179,40 @@ def fork_branches(fork_dir: Path) -> tuple[Path | None, list[Path]]:
     return ForkLayout(fork_dir).branches()
 
 
-@dataclass
+@dataclass(frozen=True)
 class ForkPair:
-    """One drained/undrained pair: the table row (:func:`pair_row`, keys :data:`PAIR_TABLE`'s names) and
-    the classification."""
+    """One drained/undrained pair: the classification (:class:`PairResult`), what was measured beside
+    it (:class:`PairMeasures`) and the two branch folders. Its table row (:attr:`row`) is built
+    from these by :data:`PAIR_TABLE` only."""
 
-    row: dict
     result: PairResult
+    measured: PairMeasures
     drained_dir: Path
     undrained_dir: Path
+
+    @cached_property
+    def row(self) -> dict:
+        """The pair's row, {column name: value} in PAIR_TABLE's order (:func:`pair_row`)."""
+        return pair_row(self.result, self.measured)
+
+    @property
+    def slip(self) -> int:
+        return self.measured.slip
+
+    @property
+    def permeability(self) -> float:
+        """kappa_c of the undrained branch [d^2]."""
+        return self.measured.permeability
+
+    @property
+    def branch(self) -> str:
+        """The undrained branch's folder name (perm_K)."""
+        return self.measured.branch
+
+    @property
+    def regime(self) -> str:
+        """The undrained branch's drainage regime (analysis.pairs.regime)."""
+        return self.measured.regime
 
 
 
@@ -342,8 +374,7 @@ def classify_fork(fork_dir: Path, main: str = "first") -> list[ForkPair]:
                 deborah_mean=de_mean, deborah_slip=de_slip, regime=regime(de), deborah_onset=de_onset,
                 deborah_max=de_max, deborah_drained=de_drained,
                 mechanism=_mechanism(d_extra, ds, d_main, u_main, uinfo, l_over_d))
-            row = pair_row(result, measured)
-            pairs.append(ForkPair(row, result, drained_dir, udir))
+            pairs.append(ForkPair(result, measured, drained_dir, udir))
     return pairs
 
 
@@ -405,21 +436,51 @@ class Skipped(str):
 
 def by_permeability(pairs: list[ForkPair]) -> dict[float, list[ForkPair]]:
     """The pairs grouped by kappa_c, in increasing order (pairs at different permeabilities are
-    never pooled)."""
+    never pooled). ``pairs``: ForkPair, or anything with its ``permeability``, ``regime`` and
+    ``result`` (analysis.campaign_table.RowPair, a pair read back from a table)."""
     groups: dict[float, list[ForkPair]] = {}
     for p in pairs:
-        groups.setdefault(float(p.row["permeability"]), []).append(p)
+        groups.setdefault(float(p.permeability), []).append(p)
     return dict(sorted(groups.items()))
 
 
-def campaign(pairs: list[ForkPair]) -> dict:
-    """Counts per type and undrained/drained ratio statistics, one summary per permeability (of
-    one or more runs): ``{"n", "per_permeability": [{"permeability", "regimes": {name: count},
-    **campaign_summary}]}``; never pooled over permeabilities."""
-    groups = []
-    for perm, members in by_permeability(pairs).items():
-        regimes: dict[str, int] = {}
-        for p in members:
-            regimes[p.row["regime"]] = regimes.get(p.row["regime"], 0) + 1
-        groups.append(dict(permeability=perm, regimes=regimes, **campaign_summary([p.result for p in members])))
-    return {"n": len(pairs), "per_permeability": groups}
+def regime_counts(regimes) -> dict[str, int]:
+    """{drainage regime: how many}, in the order the regimes first come."""
+    counts: dict[str, int] = {}
+    for name in regimes:
+        counts[name] = counts.get(name, 0) + 1
+    return counts
+
+
+@dataclass(frozen=True)
+class PermeabilityGroup:
+    """The pairs of one kappa_c: their regimes and :class:`~gouge_cli.analysis.pairs.PairCounts`
+    (JSON: ``{"permeability", "regimes", **pairs}``, :meth:`to_dict`)."""
+
+    permeability: float = unit("d^2", "kappa_c of the undrained branches")
+    regimes: dict = unit("-", "{drainage regime: pairs}")
+    pairs: PairCounts = unit("-", "counts per type and ratio statistics")
+
+    def to_dict(self) -> dict:
+        return {"permeability": self.permeability, "regimes": dict(self.regimes), **plain(self.pairs)}
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """:func:`campaign`'s summary: the number of pairs and one :class:`PermeabilityGroup` per
+    kappa_c, in increasing order (JSON: ``{"n", "per_permeability": [...]}``, :meth:`to_dict`)."""
+
+    n: int = unit("-", "pairs")
+    groups: tuple[PermeabilityGroup, ...] = unit("-", "one per permeability")
+
+    def to_dict(self) -> dict:
+        return {"n": self.n, "per_permeability": [g.to_dict() for g in self.groups]}
+
+
+def campaign(pairs: list[ForkPair]) -> Campaign:
+    """Counts per type and undrained/drained ratio statistics, one group per permeability (of one
+    or more runs); never pooled over permeabilities."""
+    return Campaign(len(pairs), tuple(
+        PermeabilityGroup(perm, regime_counts(p.regime for p in members),
+                          campaign_summary([p.result for p in members]))
+        for perm, members in by_permeability(pairs).items()))

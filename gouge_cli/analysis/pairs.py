@@ -35,9 +35,11 @@ import numpy as np
 
 from .blockslider import BlockSliderFit, fit_block_slider
 from ..errors import ConfigError
+from ..io.records import unit
 from ..model.slip_rule import Slip, SlipRule, WallSeries
 
 __all__ = ["MainEvent", "PairDefinition", "PairResult", "classify_pair", "complexity_criteria", "campaign_summary",
+           "PairCounts", "RatioStats",
            "compared_event", "static_strength", "regime", "DRAINED_DE", "UNDRAINED_DE", "SLOW", "CRITERIA"]
 
 _NAN = float("nan")
@@ -375,38 +377,60 @@ def classify_pair(
     )
 
 
-def _stats(values: list[float]) -> dict[str, float]:
+@dataclass(frozen=True)
+class RatioStats:
+    """Statistics of one undrained/drained ratio [-] over the finite values of classified pairs."""
+
+    n: int = unit("-", "finite values")
+    mean: float = unit("-", "their mean")
+    median: float = unit("-", "their median")
+    std: float = unit("-", "their standard deviation")
+    min: float = unit("-", "the smallest")
+    max: float = unit("-", "the largest")
+    frac_below_1: float = unit("-", "fraction below 1 (undrained smaller)")
+
+
+def _stats(values: list[float]) -> RatioStats:
     a = np.asarray([x for x in values if np.isfinite(x)], dtype=float)
     if a.size == 0:
-        return {"n": 0, "mean": _NAN, "median": _NAN, "std": _NAN, "min": _NAN,
-                "max": _NAN, "frac_below_1": _NAN}
-    return {"n": int(a.size), "mean": float(a.mean()), "median": float(np.median(a)),
-            "std": float(a.std()), "min": float(a.min()), "max": float(a.max()),
-            "frac_below_1": float(np.mean(a < 1.0))}
+        return RatioStats(0, _NAN, _NAN, _NAN, _NAN, _NAN, _NAN)
+    return RatioStats(int(a.size), float(a.mean()), float(np.median(a)), float(a.std()), float(a.min()),
+                      float(a.max()), float(np.mean(a < 1.0)))
 
 
-def campaign_summary(results: list[PairResult]) -> dict:
-    """Counts per type and statistics of the undrained/drained ratios.
+@dataclass(frozen=True)
+class PairCounts:
+    """Counts per type and statistics of the undrained/drained ratios of a set of pairs
+    (:func:`campaign_summary`); :func:`~gouge_cli.io.records.plain` gives its JSON form."""
 
-    Returns ``{"n", "counts": {"I", "II", "I-C", "II-C", "tie", "tie-C", "none"},
-    "n_type_I", "n_type_II", "n_tie", "n_complex", "n_slow", "criteria": {name: count},
-    "ratios": {ratio name: {n, mean, median, std, min, max, frac_below_1}}}``
-    (ratio statistics over finite values of classified pairs).
-    """
+    n: int = unit("-", "pairs")
+    counts: dict = unit("-", "pairs per type: I, II, I-C, II-C, tie, tie-C, none (and failed, if any)")
+    n_type_I: int = unit("-", "Type I pairs, complex or not")
+    n_type_II: int = unit("-", "Type II pairs, complex or not")
+    n_tie: int = unit("-", "ties, complex or not")
+    n_complex: int = unit("-", "complex classified pairs")
+    n_slow: int = unit("-", "classified pairs whose undrained event is a slow slip below the trigger")
+    criteria: dict = unit("-", "classified pairs each complexity criterion fired on")
+    ratios: dict = unit("-", "RatioStats of each ratio (RATIOS) over the classified pairs")
+
+
+def campaign_summary(results: list[PairResult]) -> PairCounts:
+    """Counts per type and statistics of the undrained/drained ratios (ratio statistics over finite
+    values of classified pairs): counts over {"I", "II", "I-C", "II-C", "tie", "tie-C", "none"},
+    criteria {name: count}, ratios {ratio name: :class:`RatioStats`}."""
     labels = TYPES + ("tie", "tie-C", "none")
     counts = {lab: 0 for lab in labels}
     for r in results:
         counts[r.type] = counts.get(r.type, 0) + 1
     classified = [r for r in results if r.base_type not in ("none", "failed")]
-    return {
-        "n": len(results),
-        "counts": counts,
-        "n_type_I": counts["I"] + counts["I-C"],
-        "n_type_II": counts["II"] + counts["II-C"],
-        "n_tie": counts["tie"] + counts["tie-C"],
-        "n_complex": sum(1 for r in classified if r.complex),
-        "n_slow": sum(1 for r in classified if r.undrained_event == SLOW),
-        "criteria": {c: sum(1 for r in classified if r.criteria.get(c, False))
-                     for c in CRITERIA},
-        "ratios": {name: _stats([getattr(r, name) for r in classified]) for name in RATIOS},
-    }
+    return PairCounts(
+        n=len(results),
+        counts=counts,
+        n_type_I=counts["I"] + counts["I-C"],
+        n_type_II=counts["II"] + counts["II-C"],
+        n_tie=counts["tie"] + counts["tie-C"],
+        n_complex=sum(1 for r in classified if r.complex),
+        n_slow=sum(1 for r in classified if r.undrained_event == SLOW),
+        criteria={c: sum(1 for r in classified if r.criteria.get(c, False)) for c in CRITERIA},
+        ratios={name: _stats([getattr(r, name) for r in classified]) for name in RATIOS},
+    )

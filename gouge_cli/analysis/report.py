@@ -73,7 +73,7 @@ class RunAnalysis:
             "fits": self.fits,
             "fit_summary": self.fit_summary(),
             "pairs": self.pair_rows,
-            "campaign": campaign(self.pairs) if self.pairs else None,
+            "campaign": campaign(self.pairs).to_dict() if self.pairs else None,
             "skipped_forks": self.skipped,
         }
 

@@ -149,20 +149,22 @@ def _print_run(out, analysis, written: dict, wide: bool = False):
         out.print(f"note: {escape(written['h5_skipped'])}", highlight=False)
 
 
-def _print_campaign(out, summary: dict, n_runs: int):
-    """One line per permeability (pairs at different permeabilities are never pooled)."""
+def _print_campaign(out, summary, n_runs: int):
+    """One line per permeability (pairs at different permeabilities are never pooled); ``summary``:
+    an analysis.forkpairs.Campaign."""
     from ..io.layout import perm_text
 
-    for g in summary["per_permeability"]:
-        counts = ", ".join(f"{k}: {v}" for k, v in g["counts"].items() if v)
-        regimes = ", ".join(f"{k} {v}" for k, v in g["regimes"].items())
-        ratio = g["ratios"]["peak_velocity_ratio"]
-        line = (f"[bold]κ_c = {perm_text(g['permeability'])} d²[/] ({regimes}; {n_runs} run{'s' if n_runs > 1 else ''}, "
-                f"{g['n']} pair{'s' if g['n'] != 1 else ''}): {counts}; Type I {g['n_type_I']}, "
-                f"Type II {g['n_type_II']}, complex {g['n_complex']}")
-        if ratio["n"]:
-            line += (f"; peak velocity ratio (undrained/drained) mean {ratio['mean']:.3g} ± {ratio['std']:.2g} "
-                     f"over {ratio['n']}, {100 * ratio['frac_below_1']:.0f}% below 1")
+    for g in summary.groups:
+        c = g.pairs
+        counts = ", ".join(f"{k}: {v}" for k, v in c.counts.items() if v)
+        regimes = ", ".join(f"{k} {v}" for k, v in g.regimes.items())
+        ratio = c.ratios["peak_velocity_ratio"]
+        line = (f"[bold]κ_c = {perm_text(g.permeability)} d²[/] ({regimes}; {n_runs} run{'s' if n_runs > 1 else ''}, "
+                f"{c.n} pair{'s' if c.n != 1 else ''}): {counts}; Type I {c.n_type_I}, "
+                f"Type II {c.n_type_II}, complex {c.n_complex}")
+        if ratio.n:
+            line += (f"; peak velocity ratio (undrained/drained) mean {ratio.mean:.3g} ± {ratio.std:.2g} "
+                     f"over {ratio.n}, {100 * ratio.frac_below_1:.0f}% below 1")
         out.print(line, highlight=False)
 
 
@@ -219,7 +221,7 @@ def register(app: typer.Typer) -> None:
         if as_json:
             print(json.dumps(json_safe({
                 "runs": [dict(a.to_dict(), written={k: str(v) for k, v in w.items()}) for a, w in done],
-                "campaign": summary,
+                "campaign": summary.to_dict() if summary is not None else None,
                 "errors": failed,
             })))
         elif summary is not None:

@@ -133,20 +133,20 @@ def guarded(command):
     return wrapper
 
 
-def restart_lines(summary: dict, run_dir) -> list[str]:
+def restart_lines(summary, run_dir) -> list[str]:
     """`gouge restart`'s one-screen result: one line per branch (status, onset, strength, drop,
     peak velocity of its first slip), two per pair (its type, S_u - S_d, the two onsets and what
     made it complex; when S_d and S_u were reached), and where the whole record is. Times in t0
-    since loading began."""
+    since loading began; ``summary``: workflows.fork.ForkSummary."""
     from ..io.layout import RunLayout
 
-    lines = [f"slip {summary['slip']} forked from t = {summary['start_time']:,.1f} t0 (since loading began)"]
-    for name, b in summary["branches"].items():
-        f = b.get("first_slip")
-        slip = (f"onset {f['onset_time']:,.1f} t0, S {f['static_strength']:.4f}, drop {f['stress_drop']:.4f} tau/sigma, "
-                f"peak {f['peak_velocity_over_Vs']:.3g} V_s" if f else "no slip in its window")
-        lines.append(f"  {name:<12} {b['status']:<18} {slip}")
-    for row in (summary.get("pair") or {}).get("pairs", []):
+    lines = [f"slip {summary.slip} forked from t = {summary.start_time:,.1f} t0 (since loading began)"]
+    for name, b in summary.branches.items():
+        f = b.first_slip
+        slip = (f"onset {f.onset_time:,.1f} t0, S {f.static_strength:.4f}, drop {f.stress_drop:.4f} tau/sigma, "
+                f"peak {f.peak_velocity_over_Vs:.3g} V_s" if f else "no slip in its window")
+        lines.append(f"  {name:<12} {b.status:<18} {slip}")
+    for row in (summary.pair or {}).get("pairs", []):
         diff = row.get("strength_difference")
         said = f"Type {row['type']}" if row["base_type"] in ("I", "II") else row["type"]
         onsets = (f"onsets {row['drained_onset']:,.1f} / {row['undrained_onset']:,.1f} t0"
@@ -159,8 +159,8 @@ def restart_lines(summary: dict, run_dir) -> list[str]:
         if isinstance(when_d, float) and isinstance(when_u, float) and when_d == when_d and when_u == when_u:
             lines.append(f"    S_d reached at t = {when_d:,.1f}, S_u at {when_u:,.1f} t0 (the largest tau/sigma "
                          "before each onset)")
-    fork = RunLayout(run_dir).fork(summary["slip"])
-    if summary.get("pair"):
+    fork = RunLayout(run_dir).fork(summary.slip)
+    if summary.pair:
         lines.append(f"record: {fork.pair_file} (the whole of it: --json; `gouge plot {run_dir} --slip "
-                     f"{summary['slip']}` draws it)")
+                     f"{summary.slip}` draws it)")
     return lines

@@ -103,7 +103,7 @@ def restart(
     request = ForkRequest(target, slip, tuple(perm), parse_overrides(set_), duration, force=force, main=main)
     summary = run_restart(request, quiet=quiet)
     if as_json:
-        out.print(json.dumps(json_safe(summary), indent=2, allow_nan=False), highlight=False)
+        out.print(json.dumps(json_safe(summary.to_dict()), indent=2, allow_nan=False), highlight=False)
         return
     for line in restart_lines(summary, target):
         out.print(line, highlight=False, markup=False)

@@ -43,6 +43,7 @@ def register(app: typer.Typer) -> None:
         """Dry loading run, drained + undrained forks of every slip, pair types and the study report."""
         from ..io.layout import perm_text
         from ..analysis.study import summary_lines
+        from ..io.records import plain
         from ..errors import StudyInterrupted
         from ..config import parse_overrides
         from ..workflows.study import parse_slips, run_study
@@ -63,11 +64,11 @@ def register(app: typer.Typer) -> None:
         except StudyInterrupted as e:
             fail(str(e), EXIT_INTERRUPTED)
         out.print(_table(f"study of {result.run_dir} ({len(result.rows)} pairs; full table in study/table.csv)",
-                         _COLUMNS, result.rows, wide=wide))
+                         _COLUMNS, [plain(r) for r in result.rows], wide=wide))
         for g in result.summary:
-            side = [{"quantity": a, "this study": b, "thesis": c} for a, b, c in summary_lines(g)]
-            regimes = ", ".join(f"{k} {v}" for k, v in g["regimes"].items())
-            out.print(_table(f"κ_c = {perm_text(g['permeability'])} d² ({regimes}): summary (transient slips left "
+            side = [{"quantity": a, "this study": b, "thesis": c} for a, b, c in summary_lines(g.summary)]
+            regimes = ", ".join(f"{k} {v}" for k, v in g.regimes.items())
+            out.print(_table(f"κ_c = {perm_text(g.permeability)} d² ({regimes}): summary (transient slips left "
                              "out) next to the thesis (κ_c = 1e-05)",
                              [("quantity", "quantity"), ("this study", "this study"), ("thesis", "thesis")], side,
                              wide=wide))

@@ -22,25 +22,24 @@ def campaign_figure(pairs: list[ForkPair], path: Path, title: str = "") -> Path:
     from .series import branch_colors
     from ..io.layout import perm_text
 
-    summary = campaign(pairs)
-    groups = summary["per_permeability"]
-    colors = branch_colors([g["permeability"] for g in groups])
+    groups = campaign(pairs).groups
+    colors = branch_colors([g.permeability for g in groups])
     fig, (ax1, ax2) = new_figure("campaign", 1, 2)
     width = 0.8 / max(len(groups), 1)
     x = np.arange(len(_ORDER))
     top = 1
     any_ratio = False
     for i, g in enumerate(groups):
-        perm = g["permeability"]
-        regimes = ", ".join(g["regimes"])
-        label = (f"κ_c = {perm_text(perm)} d² ({regimes}): {g['n']} pair{'s' if g['n'] != 1 else ''}, "
-                 f"{g['n_type_I']} Type I, {g['n_type_II']} Type II, {g['n_complex']} complex")
-        counts = [g["counts"].get(k, 0) for k in _ORDER]
+        perm, c = g.permeability, g.pairs
+        regimes = ", ".join(g.regimes)
+        label = (f"κ_c = {perm_text(perm)} d² ({regimes}): {c.n} pair{'s' if c.n != 1 else ''}, "
+                 f"{c.n_type_I} Type I, {c.n_type_II} Type II, {c.n_complex} complex")
+        counts = [c.counts.get(k, 0) for k in _ORDER]
         top = max(top, *counts)
         bars = ax1.bar(x - 0.4 + width * (i + 0.5), counts, width, color=colors[perm], edgecolor="0.3", lw=0.6,
                        label=label)
         ax1.bar_label(bars, fontsize=7)
-        ratios = np.array([p.row["peak_velocity_ratio"] for p in pairs if float(p.row["permeability"]) == perm],
+        ratios = np.array([p.result.peak_velocity_ratio for p in pairs if float(p.permeability) == perm],
                           dtype=float)
         ratios = ratios[np.isfinite(ratios)]
         if ratios.size:

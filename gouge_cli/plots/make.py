@@ -30,10 +30,10 @@ def _nearest_snapshot(reader: RunReader, t: float) -> str | None:
 def undrained_friction_figure(u: RunReader, pair, path: Path, notch: bool, drained_mean: float | None) -> Path:
     """R/sigma = mu_d (1 - P*/sigma) (Eq. 6) over the pair's compared undrained event (thesis Fig. 18)."""
     main = pair.result.undrained_slip
-    slip = int(pair.row["slip"])
+    slip = int(pair.slip)
     entry = replace(SlipEntry.from_slip(main, slip), static_strength=pair.result.undrained_strength)
     fr = slip_friction(u, entry, notch=notch)
-    title = (f"Slip {slip}, κ_c = {branch_perm_text(pair.row['branch'])} d² ({pair.row['regime']}): "
+    title = (f"Slip {slip}, κ_c = {branch_perm_text(pair.branch)} d² ({pair.measured.regime}): "
              "combined resistance R/σ (Eq. 6)")
     return friction_figure(fr, u.info.V_s, path, title=title,
                            drained_mean=drained_mean)

@@ -270,12 +270,12 @@ def comparison_figure(drained: RunReader, branches: list, path: Path) -> Path:
     d = drained.series(names)
     axes[0].plot(d["time"] - offset, d["tau_over_sigma"], color=DRAINED, lw=1.1, label="drained (dry)")
     axes[1].plot(d["time"] - offset, d["wall_vx"] / info.V_s, color=DRAINED, lw=1.1, label="drained (dry)")
-    colors = branch_colors([p.row["permeability"] for _, p in branches])
+    colors = branch_colors([p.permeability for _, p in branches])
     p_max = 0.0
     for reader, pair in branches:
         u = reader.series(names)
         tu = u["time"] - reader.time_offset()
-        c = colors[float(pair.row["permeability"])]
+        c = colors[float(pair.permeability)]
         label = branch_label(pair.row)
         axes[0].plot(tu, u["tau_over_sigma"], color=c, lw=1.0, label=label)
         axes[1].plot(tu, u["wall_vx"] / reader.info.V_s, color=c, lw=1.0, label=label)
@@ -300,13 +300,13 @@ def comparison_figure(drained: RunReader, branches: list, path: Path) -> Path:
     top.tick_params(labelsize=8)
     tidy(axes)
     slip = int(info.fork_slip) if info.fork_slip is not None else 0
-    perms = ", ".join(perm_text(p.row["permeability"]) for _, p in branches)
+    perms = ", ".join(perm_text(p.permeability) for _, p in branches)
     title = f"Slip {slip}: drained branch and every permeability (κ_c = {perms} d²) from the same packing"
     fig.suptitle(title, fontsize=10.5, y=0.985)
     fig.text(0.5, 0.008, units.caption() + "; v_w / V_s: dotted line = slip trigger", ha="center", fontsize=8,
              color="0.3")
     fig.subplots_adjust(left=0.11, right=0.97, top=0.91, bottom=0.07, hspace=0.08)
     return save(fig, path, metadata={"Title": title, "Description": json.dumps(
-        {"slip": slip, "branches": [{"branch": p.row["branch"], "permeability": p.row["permeability"],
-                                     "deborah_slip": p.row["deborah_slip"], "regime": p.row["regime"]}
+        {"slip": slip, "branches": [{"branch": p.branch, "permeability": p.permeability,
+                                     "deborah_slip": p.measured.deborah_slip, "regime": p.measured.regime}
                                     for _, p in branches]}, allow_nan=True)})

@@ -10,6 +10,7 @@ import numpy as np
 from ..analysis.blockslider import EQ3_PERIOD_FACTOR
 from ..analysis.catalog import find_slip, read_catalog, slip_friction
 from ..analysis.forkpairs import ForkPair
+from ..analysis.study import StudyRow
 from ..io.runreader import RunReader
 from .campaign import _COLORS, campaign_figure
 from .make import undrained_friction_figure
@@ -17,7 +18,7 @@ from .series import friction_figure, overview_figure, pair_figure
 from .style import new_figure, save
 
 
-def study_figure(rows: list[dict], path: Path, title: str = "") -> Path:
+def study_figure(rows: list[StudyRow], path: Path, title: str = "") -> Path:
     """Left: S_u - S_d per pair against slip number, coloured by type (transient hollow).
     Right: m_eff / m_b of each drained slip (Eq. 3 fit); 1 is the rigid block of the thesis."""
     from matplotlib.ticker import MaxNLocator
@@ -25,14 +26,14 @@ def study_figure(rows: list[dict], path: Path, title: str = "") -> Path:
     from ..io.layout import perm_text
 
     fig, (ax1, ax2) = new_figure("campaign", 1, 2)
-    perms = sorted({float(r["kappa_c"]) for r in rows})
+    perms = sorted({float(r.kappa_c) for r in rows})
     markers = dict(zip(perms, "osD^v<>p*h"))
     for r in rows:
-        d = r["S_u"] - r["S_d"] if math.isfinite(r["S_u"]) and math.isfinite(r["S_d"]) else float("nan")
+        d = r.S_u - r.S_d if math.isfinite(r.S_u) and math.isfinite(r.S_d) else float("nan")
         if math.isfinite(d):
-            c = _COLORS.get(r["type"], "0.5")
-            ax1.scatter([r["slip"]], [d], s=30, marker=markers.get(float(r["kappa_c"]), "o"),
-                        facecolor="none" if r["transient"] else c, edgecolor=c)
+            c = _COLORS.get(r.type, "0.5")
+            ax1.scatter([r.slip], [d], s=30, marker=markers.get(float(r.kappa_c), "o"),
+                        facecolor="none" if r.transient else c, edgecolor=c)
     ax1.axhline(0.0, color="0.3", lw=0.7)
     for t in ("I", "I-C", "II", "II-C", "tie"):
         ax1.scatter([], [], color=_COLORS[t], label=f"Type {t}", s=20)
@@ -43,11 +44,11 @@ def study_figure(rows: list[dict], path: Path, title: str = "") -> Path:
     ax1.legend(fontsize=7, frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     ax1.set_xlabel("slip number")
     ax1.set_ylabel("S_u − S_d  (τ/σ)")
-    drained = {r["slip"]: r for r in rows}.values()
-    xs = [r["slip"] for r in drained if math.isfinite(r["m_eff_over_m_b"])]
-    ys = [r["m_eff_over_m_b"] for r in drained if math.isfinite(r["m_eff_over_m_b"])]
-    bad = [r["slip"] for r in drained if not math.isfinite(r["m_eff_over_m_b"])]
-    holds = [r["drained_fit_verdict"] == "holds" for r in drained if math.isfinite(r["m_eff_over_m_b"])]
+    drained = {r.slip: r for r in rows}.values()
+    xs = [r.slip for r in drained if math.isfinite(r.m_eff_over_m_b)]
+    ys = [r.m_eff_over_m_b for r in drained if math.isfinite(r.m_eff_over_m_b)]
+    bad = [r.slip for r in drained if not math.isfinite(r.m_eff_over_m_b)]
+    holds = [r.drained_fit_verdict == "holds" for r in drained if math.isfinite(r.m_eff_over_m_b)]
     ax2.axhspan(1 / EQ3_PERIOD_FACTOR ** 2, EQ3_PERIOD_FACTOR ** 2, color="0.92", lw=0,
                 label=f"Eq. 3 applies (m_eff within {EQ3_PERIOD_FACTOR ** 2:g}× m_b)")
     ax2.plot([x for x, h in zip(xs, holds) if h], [y for y, h in zip(ys, holds) if h], "o", color="black", ms=4,
@@ -73,7 +74,7 @@ def study_figure(rows: list[dict], path: Path, title: str = "") -> Path:
     return save(fig, path)
 
 
-def study_figures(run_dir: Path, pairs: list[ForkPair], rows: list[dict], out: Path,
+def study_figures(run_dir: Path, pairs: list[ForkPair], rows: list[StudyRow], out: Path,
                   notch: bool = True) -> list[Path]:
     """overview.png (loading run, slips shaded); per pair the figures of `gouge plot`:
     pair_slip_NNN_<branch>.png (drained vs undrained, thesis Figs. 7-12), friction_slip_NNN.png
@@ -85,13 +86,13 @@ def study_figures(run_dir: Path, pairs: list[ForkPair], rows: list[dict], out: P
     with RunReader(run_dir) as reader:
         catalog = read_catalog(reader)
         written.append(overview_figure(reader, catalog, out / "overview.png"))
-        for n in sorted({int(p.row["slip"]) for p in pairs}):
+        for n in sorted({int(p.slip) for p in pairs}):
             fr = slip_friction(reader, find_slip(catalog, n), notch=notch)
             drained_mean[n] = fr.mean_mu_d
             written.append(friction_figure(fr, reader.info.V_s, out / f"friction_slip_{n:03d}.png",
                                            title=f"Slip {n}, drained: dynamic friction μ_d(t) (Eq. 7)"))
     for p in pairs:
-        n, branch = int(p.row["slip"]), p.row["branch"]
+        n, branch = int(p.slip), p.branch
         with RunReader(p.drained_dir) as d, RunReader(p.undrained_dir) as u:
             written.append(pair_figure(d, u, p, out / f"pair_slip_{n:03d}_{branch}.png"))
             if p.result.undrained_slip is not None:

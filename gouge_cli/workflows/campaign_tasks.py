@@ -218,7 +218,7 @@ def advance_fork(run_dir: str, slip: int, permeabilities: list[float], duration:
                                            force=(i == 0)), quiet=True)
             write_pair_json(fork)
             prefix = f"{name}/" if name else ""
-            statuses.update({prefix + k: b["status"] for k, b in summary["branches"].items()})
+            statuses.update({prefix + k: b.status for k, b in summary.branches.items()})
         return {"branches": statuses, **fork_result(run_dir, slip, permeabilities, variants)}
 
     def record(result, wall, cpu):

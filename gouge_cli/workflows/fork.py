@@ -23,6 +23,7 @@ from ..analysis.pairs import MainEvent
 from ..io.layout import RunLayout, branch_name
 from ..io import provenance
 from ..io.checkpoint import Checkpoint, read_checkpoint
+from ..io.records import plain, unit
 from ..config import build_config, Config
 from ..errors import ConfigError, InputError, NoSpaceError, PhysicsFailure
 from ..driver.slips import lead_time
@@ -211,7 +212,7 @@ def _run_branch(run_dir: Path, slip: int, entry: SlipEntry, ck: Checkpoint, scen
     return BranchResult(name, out_dir, status, time.perf_counter() - t0, sim.state.step - step0, first)
 
 
-def run_fork(request: ForkRequest, live=None, quiet=False) -> dict:
+def run_fork(request: ForkRequest, live=None, quiet=False) -> "ForkSummary":
     """Fork the drained branch and one undrained branch per permeability from slip ``request.slip``,
     reading its checkpoint once.
 
@@ -221,9 +222,8 @@ def run_fork(request: ForkRequest, live=None, quiet=False) -> dict:
     A branch stopped by Ctrl-C stops the fork (KeyboardInterrupt, naming the command that finishes
     it; no later branch runs); a full disk raises :class:`~gouge_cli.errors.NoSpaceError` naming it.
 
-    Returns ``{"run", "slip", "start_time", "branches": {name: {status, dir, wall_seconds, steps,
-    first_slip}}, "library_differences_from_parent"}`` (first_slip: the detector's record of the
-    branch's first slip; paths relative to the fork directory)."""
+    Returns a :class:`ForkSummary` (each branch's status, folder, wall time, steps and first slip;
+    paths relative to the fork directory)."""
     slip, perms, force = request.slip, list(request.perms), request.force
     run_dir = check_run_dir(request.run_dir)
     refuse_if_in_progress(run_dir, f"restart --slip {slip}")
@@ -267,15 +267,13 @@ def run_fork(request: ForkRequest, live=None, quiet=False) -> dict:
     with RunReader(run_dir, allow_running=True) as reader:
         origin = reader.time_offset()
     by_name = {b.name: b for b in kept + results}
-    summary = pair_summary(run_dir, slip, ck.time - origin, [by_name[branch_name(p)] for p in names], origin,
-                           ck.config.loading.velocity)
-    summary["library_differences_from_parent"] = provenance.bit_risks(ck.provenance)
-    return summary
+    return pair_summary(slip, ck.time - origin, [by_name[branch_name(p)] for p in names], origin,
+                        ck.config.loading.velocity, provenance.bit_risks(ck.provenance))
 
 
-def restart(request: ForkRequest, live=None, quiet: bool = False) -> dict:
+def restart(request: ForkRequest, live=None, quiet: bool = False) -> "ForkSummary":
     """`gouge restart` and :func:`gouge_cli.api.restart`: :func:`run_fork`, then, with
-    permeabilities, the fork's pair.json (its record also under "pair" in the returned summary)."""
+    permeabilities, the fork's pair.json (its record also the returned summary's ``pair``)."""
     from .pairs import write_pair_json
 
     fork_dir = RunLayout(request.run_dir).fork(request.slip).root
@@ -289,7 +287,7 @@ def restart(request: ForkRequest, live=None, quiet: bool = False) -> dict:
                 pass
         raise
     if request.perms:
-        summary["pair"] = write_pair_json(fork_dir, request.main)
+        summary = replace(summary, pair=write_pair_json(fork_dir, request.main))
     return summary
 
 
@@ -300,20 +298,66 @@ def _finished_branch(fork_dir: Path, perm: float | None) -> BranchResult:
     return BranchResult(branch_name(perm), out_dir, "finished (kept)", 0.0, 0, catalog[0] if catalog else None)
 
 
-def pair_summary(run_dir: Path, slip: int, start_time: float, results: list[BranchResult], origin: float,
-                 V_s: float) -> dict:
+@dataclass(frozen=True)
+class FirstSlip:
+    """A branch's first slip as `gouge restart` reports it (:meth:`of` a catalog entry)."""
+
+    onset_time: float = unit("t0", "onset, since loading began")
+    duration: float = unit("t0", "slip duration")
+    static_strength: float = unit("sigma", "static strength tau/sigma")
+    stress_drop: float = unit("sigma", "stress drop tau/sigma")
+    slip: float = unit("d", "slip distance of the top wall")
+    peak_velocity_over_Vs: float = unit("V_s", "peak wall velocity")
+    mean_velocity_over_Vs: float = unit("V_s", "mean wall velocity over the slip")
+
+    @classmethod
+    def of(cls, f: SlipEntry, origin: float, V_s: float) -> "FirstSlip":
+        """From the detector's entry (stored clock; ``origin``: the stored clock when loading
+        began) and the loading velocity ``V_s`` [v0]."""
+        return cls(f.onset_time - origin, f.duration, f.static_strength, f.stress_drop, f.slip,
+                   f.peak_velocity / V_s, f.mean_velocity / V_s)
+
+
+@dataclass(frozen=True)
+class BranchSummary:
+    """One branch of a fork as `gouge restart` reports it."""
+
+    status: str = unit("-", "finished, finished (kept), interrupted or failed: ...")
+    dir: str = unit("-", "the branch's folder, relative to the fork's")
+    wall_seconds: float = unit("s", "wall-clock time of the branch (0 when kept)")
+    steps: int = unit("-", "time steps run")
+    first_slip: FirstSlip | None = unit("-", "its first slip (None: no slip in its window)")
+
+
+@dataclass(frozen=True, kw_only=True)
+class ForkSummary:
+    """What :func:`run_fork` returns and `gouge restart` prints (``--json``: :meth:`to_dict`): times
+    in t0 since loading began, velocities in V_s, strengths and drops in tau/sigma."""
+
+    run: str = unit("-", "the parent run, relative to the fork's folder", default="../..")
+    slip: int = unit("-", "the forked slip")
+    time_origin: str = unit("-", "what times count from", default="loading start")
+    start_time: float = unit("t0", "the checkpoint's time, since loading began")
+    branches: dict = unit("-", "{branch name: BranchSummary}, drained first")
+    library_differences_from_parent: list = unit("-", "library versions that differ from the parent's "
+                                                 "checkpoint (provenance.bit_risks)", default_factory=list)
+    pair: dict | None = unit("-", "pair.json's record (workflows.pairs.write_pair_json), when written",
+                             default=None)
+
+    def to_dict(self) -> dict:
+        """The JSON form (``pair`` only when there is one)."""
+        out = plain(self)
+        if self.pair is None:
+            del out["pair"]
+        return out
+
+
+def pair_summary(slip: int, start_time: float, results: list[BranchResult], origin: float,
+                 V_s: float, risks: list[str]) -> ForkSummary:
     """What `gouge restart` prints: times in t0 since loading began (``origin``: the stored clock then;
-    ``start_time``: the checkpoint's), velocities in V_s, strengths and drops in tau/sigma."""
-    branches = {}
-    for r in results:
-        first = None
-        if r.first_slip:
-            f = r.first_slip
-            first = {"onset_time": f.onset_time - origin, "duration": f.duration,
-                     "static_strength": f.static_strength, "stress_drop": f.stress_drop,
-                     "slip": f.slip, "peak_velocity_over_Vs": f.peak_velocity / V_s,
-                     "mean_velocity_over_Vs": f.mean_velocity / V_s}
-        branches[r.name] = {"status": r.status, "dir": r.out_dir.name, "wall_seconds": round(r.wall_seconds, 3),
-                            "steps": r.steps, "first_slip": first}
-    return {"run": "../..", "slip": slip, "time_origin": "loading start", "start_time": start_time,
-            "branches": branches}
+    ``start_time``: the checkpoint's), velocities in V_s, strengths and drops in tau/sigma; ``risks``:
+    the library differences from the parent's checkpoint."""
+    return ForkSummary(slip=slip, start_time=start_time, library_differences_from_parent=risks, branches={
+        r.name: BranchSummary(r.status, r.out_dir.name, round(r.wall_seconds, 3), r.steps,
+                              FirstSlip.of(r.first_slip, origin, V_s) if r.first_slip else None)
+        for r in results})

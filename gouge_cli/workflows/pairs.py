@@ -54,7 +54,7 @@ def write_pair_json(fork_dir: Path, main: str = "first") -> dict:
     branches = {p.name: branch_status(p) for p in [drained, *undrained] if p is not None}
     risks = sorted({r for p in [drained, *undrained] if p is not None for r in branch_bit_risks(p)})
     record = json_safe({
-        "slip": pairs[0].row["slip"] if pairs else fork.slip,
+        "slip": pairs[0].slip if pairs else fork.slip,
         "fork_dir": fork_dir.name,
         "branches": branches,
         "definition": pairs[0].result.definition if pairs else None,

@@ -20,7 +20,6 @@ Steps (each skipped when its output is already there, so the study is idempotent
 
 from __future__ import annotations
 
-import csv
 import errno
 import json
 import math
@@ -29,12 +28,13 @@ import os
 import shlex
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..analysis.pairs import MainEvent
 from ..analysis.report import analyze_run, write_analysis
-from ..analysis.study import STUDY_COLUMNS, study_rows, study_summaries, summary_lines, transient_slips
+from ..analysis.study import (STUDY_COLUMNS, StudyGroup, StudyRow, study_rows, study_summaries, summary_lines,
+                              transient_slips, write_study_table)
 from ..io.checkpoint import read_checkpoint
 from ..config import load_config
 from ..errors import ConfigError, NoSpaceError, StudyInterrupted
@@ -45,10 +45,11 @@ from ..io.layout import RunLayout, branch_name, perm_text, slip_name
 from ..io.rundir import check_run_dir
 from .run import default_run_dir, resume_run, run_scene
 from ..io.filedoc import json_safe
+from ..io.records import plain, unit
 from .pairs import branch_status, write_pair_json
 from .watchdog import follow_parent
 
-__all__ = ["EXTRA_STRENGTH", "StudyResult", "parse_slips", "study_window", "branch_task", "plan_branches",
+__all__ = ["EXTRA_STRENGTH", "BranchRun", "StudyResult", "parse_slips", "study_window", "branch_task", "plan_branches",
            "run_study"]
 
 #: Each branch runs on after the drained slip's end for 2 slip durations plus the time the spring
@@ -92,7 +93,19 @@ def _pool_worker(parent_pid: int):
     _one_thread()
 
 
-def branch_task(run_dir: str, slip: int, perm: float | None, duration: float, stop_after_slip: bool = True) -> dict:
+@dataclass(frozen=True)
+class BranchRun:
+    """What :func:`branch_task` reports of one branch it ran (picklable)."""
+
+    slip: int = unit("-", "slip number the branch forks before")
+    branch: str = unit("-", "drained or perm_K")
+    status: str = unit("-", "the branch's status: finished, interrupted, or failed/physics failure with its message")
+    steps: int = unit("-", "time steps run")
+    wall_seconds: float = unit("s", "wall-clock time it took")
+
+
+def branch_task(run_dir: str, slip: int, perm: float | None, duration: float,
+                stop_after_slip: bool = True) -> BranchRun:
     """The per-fork step: run one branch of one slip (fresh) and report it. Picklable arguments and
     result, one numba thread, so any executor (this process pool, a Dask cluster) can call it."""
     _one_thread()
@@ -107,22 +120,36 @@ def branch_task(run_dir: str, slip: int, perm: float | None, duration: float, st
         status, steps = r.status, r.steps
     except PhysicsError as exc:
         status, steps = f"physics failure: {exc}", 0
-    return {"slip": slip, "branch": branch_name(perm), "status": status, "steps": steps,
-            "wall_seconds": time.perf_counter() - t0}
+    return BranchRun(slip, branch_name(perm), status, steps, time.perf_counter() - t0)
 
 
-@dataclass
+@dataclass(frozen=True)
 class StudyResult:
-    run_dir: Path
-    slips: list[int]
-    transient: list[int]
-    ran: list[dict] = field(default_factory=list)
-    skipped: list[str] = field(default_factory=list)
-    damaged: list[str] = field(default_factory=list)      # forks left out of the tables (analysis.skipped)
-    rows: list[dict] = field(default_factory=list)
-    summary: list = field(default_factory=list)      # one study_summary per permeability
-    written: dict = field(default_factory=dict)
-    loading: str = ""
+    """What :func:`run_study` ran, skipped and found; ``study/summary.json`` is
+    :meth:`summary_record`."""
+
+    run_dir: Path = unit("-", "the loading run")
+    slips: list[int] = unit("-", "the slips studied")
+    transient: list[int] = unit("-", "the run's transient slips (left out of the statistics)")
+    perms: list[float] = unit("d^2", "kappa_c of the undrained branches")
+    main: str = unit("-", "compared event: first or largest")
+    loading: str = unit("-", "what step 1 did: given, done before, resumed (status), ran")
+    ran: list[BranchRun] = unit("-", "branches run now", default_factory=list)
+    skipped: list[str] = unit("-", "branches finished before ('slip N branch')", default_factory=list)
+    damaged: list[str] = unit("-", "forks left out of the tables (analysis.skipped)", default_factory=list)
+    rows: list[StudyRow] = unit("-", "the study table", default_factory=list)
+    summary: list[StudyGroup] = unit("-", "one summary per permeability, in increasing kappa_c",
+                                     default_factory=list)
+    written: dict = unit("-", "{what: path} of the files written", default_factory=dict)
+
+    def summary_record(self) -> dict:
+        """``study/summary.json``: the study's choices, each permeability's summary and the same
+        side by side with the thesis."""
+        return {"run": str(Path(self.run_dir).resolve()), "perms": list(self.perms), "main": self.main,
+                "slips": self.slips, "transient_slips": self.transient,
+                "per_permeability": [g.to_dict() for g in self.summary],
+                "side_by_side": {perm_text(g.permeability): [list(x) for x in summary_lines(g.summary)]
+                                 for g in self.summary}}
 
 
 def _loading_run(target: Path, out: Path | None, overrides: dict | None, quiet: bool,
@@ -198,9 +225,9 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
     run_dir, how = _loading_run(target, out, overrides, quiet, confirm)
     say(f"loading run {run_dir}: {how}")
     chosen, transient = _select(run_dir, slips)
-    result = StudyResult(run_dir, chosen, sorted(transient), loading=how)
-    todo, result.skipped = plan_branches(run_dir, chosen, perms)
-    say(f"{len(chosen)} slips, {len(todo)} branches to run, {len(result.skipped)} done before")
+    todo, skipped = plan_branches(run_dir, chosen, perms)
+    ran = []
+    say(f"{len(chosen)} slips, {len(todo)} branches to run, {len(skipped)} done before")
     if todo:
         workers = max(1, min(jobs or os.cpu_count() or 1, len(todo)))
         ctx = multiprocessing.get_context("spawn")
@@ -220,51 +247,45 @@ def run_study(target: Path, perms: list[float], slips: list[int] | None = None, 
                     raise NoSpaceError(exc.filename or str(run_dir), f"run `{command}` again (the branches that "
                                        "finished are kept)", getattr(exc, "need", None),
                                        getattr(exc, "detail", "")) from None
-                result.ran.append(rec)
-                say(f"slip {rec['slip']} {rec['branch']}: {rec['status']} ({rec['wall_seconds']:.0f} s)")
+                ran.append(rec)
+                say(f"slip {rec.slip} {rec.branch}: {rec.status} ({rec.wall_seconds:.0f} s)")
     for slip in chosen:
         try:
             write_pair_json(RunLayout(run_dir).fork(slip).root, main)
         except Exception as exc:       # a failed branch: the pair is reported as skipped below
             say(f"slip {slip}: no pair ({exc})")
     analysis = analyze_run(run_dir, main=main)
-    result.damaged = [r for r in analysis.skipped if getattr(r, "damaged", True)
-                      and any(slip_name(s) in r for s in chosen)]
-    result.written.update(write_analysis(analysis))
-    pairs = [p for p in analysis.pairs if int(p.row["slip"]) in set(chosen)
-             and p.row["branch"] in {branch_name(k) for k in perms}]
-    result.rows = study_rows(run_dir, pairs, transient)
-    result.summary = study_summaries(result.rows)
-    result.written.update(_write_study(run_dir, result, perms, main, pairs if figures else None))
+    damaged = [r for r in analysis.skipped if getattr(r, "damaged", True)
+               and any(slip_name(s) in r for s in chosen)]
+    written = dict(write_analysis(analysis))
+    pairs = [p for p in analysis.pairs if int(p.slip) in set(chosen)
+             and p.branch in {branch_name(k) for k in perms}]
+    rows = study_rows(run_dir, pairs, transient)
+    result = StudyResult(run_dir, chosen, sorted(transient), list(perms), main, how, ran, skipped, damaged, rows,
+                         study_summaries(rows), written)
+    written.update(_write_study(result, pairs if figures else None))
     return result
 
 
-def _write_study(run_dir: Path, result: StudyResult, perms, main: str, pairs) -> dict:
+def _write_study(result: StudyResult, pairs) -> dict:
+    run_dir, perms, main = result.run_dir, result.perms, result.main
     out = run_dir / "study"
     out.mkdir(parents=True, exist_ok=True)
     table = out / "table.csv"
-    with open(table, "w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(STUDY_COLUMNS), extrasaction="ignore")
-        w.writeheader()
-        for row in result.rows:
-            w.writerow(row)
-    summary = {"run": str(Path(run_dir).resolve()), "perms": list(perms), "main": main, "slips": result.slips,
-               "transient_slips": result.transient, "per_permeability": result.summary,
-               "side_by_side": {perm_text(g["permeability"]): [list(x) for x in summary_lines(g)]
-                                for g in result.summary}}
-    (out / "summary.json").write_text(json.dumps(json_safe(summary), indent=2, allow_nan=False))
+    write_study_table(table, result.rows)
+    (out / "summary.json").write_text(json.dumps(json_safe(result.summary_record()), indent=2, allow_nan=False))
     lines = [f"# Study of {run_dir}", "", f"kappa_c: {', '.join(perm_text(p) for p in perms)}; compared events: "
              f"{main}; slips {', '.join(map(str, result.slips))}; transient (left out): "
              f"{', '.join(map(str, result.transient)) or 'none'}", "",
              "Permeabilities are never pooled: one summary per kappa_c.", ""]
     for g in result.summary:
-        lines += [f"## kappa_c = {perm_text(g['permeability'])} d^2 "
-                  f"({', '.join(f'{k} {v}' for k, v in g['regimes'].items())})", "",
+        lines += [f"## kappa_c = {perm_text(g.permeability)} d^2 "
+                  f"({', '.join(f'{k} {v}' for k, v in g.regimes.items())})", "",
                   "| quantity | this study | thesis |", "|---|---|---|"]
-        lines += [f"| {a} | {b} | {c} |" for a, b, c in summary_lines(g)]
+        lines += [f"| {a} | {b} | {c} |" for a, b, c in summary_lines(g.summary)]
         lines.append("")
     lines += ["", "| " + " | ".join(STUDY_COLUMNS[:-1]) + " |", "|" + "---|" * (len(STUDY_COLUMNS) - 1)]
-    for r in result.rows:
+    for r in map(plain, result.rows):
         lines.append("| " + " | ".join(_cell(r[c]) for c in STUDY_COLUMNS[:-1]) + " |")
     (out / "report.md").write_text("\n".join(lines) + "\n")
     written = {"study_table": table, "study_summary": out / "summary.json", "study_report": out / "report.md"}

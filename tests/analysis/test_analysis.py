@@ -378,13 +378,13 @@ def test_campaign_summary_counts_and_ratios():
         _classify(*_pair(0.22, 0.21, sub)),
     ]
     summary = campaign_summary(results)
-    assert summary["n"] == 5
-    assert {k: summary["counts"][k] for k in ("I", "II", "I-C", "II-C")} == {
+    assert summary.n == 5
+    assert {k: summary.counts[k] for k in ("I", "II", "I-C", "II-C")} == {
         "I": 1, "II": 2, "I-C": 1, "II-C": 1}
-    assert summary["n_type_I"] == 2 and summary["n_type_II"] == 3
-    assert summary["n_complex"] == 2 and summary["criteria"]["subevents"] == 2
-    pv = summary["ratios"]["peak_velocity_ratio"]
-    assert pv["n"] == 5 and pv["frac_below_1"] == 1.0 and pv["max"] < 0.61
+    assert summary.n_type_I == 2 and summary.n_type_II == 3
+    assert summary.n_complex == 2 and summary.criteria["subevents"] == 2
+    pv = summary.ratios["peak_velocity_ratio"]
+    assert pv.n == 5 and pv.frac_below_1 == 1.0 and pv.max < 0.61
 
 
 def test_notched_refit_removes_the_layers_vibration_and_recovers_eq3():

@@ -4,13 +4,14 @@ rule and the study summary, on constructed series with known answers."""
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 
 import numpy as np
 import pytest
 
 from gouge_cli.analysis.blockslider import FIT_MIN_R2, FIT_PERIOD_FACTOR, fit_block_slider, judge_fit
 from gouge_cli.analysis.pairs import SLOW, PairDefinition, classify_pair
-from gouge_cli.analysis.study import study_summary, transient_slips
+from gouge_cli.analysis.study import StudyRow, study_summary, transient_slips
 from gouge_cli.io.slipcatalog import SlipEntry
 from gouge_cli.model.slip_rule import WallSeries
 from gouge_cli.workflows.study import parse_slips, study_window
@@ -111,19 +112,20 @@ def test_transient_rule():
 
 def test_study_summary_leaves_transient_rows_out():
     def row(slip, typ, transient=False, pv=0.8, dur=100.0, r2=0.95, ok=True, meff=4.0, r2n=0.97):
-        return {"slip": slip, "transient": transient, "type": typ, "undrained_event": "slip",
-                "peak_velocity_ratio": pv, "stress_drop_ratio": 0.9, "drained_duration": dur,
-                "drained_fit_r2": r2, "drained_fit_ok": ok, "drained_fit_r2_notched": r2n,
-                "m_eff_over_m_b": meff if ok else float("nan")}
+        unset = {f.name: float("nan") for f in fields(StudyRow)}
+        return StudyRow(**dict(unset, slip=slip, transient=transient, type=typ, undrained_event="slip",
+                               peak_velocity_ratio=pv, stress_drop_ratio=0.9, drained_duration=dur,
+                               drained_fit_r2=r2, drained_fit_ok=ok, drained_fit_r2_notched=r2n,
+                               m_eff_over_m_b=meff if ok else float("nan")))
 
     rows = [row(1, "I", transient=True, pv=2.0, dur=10.0), row(2, "II-C", r2=0.85), row(3, "I"),
             row(4, "tie", pv=1.2, r2n=0.8), row(5, "II", dur=130.0, r2=0.3, ok=False)]
     s = study_summary(rows)
-    assert (s["n"], s["n_type_I"], s["n_type_II"], s["n_tie"], s["n_complex"]) == (4, 1, 2, 1, 1)
-    assert s["frac_slower"] == 0.75 and s["drained_frac_fit_ok"] == 0.75
-    assert s["drained_frac_r2_good"] == 0.5 and s["drained_frac_duration_within"] == 0.75
-    assert s["drained_frac_r2_good_notched"] == 0.5      # slips 2 and 3 (4's notched R^2 0.8, 5 fails the bar)
-    assert s["m_eff_over_m_b"]["mean"] == 4.0 and s["m_eff_over_m_b"]["n"] == 3
+    assert (s.n, s.n_type_I, s.n_type_II, s.n_tie, s.n_complex) == (4, 1, 2, 1, 1)
+    assert s.frac_slower == 0.75 and s.drained_frac_fit_ok == 0.75
+    assert s.drained_frac_r2_good == 0.5 and s.drained_frac_duration_within == 0.75
+    assert s.drained_frac_r2_good_notched == 0.5      # slips 2 and 3 (4's notched R^2 0.8, 5 fails the bar)
+    assert s.m_eff_over_m_b.mean == 4.0 and s.m_eff_over_m_b.n == 3
 
 
 def test_parse_slips_and_window():

@@ -156,7 +156,7 @@ def run_with_forks(tmp_path):
 def test_pair_types_from_planted_strengths(run_with_forks):
     pairs, skipped = FP.run_pairs(run_with_forks)
     assert skipped == []
-    by_branch = {p.row["branch"]: p.row for p in pairs}
+    by_branch = {p.branch: p.row for p in pairs}
     assert by_branch["perm_1e-05"]["type"] == "II"
     assert by_branch["perm_0.0001"]["type"] == "I"
     assert by_branch["perm_1e-05"]["strength_difference"] == pytest.approx(0.04, abs=1e-3)
@@ -166,13 +166,13 @@ def test_pair_types_from_planted_strengths(run_with_forks):
     assert by_branch["perm_1e-05"]["peak_velocity_ratio"] == pytest.approx(0.14 / 0.10, rel=1e-2)
     # two permeabilities: two separate summaries, never one pooled over both
     summary = FP.campaign(pairs)
-    assert summary["n"] == 2 and [g["permeability"] for g in summary["per_permeability"]] == [1e-5, 1e-4][::-1] \
-        or [g["permeability"] for g in summary["per_permeability"]] == [1e-5, 1e-4]
-    by_perm = {g["permeability"]: g for g in summary["per_permeability"]}
-    assert set(by_perm) == {1e-5, 1e-4} and all(g["n"] == 1 for g in by_perm.values())
-    assert (by_perm[1e-5]["n_type_II"], by_perm[1e-5]["n_type_I"]) == (1, 0)
-    assert (by_perm[1e-4]["n_type_I"], by_perm[1e-4]["n_type_II"]) == (1, 0)
-    assert by_perm[1e-5]["ratios"]["peak_velocity_ratio"]["mean"] == pytest.approx(0.14 / 0.10, rel=1e-2)
+    assert summary.n == 2 and [g.permeability for g in summary.groups] == [1e-5, 1e-4][::-1] \
+        or [g.permeability for g in summary.groups] == [1e-5, 1e-4]
+    by_perm = {g.permeability: g.pairs for g in summary.groups}
+    assert set(by_perm) == {1e-5, 1e-4} and all(g.n == 1 for g in by_perm.values())
+    assert (by_perm[1e-5].n_type_II, by_perm[1e-5].n_type_I) == (1, 0)
+    assert (by_perm[1e-4].n_type_I, by_perm[1e-4].n_type_II) == (1, 0)
+    assert by_perm[1e-5].ratios["peak_velocity_ratio"].mean == pytest.approx(0.14 / 0.10, rel=1e-2)
 
 
 def test_analyze_and_write(run_with_forks):

@@ -31,18 +31,11 @@ from gouge_cli.analysis.forkpairs import PAIR_COLUMNS  # noqa: E402
 from gouge_cli.cli.main import app  # noqa: E402
 from gouge_cli.errors import EXIT_BAD_INPUT, AnalysisError, NotARunError  # noqa: E402
 from gouge_cli.units import pint_unit, si_of, unit_sizes  # noqa: E402
-from slipping import slipping_run  # noqa: E402
+from slipping import TINY  # noqa: E402
+from factories import fork_at  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
-SCENE = {
-    "name": "tiny_api",
-    "seed": 4,
-    "packing": {"n_grains": 300, "width": 15},
-    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-    "numerics": {"dt_safety": 0.3, "threads": 1},
-    "run": {"duration": 80000},            # tests/plots: 2 or more slips for any GOUGE_TEST_SEED_OFFSET
-    "output": {"series_interval": 10, "snapshot_interval": 20000},
-}
+SCENE = dict(TINY, name="tiny_api")      # tests/plots' scene: 2 or more slips for any GOUGE_TEST_SEED_OFFSET
 PERM = 1e-3
 runner = CliRunner()
 
@@ -52,11 +45,11 @@ def gouge_cli(*args):
 
 
 @pytest.fixture(scope="module")
-def forked(tmp_path_factory):
+def forked(tiny_run, tmp_path_factory):
     """The tiny scene of tests/plots, forked before its first slip with a checkpoint (drained + one
     undrained branch writing snapshots with a pressure grid); the packing found through
     tests/slipping.py, so that it slips at every GOUGE_TEST_SEED_OFFSET."""
-    _, out, numbers = slipping_run(SCENE, tmp_path_factory.mktemp("api"), slips=1)    # any seed offset
+    _, out, numbers = tiny_run.copy(tmp_path_factory.mktemp("api"))    # any seed offset
     slip = numbers[0]
     result = gouge_cli("restart", out, "--slip", slip, "--perm", PERM, "--set", "output.snapshot_interval=1000",
                        "--quiet")
@@ -275,7 +268,7 @@ def test_pair_equals_pair_json(forked):
     run = gouge.open_run(out)
     assert list(run.forks) == [slip]
     pair = run.pair(slip, PERM)
-    record = json.loads((out / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())
+    record = json.loads(fork_at(out, slip).pair_file.read_text())
     (stored,) = record["pairs"]
     for col in PAIR_COLUMNS:
         if col == "run":
@@ -362,7 +355,7 @@ def test_opening_changes_no_byte(forked):
 def test_open_study_equals_pair_json(forked):
     out, slip = forked
     df = gouge.open_study(out)
-    record = json.loads((out / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())
+    record = json.loads(fork_at(out, slip).pair_file.read_text())
     assert len(df) == len(record["pairs"]) == 1
     row = df.iloc[0]
     for col in PAIR_COLUMNS:

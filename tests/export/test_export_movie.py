@@ -15,6 +15,7 @@ from typer.testing import CliRunner
 
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
+from factories import branch_at
 
 SCENE = {
     "name": "tinywet",
@@ -330,7 +331,7 @@ def test_export_of_a_fork_lands_in_its_run_whatever_the_working_directory(runs, 
     from gouge_cli.io import integrity
 
     run = _fake_fork(runs)
-    branch = run / "forks" / "slip_001" / "perm_1e-05"
+    branch = branch_at(run, 1, 1e-5).root
     with h5py.File(branch / "run.h5", "r+") as h5:
         h5.attrs["parent_run"] = "../../.."
         h5.attrs["fork_slip"] = 1

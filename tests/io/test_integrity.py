@@ -33,17 +33,11 @@ from gouge_cli.io.runreader import RunReader
 from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.io.verify import run_file_problems, verify_run
 from slipping import slipping_run
+from factories import scene
 
-SCENE = {
-    "name": "flips",
-    "seed": 4,
-    "packing": {"n_grains": 300, "width": 15},
-    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-    "numerics": {"dt_safety": 0.3, "threads": 1},
-    "run": {"duration": 14000},
-    "output": {"series_interval": 10, "snapshot_interval": 5000, "checkpoint_interval": 1000},
-    "slips": {"start_factor": 4, "end_factor": 1.5},
-}
+SCENE = scene("flips", 4, numerics={"threads": 1}, run={"duration": 14000},
+              output={"series_interval": 10, "snapshot_interval": 5000, "checkpoint_interval": 1000},
+              slips={"start_factor": 4, "end_factor": 1.5})
 SEED = 42 + int(os.environ.get("GOUGE_TEST_SEED_OFFSET", "0"))
 runner = CliRunner()
 

@@ -17,10 +17,9 @@ from gouge_cli.kernels.layout import K_REBUILDS, THREADS, W_VZ
 from gouge_cli.model.params import numba_threads
 from gouge_cli.driver.compaction import compact
 from gouge_cli.driver.simulation import Simulation
+from factories import scene
 
-SCENE = {"packing": {"n_grains": 300, "width": 15}, "seed": 3,
-         "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-         "numerics": {"dt_safety": 0.3}}
+SCENE = scene(seed=3)
 
 
 @pytest.fixture(scope="module")

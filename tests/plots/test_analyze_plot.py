@@ -16,7 +16,7 @@ from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.plots import DPI, FIGSIZE
 from gouge_cli.plots.snapshot import snapshot_pixels
-from slipping import TINY, slipping_run
+from factories import fork_at
 
 runner = CliRunner()
 
@@ -26,10 +26,10 @@ def gouge(*args):
 
 
 @pytest.fixture(scope="module")
-def forked(tmp_path_factory):
+def forked(tiny_run, tmp_path_factory):
     """The tiny scene (2 or more slips with checkpoints), its second such slip forked with one
     undrained branch writing snapshots: (run directory, slip number)."""
-    _, out, numbers = slipping_run(TINY, tmp_path_factory.mktemp("analyze"))
+    _, out, numbers = tiny_run.copy(tmp_path_factory.mktemp("analyze"))
     result = gouge("restart", out, "--slip", numbers[1], "--perm", 1e-3, "--set", "output.snapshot_interval=500",
                    "--quiet")
     assert result.exit_code == 0, result.output
@@ -71,7 +71,7 @@ def test_analyze_writes_tables(forked):
     header, rows = _rows(forked_run / "analysis" / "pairs.csv")
     assert header == list(PAIR_COLUMNS) and len(rows) == 1
     assert rows[0]["branch"] == "perm_1e-03" and int(rows[0]["slip"]) == slip
-    _check_pair_rule(forked_run / "forks" / f"slip_{slip:03d}", rows[0])
+    _check_pair_rule(fork_at(forked_run, slip).root, rows[0])
 
 
 def _check_pair_rule(fork, row):

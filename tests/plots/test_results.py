@@ -18,7 +18,7 @@ from gouge_cli.analysis.blockslider import BlockSliderFit
 from gouge_cli.analysis.forkpairs import DRAINED_DE, UNDRAINED_DE
 from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
-from slipping import TINY, slipping_run
+from factories import branch_at, fork_at
 
 K1, K2 = 1e-3, 1e-2
 runner = CliRunner()
@@ -33,15 +33,15 @@ def _sha(path):
 
 
 @pytest.fixture(scope="module")
-def two_perms(tmp_path_factory):
+def two_perms(tiny_run, tmp_path_factory):
     """The tiny scene's second slip with a checkpoint (number n) forked at K1, then K2 added by a
     second `gouge restart`: (run directory, first and second restart results, the drained
     branch's SHA-256 after the first, n)."""
-    _, out, numbers = slipping_run(TINY, tmp_path_factory.mktemp("results"))
+    _, out, numbers = tiny_run.copy(tmp_path_factory.mktemp("results"))
     n = numbers[1]
     first = gouge("restart", out, "--slip", n, "--perm", K1, "--quiet")
     assert first.exit_code == 0, first.output
-    drained_hash = _sha(out / "forks" / f"slip_{n:03d}" / "drained" / "run.h5")
+    drained_hash = _sha(branch_at(out, n).run_file)
     second = gouge("restart", out, "--slip", n, "--perm", K2, "--quiet", "--json")
     return out, first, second, drained_hash, n
 
@@ -56,7 +56,7 @@ def test_restart_prints_one_screen(two_perms):
     assert any(line.strip().startswith("drained ") for line in lines)
     pair = next(line for line in lines if "pair drained vs perm_1e-03" in line)
     assert "onsets" in pair or "no pair" in pair or "none" in pair
-    row = json.loads((out / "forks" / f"slip_{n:03d}" / "pair.json").read_text())["pairs"][0]
+    row = json.loads(fork_at(out, n).pair_file.read_text())["pairs"][0]
     if "onsets" in pair:          # the window of the comparison: when each maximum was reached (issue 60)
         when = lines[lines.index(pair) + 1]
         assert when == (f"    S_d reached at t = {row['drained_strength_time']:,.1f}, S_u at "
@@ -69,7 +69,7 @@ def test_restart_prints_one_screen(two_perms):
 def test_restart_perm_adds_a_branch(two_perms):
     out, _, second, drained_hash, n = two_perms
     assert second.exit_code == 0, second.output
-    fork = out / "forks" / f"slip_{n:03d}"
+    fork = fork_at(out, n).root
     assert sorted(p.name for p in fork.iterdir() if p.is_dir()) == ["drained", "perm_1e-02", "perm_1e-03"]
     assert _sha(fork / "drained" / "run.h5") == drained_hash           # the drained branch was kept
     printed = json.loads(second.output[second.output.index("{"):])
@@ -109,7 +109,7 @@ def test_one_onset_time_everywhere(two_perms, tmp_path):
     with open(out / "analysis" / "pairs.csv") as fh:
         pairs = list(csv.DictReader(fh))
     assert len(pairs) == 2
-    pj = json.loads((out / "forks" / f"slip_{n:03d}" / "pair.json").read_text())
+    pj = json.loads(fork_at(out, n).pair_file.read_text())
     for p in pairs + pj["pairs"]:
         assert float(p["drained_onset"]) == pytest.approx(onset, abs=2 * dt_sample)
     assert gouge("plot", out, "--slip", n, "--out", tmp_path).exit_code == 0
@@ -187,7 +187,7 @@ def test_export_from_another_directory_lands_in_the_run(two_perms, tmp_path, mon
     """parent_run is relative to the branch folder: resolving it from the current directory wrote
     the export outside the run (into cwd/../../../export)."""
     out, _, _, _, n = two_perms
-    with h5py.File(out / "forks" / f"slip_{n:03d}" / "perm_1e-03" / "run.h5", "r") as h5:
+    with h5py.File(branch_at(out, n, 1e-3).run_file, "r") as h5:
         assert h5.attrs["parent_run"] == "../../.."
     elsewhere = tmp_path / "a" / "b" / "c"
     elsewhere.mkdir(parents=True)

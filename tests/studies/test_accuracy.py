@@ -20,10 +20,9 @@ from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.config import build_config
 from slipping import slipping_start
+from factories import scene
 
-TINY = {"name": "tiny", "seed": 11, "packing": {"n_grains": 300, "width": 15},
-        "loading": {"spring_constant": 2e-4, "velocity": 4e-5}, "numerics": {"dt_safety": 0.3},
-        "run": {"duration": 80000}}
+TINY = scene("tiny", 11, run={"duration": 80000})
 
 
 @pytest.fixture(scope="module")

@@ -20,6 +20,7 @@ from gouge_cli.kernels import step as K
 from gouge_cli.kernels.probe import stream_probe
 from needs import two_threads
 from slipping import slipping_run
+from factories import scene
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -105,10 +106,8 @@ def test_footprint_sub_systems_are_the_first_rows_of_the_packing():
 
 
 def test_batch_script_forks_every_slip(tmp_path):
-    scene = {"name": "batch", "seed": 1, "packing": {"n_grains": 300, "width": 15},
-             "loading": {"spring_constant": 2e-4, "velocity": 4e-5}, "numerics": {"dt_safety": 0.3},
-             "run": {"duration": 80000}, "output": {"series_interval": 10, "snapshot_interval": 40000}}
-    _, run, _ = slipping_run(scene, tmp_path, slips=1)
+    batch = scene("batch", 1, run={"duration": 80000}, output={"series_interval": 10, "snapshot_interval": 40000})
+    _, run, _ = slipping_run(batch, tmp_path, slips=1)
     bin_dir = Path(sys.executable).parent
     env = dict(os.environ, GOUGE=str(bin_dir / "gouge"), PYTHON=sys.executable)
     catalog = json.loads(subprocess.run([str(bin_dir / "gouge"), "slips", str(run), "--json"], check=True,

@@ -27,6 +27,7 @@ from gouge_cli.workflows.campaign_survey import status_lines, survey
 from gouge_cli.workflows.campaign_tasks import read_ledger
 from gouge_cli.workflows.campaign_spec import load_spec
 from gouge_cli.workflows.executors import ClusterOptions, local_cluster, slurm_cluster
+from factories import fork_at
 
 SCENE = {
     "name": "tiny", "seed": 1,
@@ -175,8 +176,8 @@ def test_point_on_a_worker_is_bitwise_gouge_run_and_restart(campaign, folder):
     result = gouge("restart", serial, "--slip", slip, "--perm", "1e-3", "--duration", 800, "--quiet")
     assert result.exit_code == 0, result.output
     for branch in ("drained", "perm_1e-03"):
-        a = series(pdir / "forks" / f"slip_{slip:03d}" / branch / "run.h5")
-        b = series(serial / "forks" / f"slip_{slip:03d}" / branch / "run.h5")
+        a = series(fork_at(pdir, slip).root / branch / "run.h5")
+        b = series(fork_at(serial, slip).root / branch / "run.h5")
         for name in a:
             assert np.array_equal(a[name], b[name], equal_nan=True), (branch, name)
 

@@ -27,7 +27,8 @@ import h5py
 import pytest
 import yaml
 
-from slipping import TINY, slipping_run
+from slipping import TINY
+from factories import branch_at, fork_at
 
 GOUGE = [sys.executable, "-m", "gouge_cli.cli"]
 SIZE_MB = 160     # MB: a fixture run copied onto it is 18-59 MB (59 at seed offset 1: 48 was too small)
@@ -108,10 +109,10 @@ def readable(run_file: Path) -> str:
 
 
 @pytest.fixture(scope="module")
-def forked(tmp_path_factory):
+def forked(tiny_run, tmp_path_factory):
     """The tiny scene with slips, one slip forked (drained + kappa_c 1e-3 writing snapshots):
     (run directory, slip number, config)."""
-    config, out, numbers = slipping_run(TINY, tmp_path_factory.mktemp("fulldisk"), slips=1)
+    config, out, numbers = tiny_run.copy(tmp_path_factory.mktemp("fulldisk"))
     done = gouge("restart", out, "--slip", numbers[0], "--perm", 1e-3, "--quiet")
     assert done.returncode == 0, done.stderr[-2000:]
     return out, numbers[0], config
@@ -169,13 +170,13 @@ def test_restart_on_a_full_disk(forked, small_fs):
     filler = fill(small_fs, 300_000)
     message = full_disk_message(gouge("restart", target, "--slip", slip, "--perm", 1e-3, "--quiet"))
     assert "MB" in message and "--perm 1e-03" in message
-    assert not (target / "forks" / f"slip_{slip:03d}" / "drained" / "run.h5").exists()
+    assert not branch_at(target, slip).run_file.exists()
     assert readable(target / "run.h5") == "finished" and not temp_files(small_fs)
     assert gouge("verify", target).returncode == 0
     filler.unlink()
     done = gouge(*advised(message), "--quiet")
     assert done.returncode == 0, done.stderr[-2000:]
-    assert (target / "forks" / f"slip_{slip:03d}" / "pair.json").is_file()
+    assert fork_at(target, slip).pair_file.is_file()
 
 
 def test_rerun_of_a_finished_branch_onto_a_full_disk_keeps_it(forked, small_fs):
@@ -189,7 +190,7 @@ def test_rerun_of_a_finished_branch_onto_a_full_disk_keeps_it(forked, small_fs):
 
     run, slip, _ = forked
     target = _copy(run, small_fs)
-    branch = target / "forks" / f"slip_{slip:03d}" / "drained" / "run.h5"
+    branch = branch_at(target, slip).run_file
     before = digest(branch)
     dense = ["output.slip_frames=0", "output.snapshot_interval=10"]
     ck = read_checkpoint(target / fork_entry(target, slip).checkpoint, dense)
@@ -404,7 +405,7 @@ def test_analyze_exits_4_with_a_damaged_fork(forked, tmp_path):
     run, slip, _ = forked
     target = tmp_path / "run"
     shutil.copytree(run, target)
-    branch = target / "forks" / f"slip_{slip:03d}" / "perm_1e-03" / "run.h5"
+    branch = branch_at(target, slip, 1e-3).run_file
     with open(branch, "r+b") as fh:            # damage the branch: its first kilobytes zeroed
         fh.write(b"\0" * 4096)
     done = gouge("analyze", target)
@@ -425,7 +426,7 @@ def test_failed_branch_reported_as_failed(forked, tmp_path):
                  "--set", "fluid.solver=explicit", "--quiet")
     message = refused(done, 3)
     assert "physics failure" in message
-    pair = json.loads((target / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())
+    pair = json.loads(fork_at(target, slip).pair_file.read_text())
     assert pair["branches"]["perm_1e-02"].startswith("failed")
     row = next(r for r in pair["pairs"] if r["branch"] == "perm_1e-02")
     assert (row["type"], row["base_type"], row["status"]) == ("failed", "failed", "failed")
@@ -457,7 +458,7 @@ def test_advice_of_a_held_lock_and_ctrl_c_continues_the_restart(forked, tmp_path
     args = ["restart", str(target), "--slip", str(slip), "--perm", "1e-3", "--duration", "30000", "--quiet"]
     first = subprocess.Popen(GOUGE + args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                              env=dict(os.environ, NUMBA_NUM_THREADS="1"), start_new_session=True)
-    branch = target / "forks" / f"slip_{slip:03d}" / "drained"
+    branch = branch_at(target, slip).root
     try:
         for _ in range(1200):
             if holder(branch) is not None or first.poll() is not None:
@@ -481,7 +482,7 @@ def test_advice_of_a_held_lock_and_ctrl_c_continues_the_restart(forked, tmp_path
     assert advised(resumed)[:4] == ["restart", str(target.resolve()), "--slip", str(slip)]
     done = gouge(*command, "--quiet")
     assert done.returncode == 0, done.stderr[-2000:]
-    assert json.loads((target / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())["pairs"]
+    assert json.loads(fork_at(target, slip).pair_file.read_text())["pairs"]
     again = gouge(*named, "--quiet")                # all finished: refused, naming --force (exit 2)
     assert again.returncode == 2 and "--force" in again.stderr
 
@@ -492,7 +493,7 @@ def test_study_exits_4_with_a_damaged_branch(forked, tmp_path):
     run, slip, _ = forked
     target = tmp_path / "run"
     shutil.copytree(run, target)
-    branch = target / "forks" / f"slip_{slip:03d}" / "perm_1e-03" / "run.h5"
+    branch = branch_at(target, slip, 1e-3).run_file
     with h5py.File(branch, "r") as h5:              # one byte of its wall velocity flipped on disk
         chunk = h5["series/wall_vx"].id.get_chunk_info(0)
     with open(branch, "r+b") as fh:

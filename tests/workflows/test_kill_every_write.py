@@ -20,16 +20,11 @@ from pathlib import Path
 import h5py
 import pytest
 import yaml
+from factories import scene
 
-SCENE = {
-    "name": "k", "seed": 4,
-    "packing": {"n_grains": 300, "width": 15},
-    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-    "numerics": {"dt_safety": 0.3},
-    "run": {"duration": 3000},
-    "output": {"series_interval": 10, "snapshot_interval": 1500, "checkpoint_interval": 1000},
-    "slips": {"start_factor": 4, "end_factor": 1.5},
-}
+SCENE = scene("k", 4, run={"duration": 3000},
+              output={"series_interval": 10, "snapshot_interval": 1500, "checkpoint_interval": 1000},
+              slips={"start_factor": 4, "end_factor": 1.5})
 ENV = dict(os.environ, PYTHONUNBUFFERED="1", NUMBA_NUM_THREADS="1")
 GOUGE = [sys.executable, "-m", "gouge_cli.cli"]
 STRACE = shutil.which("strace")

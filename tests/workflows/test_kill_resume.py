@@ -29,17 +29,11 @@ from gouge_cli.io.checkpoint import read_checkpoint
 from gouge_cli.io.integrity import seal
 from gouge_cli.cli.main import app
 from gouge_cli.io.slipcatalog import slip_catalog
+from factories import scene
 
-SCENE = {
-    "name": "kill",
-    "seed": 4,
-    "packing": {"n_grains": 300, "width": 15},
-    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-    "numerics": {"dt_safety": 0.3},
-    "run": {"duration": 14000},
-    "output": {"series_interval": 10, "snapshot_interval": 5000, "checkpoint_interval": 1000},
-    "slips": {"start_factor": 4, "end_factor": 1.5},
-}
+SCENE = scene("kill", 4, run={"duration": 14000},
+              output={"series_interval": 10, "snapshot_interval": 5000, "checkpoint_interval": 1000},
+              slips={"start_factor": 4, "end_factor": 1.5})
 ENV = dict(os.environ, PYTHONUNBUFFERED="1", NUMBA_NUM_THREADS="1")
 
 

@@ -24,6 +24,7 @@ from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT, EXIT_INTERRUPTED, EXIT_PHYSICS, AnalysisError
 from slipping import slipping_run
 from gouge_cli.workflows.pairs import branch_status, write_pair_json
+from factories import fork_at
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENE = {
@@ -91,7 +92,7 @@ def _restart(run_dir, slip, *extra):
 
 def test_full_disk_in_restart_names_the_command_that_continues(loaded, monkeypatch):
     run_dir, slip = loaded
-    fork = run_dir / "forks" / f"slip_{slip:03d}"
+    fork = fork_at(run_dir, slip).root
 
     def full(out_dir):
         raise OSError(errno.ENOSPC, "No space left on device", str(out_dir))
@@ -116,7 +117,7 @@ def test_full_disk_in_restart_names_the_command_that_continues(loaded, monkeypat
 
 def test_ctrl_c_in_restart_exits_130_and_classifies_nothing(loaded, monkeypatch):
     run_dir, slip = loaded
-    fork = run_dir / "forks" / f"slip_{slip:03d}"
+    fork = fork_at(run_dir, slip).root
     assert _restart(run_dir, slip, "--force").exit_code == 0
     (fork / "pair.json").unlink()
     calls = _on_row(monkeypatch, "drained", 5, lambda out_dir: os.kill(os.getpid(), signal.SIGINT))

@@ -24,6 +24,7 @@ from gouge_cli.workflows.campaign_tasks import read_ledger
 from gouge_cli.workflows.pairs import branch_status
 from gouge_cli.workflows.watchdog import POLL
 from slipping import slipping_run
+from factories import fork_at
 
 ROOT = Path(__file__).resolve().parents[2]
 BOUND = 20.0        # seconds within which every process of the killed command must be gone
@@ -110,7 +111,7 @@ def test_sigkill_on_study_parent_leaves_no_worker(loaded):
             proc.kill()
     print(f"study: {len(workers)} processes gone {seconds:.2f} s after SIGKILL on their parent")
     assert seconds < BOUND
-    fork = run_dir / "forks" / f"slip_{slip:03d}"
+    fork = fork_at(run_dir, slip).root
     assert [b for b in ("drained", "perm_1e-05", "perm_1e-03") if branch_status(fork / b) != "finished"], \
         "every branch finished before the kill: the test killed nothing"
     again = gouge(*args)

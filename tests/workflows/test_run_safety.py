@@ -24,6 +24,7 @@ from gouge_cli.errors import MAX_MESSAGE
 from gouge_cli.io.rundir import LOCK_NAME, holder
 from gouge_cli.io.slipcatalog import slip_catalog
 from test_kill_resume import ENV, slipping_scene
+from factories import fork_at
 
 runner = CliRunner()
 QUICK = ["--set", "run.duration=200", "--set", "compaction.max_time=300", "--set", "compaction.min_time=100"]
@@ -166,7 +167,7 @@ def test_sigterm_stops_a_restart_cleanly(finished, tmp_path):
     finishes the fork, no temporary file; that command then finishes it."""
     d = copy_of(finished, tmp_path / "run")
     n = next(e.number for e in slip_catalog(d) if e.checkpoint)
-    fork = d / "forks" / f"slip_{n:03d}"
+    fork = fork_at(d, n).root
     args = ["restart", str(d), "--slip", str(n), "--perm", "1e-3", "--duration", "3000"]
     proc = subprocess.Popen([sys.executable, "-m", "gouge_cli.cli", *args], env=ENV, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT)
@@ -192,7 +193,7 @@ def test_drained_only_fork_without_perm(finished, tmp_path):
     n = next(e.number for e in slip_catalog(d) if e.checkpoint)
     result = gouge("restart", d, "--slip", n, "--quiet")
     assert result.exit_code == 0, result.output
-    fork = d / "forks" / f"slip_{n:03d}"
+    fork = fork_at(d, n).root
     assert list(fork.iterdir()) != [] and (fork / "drained/run.h5").is_file()
     assert not list(fork.glob("perm_*"))
 

@@ -22,17 +22,11 @@ from gouge_cli.driver import phases
 from gouge_cli.io.slipcatalog import slip_catalog
 from gouge_cli.workflows.fork import ForkRequest, run_fork
 from gouge_cli.driver.stick_scaling import StickScaling
+from factories import branch_at, scene
 
-SCENE = {
-    "name": "scaled",
-    "seed": 4,
-    "packing": {"n_grains": 300, "width": 15},
-    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-    "numerics": {"dt_safety": 0.3, "stick_scaling": 16, "threads": 1},
-    "run": {"duration": 36000},
-    "output": {"series_interval": 10, "snapshot_interval": 20000, "checkpoint_interval": 2000},
-    "slips": {"start_factor": 4, "end_factor": 1.5},
-}
+SCENE = scene("scaled", 4, numerics={"stick_scaling": 16, "threads": 1}, run={"duration": 36000},
+              output={"series_interval": 10, "snapshot_interval": 20000, "checkpoint_interval": 2000},
+              slips={"start_factor": 4, "end_factor": 1.5})
 runner = CliRunner()
 
 
@@ -91,10 +85,10 @@ def test_drained_fork_retraces_the_scaled_runs_slip(scaled_run):
     ck = read_checkpoint(out / entry.checkpoint)
     assert ck.config.numerics.stick_scaling == 16.0
     summary = run_fork(ForkRequest(out, entry.number), quiet=True)
-    drained = summary["branches"]["drained"]
-    assert drained["first_slip"] is not None
+    drained = summary.branches["drained"]
+    assert drained.first_slip is not None
     original = series(out / "run.h5")
-    branch = out / "forks" / f"slip_{entry.number:03d}" / "drained" / "run.h5"
+    branch = branch_at(out, entry.number).run_file
     with h5py.File(branch, "r") as h5:
         assert yaml.safe_load(h5.attrs["config"])["numerics"]["stick_scaling"] == 1.0
     fork = series(branch)
@@ -104,7 +98,7 @@ def test_drained_fork_retraces_the_scaled_runs_slip(scaled_run):
         assert np.array_equal(original[name][idx], fork[name][1:]), name
     with h5py.File(out / "run.h5", "r") as h5:          # restart reports times since loading began
         origin = float(h5["series/time"][0] - h5["series/load_time"][0])
-    assert drained["first_slip"]["onset_time"] == pytest.approx(entry.onset_time - origin, abs=1e-9)
+    assert drained.first_slip.onset_time == pytest.approx(entry.onset_time - origin, abs=1e-9)
 
 
 def test_stop_inside_a_recomputed_slip_then_resume_is_bitwise(scaled_run, tmp_path, monkeypatch):

@@ -20,16 +20,10 @@ from gouge_cli.cli.main import app
 from gouge_cli.errors import EXIT_BAD_INPUT
 from gouge_cli.io.integrity import seal
 from slipping import slipping_run
+from factories import fork_at, scene
 
-SCENE = {
-    "name": "tiny_study",
-    "seed": 4,
-    "packing": {"n_grains": 300, "width": 15},
-    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-    "numerics": {"dt_safety": 0.3, "threads": 1},
-    "run": {"duration": 50000},
-    "output": {"series_interval": 10, "snapshot_interval": 50000, "checkpoint_interval": 10000},
-}
+SCENE = scene("tiny_study", 4, numerics={"threads": 1}, run={"duration": 50000},
+              output={"series_interval": 10, "snapshot_interval": 50000, "checkpoint_interval": 10000})
 runner = CliRunner()
 
 
@@ -66,7 +60,7 @@ def test_study_end_to_end_idempotent_and_consistent(study_run):
         pairs_csv = {int(r["slip"]): r for r in csv.DictReader(fh)}
     assert sorted(table) == sorted(pairs_csv) == slips
     for n in slips:
-        pj = json.loads((run_dir / "forks" / f"slip_{n:03d}" / "pair.json").read_text())
+        pj = json.loads(fork_at(run_dir, n).pair_file.read_text())
         (p,) = pj["pairs"]
         row, trow = pairs_csv[n], table[n]
         assert p["type"] == row["type"] == trow["type"]

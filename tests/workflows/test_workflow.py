@@ -27,16 +27,10 @@ from gouge_cli.io.verify import verify_run
 from gouge_cli.workflows.fork import ForkRequest, run_fork
 from gouge_cli.driver.simulation import Simulation
 from slipping import slipping_run
+from factories import branch_at, fork_at, scene
 
-SCENE = {
-    "name": "tiny",
-    "seed": 4,
-    "packing": {"n_grains": 300, "width": 15},
-    "loading": {"spring_constant": 2e-4, "velocity": 4e-5},
-    "numerics": {"dt_safety": 0.3},
-    "run": {"duration": 80000},
-    "output": {"series_interval": 10, "snapshot_interval": 20000, "checkpoint_interval": 5000},
-}
+SCENE = scene("tiny", 4, run={"duration": 80000},
+              output={"series_interval": 10, "snapshot_interval": 20000, "checkpoint_interval": 5000})
 runner = CliRunner()
 
 
@@ -122,10 +116,10 @@ def test_drained_fork_retraces_the_original(tiny):
     _, finished_run, kept = tiny
     n = kept[1]
     summary = run_fork(ForkRequest(finished_run, n), quiet=True)
-    drained = summary["branches"]["drained"]
-    assert drained["status"] == "finished" and drained["first_slip"] is not None
+    drained = summary.branches["drained"]
+    assert drained.status == "finished" and drained.first_slip is not None
     original = series(finished_run / "run.h5")
-    fork = series(finished_run / "forks" / f"slip_{n:03d}" / "drained" / "run.h5")
+    fork = series(branch_at(finished_run, n).run_file)
     idx = np.searchsorted(original["time"], fork["time"][1:])
     assert np.array_equal(original["time"][idx], fork["time"][1:])
     for name in ("wall_x", "wall_vx", "tau_over_sigma", "porosity", "kinetic_energy", "max_overlap"):
@@ -133,9 +127,9 @@ def test_drained_fork_retraces_the_original(tiny):
     entry = next(e for e in slip_catalog(finished_run) if e.number == n)
     with h5py.File(finished_run / "run.h5", "r") as h5:          # restart reports times since loading began
         origin = float(h5["series/time"][0] - h5["series/load_time"][0])
-    assert drained["first_slip"]["onset_time"] == pytest.approx(entry.onset_time - origin, abs=1e-9)
+    assert drained.first_slip.onset_time == pytest.approx(entry.onset_time - origin, abs=1e-9)
     # the fork wrote dense snapshots while its wall slipped (output.slip_frames, 30 by default)
-    with h5py.File(finished_run / "forks" / f"slip_{n:03d}" / "drained" / "run.h5", "r") as h5:
+    with h5py.File(branch_at(finished_run, n).run_file, "r") as h5:
         interval, dt = h5.attrs["snapshot_dense_interval"], h5.attrs["dt"]
         lo = yaml.safe_load(h5.attrs["config"])["slips"]["end_factor"] * SCENE["loading"]["velocity"]
         snaps = [h5["snapshots"][n] for n in sorted(h5["snapshots"])]
@@ -179,7 +173,7 @@ def test_restart_refuses_non_run_and_corrupt_checkpoint(tiny, tmp_path):
     ck.write_bytes(ck.read_bytes()[:5000])
     with pytest.raises(CheckpointError, match="unreadable or truncated"):
         read_checkpoint(ck)
-    assert not (copy / "forks" / f"slip_{n:03d}").exists()
+    assert not fork_at(copy, n).root.exists()
 
 
 def test_bad_config_writes_nothing(scene_file, tmp_path):
@@ -382,12 +376,12 @@ def test_moved_run_directory_still_forks(finished_run, tmp_path):
     shutil.copytree(finished_run, moved, ignore=shutil.ignore_patterns("forks"))
     slip = next(e.number for e in slip_catalog(moved) if e.checkpoint)
     summary = run_fork(ForkRequest(moved, slip, duration=100.0), quiet=True)
-    branch = moved / "forks" / f"slip_{slip:03d}" / "drained"
+    branch = branch_at(moved, slip).root
     with h5py.File(branch / "run.h5", "r") as h5:
         assert (branch / h5.attrs["parent_run"]).resolve() == moved.resolve()
         assert re.fullmatch(r"[0-9a-f]{16}", h5.attrs["final_state_hash"])
-    assert (branch.parent / summary["run"]).resolve() == moved.resolve()
-    assert summary["branches"]["drained"]["dir"] == "drained" and summary["library_differences_from_parent"] == []
+    assert (branch.parent / summary.run).resolve() == moved.resolve()
+    assert summary.branches["drained"].dir == "drained" and summary.library_differences_from_parent == []
 
 
 def test_restart_names_library_differences_from_the_parent(finished_run, tmp_path):
@@ -407,7 +401,7 @@ def test_restart_names_library_differences_from_the_parent(finished_run, tmp_pat
     result = gouge("restart", run, "--slip", slip, "--perm", "1e-5", "--duration", "50", "--quiet")
     assert result.exit_code == 0, result.output
     assert f"numpy 1.0.0 -> {np.__version__}" in result.output
-    pair = json.loads((run / "forks" / f"slip_{slip:03d}" / "pair.json").read_text())
+    pair = json.loads(fork_at(run, slip).pair_file.read_text())
     assert pair["library_differences_from_parent"] == [f"numpy 1.0.0 -> {np.__version__}"]
 
 
