@@ -468,7 +468,7 @@ def test_advice_of_a_held_lock_and_ctrl_c_continues_the_restart(forked, tmp_path
         message = refused(gouge(*args))
         assert "in use" in message
         command = advised(message)
-        assert command[:2] == ["restart", str(target)] and "0.001" in command
+        assert command[:2] == ["restart", str(target)] and "1e-03" in command
         first.send_signal(signal.SIGINT)
         stdout, stderr = first.communicate(timeout=120)
     finally:
