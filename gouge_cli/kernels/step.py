@@ -15,6 +15,13 @@ needs whole-step velocities mid-call takes them from ``closed_velocity`` (the fl
 The scene's arrays come as records addressed by field name (kernels.layout.Grains, Lists, Pairs,
 built by model.state.State); indices of params, wall, clock and counters: kernels.layout.
 
+The sequence is written once: _step and run_steps call the step's phases by name (STEP_PHASES:
+open, drift, rebuild, forces, wall, close and the rebuild flag's read and suspension), each with
+a first argument `block` saying who runs it. Here block is () and the phases are this module's
+(numba threads inside each); kernels.gpu.dry compiles the same two functions for a CUDA thread
+block with its own phases bound to those names. advance is the CPU's dry engine, coupled.py adds
+the fluid between its steps.
+
 Size (~500 lines): the pair pass (reverse_list .. sum_pass) and the step (kicks, drift,
 rebuild, advance) stay in one file for now; the pair pass is the natural next split (forces.py).
 """
@@ -485,33 +492,6 @@ def rebuild(grains, lists, params, counters, drag_x, drag_z):
 
 
 @njit(cache=NUMBA_CACHE)
-def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close, drifted):
-    """One step (module docstring). owed: the grains still owe the previous step their second
-    half kick, which is fused into this step's first; close: end with the grains' second half
-    kick (the state is then at a whole step), else leave it owed to the next step; drifted:
-    steps 1-2 are already done (open_step and _move_one of every grain, rebuild flag set).
-    False if the rebuild overflows the list: the step is then left drifted
-    (counters[K_NEED_REBUILD] = MID_STEP) and the next call resumes it at the rebuild."""
-    if counters[K_NEED_REBUILD] != MID_STEP and not drifted:
-        open_step(grains, wall, clock, params)
-        late = kick_drift(grains.x, grains.z, grains.vx, grains.vz, grains.spin, grains.force_x, grains.force_z,
-                          grains.torque, grains.inv_mass, grains.inv_inertia, grains.body, lists.x_build,
-                          lists.z_build, owed, params, lists.cell_of)
-        if late > 0:
-            counters[K_NEED_REBUILD] = 1
-    if counters[K_NEED_REBUILD] != 0:
-        if not rebuild(grains, lists, params, counters, drag_x, drag_z):
-            counters[K_NEED_REBUILD] = MID_STEP
-            return False
-    compute_forces(grains, lists, pair, wall, params, drag_x, drag_z)
-    wall_kick(wall, clock, params)
-    counters[K_STEP] += 1
-    if close:
-        close_step(grains, wall, params)
-    return True
-
-
-@njit(cache=NUMBA_CACHE)
 def close_step(grains, wall, params):
     """Step 5 on its own: the top wall's grains take its velocity and the free grains get the
     second half kick they owe (the state is then at a whole step)."""
@@ -520,13 +500,110 @@ def close_step(grains, wall, params):
           grains.inv_inertia, grains.body, params)
 
 
+
+# ---- the step's sequence ----------------------------------------------------------------------
+# _step and run_steps are the one description of a step's order: the CPU engines call them as they
+# are (block = (): the phases below, on this process's numba threads); kernels.gpu.dry compiles the
+# same two functions for a CUDA thread block with every name in STEP_PHASES bound to the block's own
+# phase (block: the thread, the block's size, its scratch). A phase does its part of the step and
+# leaves the state where the next one expects it.
+
+STEP_PHASES = ("pending", "suspend", "open_phase", "drift_phase", "rebuild_phase", "force_phase", "wall_phase",
+          "close_phase")
+
+
 @njit(cache=NUMBA_CACHE)
-def advance(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, drag_z):
-    """Run up to nsteps dry steps, the grains' half kicks between steps fused. Returns (status,
+def pending(block, counters):
+    """counters[K_NEED_REBUILD]: 0, 1 (rebuild the list before the forces) or MID_STEP (a step
+    left drifted by an overflow: resume at the rebuild)."""
+    return counters[K_NEED_REBUILD]
+
+
+@njit(cache=NUMBA_CACHE)
+def suspend(block, counters):
+    """Leave the step drifted after an overflowing rebuild: the next call resumes at the rebuild."""
+    counters[K_NEED_REBUILD] = MID_STEP
+
+
+@njit(cache=NUMBA_CACHE)
+def open_phase(block, grains, wall, clock, params):
+    """Step 1 (open_step)."""
+    open_step(grains, wall, clock, params)
+
+
+@njit(cache=NUMBA_CACHE)
+def drift_phase(block, grains, lists, params, counters, owed):
+    """Step 2: every grain's half kick (two if owed) and drift (kick_drift); a rebuild is pending
+    if one has moved more than skin/2 since the list was built."""
+    late = kick_drift(grains.x, grains.z, grains.vx, grains.vz, grains.spin, grains.force_x, grains.force_z,
+                      grains.torque, grains.inv_mass, grains.inv_inertia, grains.body, lists.x_build, lists.z_build,
+                      owed, params, lists.cell_of)
+    if late > 0:
+        counters[K_NEED_REBUILD] = 1
+
+
+@njit(cache=NUMBA_CACHE)
+def rebuild_phase(block, grains, lists, params, counters, drag_x, drag_z):
+    """The list rebuilt (rebuild); False if it does not fit."""
+    return rebuild(grains, lists, params, counters, drag_x, drag_z)
+
+
+@njit(cache=NUMBA_CACHE)
+def force_phase(block, grains, lists, pairs, params, drag_x, drag_z):
+    """Step 3: contact (+ drag) forces on every grain (contact_forces)."""
+    contact_forces(grains, lists, pairs, drag_x, drag_z, params)
+
+
+@njit(cache=NUMBA_CACHE)
+def wall_phase(block, grains, wall, clock, params, counters):
+    """Step 4: the grains' force on the top wall, its spring and its second half kick; the step
+    is counted."""
+    wall_force(grains.force_x, grains.force_z, grains.top, wall)
+    wall_kick(wall, clock, params)
+    counters[K_STEP] += 1
+
+
+@njit(cache=NUMBA_CACHE)
+def close_phase(block, grains, wall, params):
+    """Step 5 (close_step)."""
+    close_step(grains, wall, params)
+
+
+@njit(cache=NUMBA_CACHE)
+def _step(block, grains, lists, pairs, wall, clock, params, counters, drag_x, drag_z, owed, close, drifted):
+    """One step (module docstring), phase by phase (STEP_PHASES). owed: the grains still owe the
+    previous step their second half kick, which is fused into this step's first; close: end with
+    the grains' second half kick (the state is then at a whole step), else leave it owed to the
+    next step; drifted: steps 1-2 are already done (open_step and _move_one of every grain,
+    rebuild flag set). False if the rebuild overflows the list: the step is then left drifted
+    (counters[K_NEED_REBUILD] = MID_STEP) and the next call resumes it at the rebuild."""
+    if pending(block, counters) != MID_STEP and not drifted:
+        open_phase(block, grains, wall, clock, params)
+        drift_phase(block, grains, lists, params, counters, owed)
+    if pending(block, counters) != 0:
+        if not rebuild_phase(block, grains, lists, params, counters, drag_x, drag_z):
+            suspend(block, counters)
+            return False
+    force_phase(block, grains, lists, pairs, params, drag_x, drag_z)
+    wall_phase(block, grains, wall, clock, params, counters)
+    if close:
+        close_phase(block, grains, wall, params)
+    return True
+
+
+@njit(cache=NUMBA_CACHE)
+def run_steps(block, grains, lists, pairs, wall, clock, params, counters, nsteps, drag_x, drag_z):
+    """Up to nsteps dry steps (_step), the grains' half kicks between steps fused. Returns (status,
     whole steps done); status LIST_OVERFLOW asks the caller to enlarge the list arrays to
     counters[K_NEEDED_CAPACITY] and call again (the interrupted step resumes)."""
     for s in range(nsteps):
-        if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, s > 0, s == nsteps - 1,
-                     bool(False)):
+        if not _step(block, grains, lists, pairs, wall, clock, params, counters, drag_x, drag_z, s > 0,
+                     s == nsteps - 1, bool(False)):
             return LIST_OVERFLOW, s
     return OK, nsteps
+
+
+@njit(cache=NUMBA_CACHE)
+def advance(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, drag_z):
+    """run_steps on this process's numba threads: the CPU's dry engine."""
+    return run_steps((), grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, drag_z)
