@@ -37,7 +37,7 @@ from .layout import (BG_DAMPING, B_DVX, B_DVZ, B_DX, B_DZ, B_WI, B_WJ, C_ANCHOR,
                      K_PAIRS, K_REBUILDS, K_STEP, LIST_OVERFLOW, L_BUILT, L_SCRATCH, MID_STEP, OK, PAIR_BUF,
                      PARTS_PER_THREAD, PC_MEFF, PC_REFF, PC_RI, PC_RJ, SIGMA, SKIN, SORT_EVERY, SPRING, THREADS, TOP,
                      V_LOAD, WALL_MASS, WIDTH, W_FX, W_FZ, W_VX, W_VZ, W_X, W_Z)
-from .contact import hertz_mindlin, pair_constants
+from .contact import pair_constants, pair_force
 from .neighbors import bucket_order, build_neighbors, minimum_image
 from .reorder import permute, renumber_list, spatial_order
 
@@ -107,15 +107,15 @@ def _fill(k0, k1, x, z, vx, vz, spin, row, index, width, buf):
 
 @njit(error_model="numpy", cache=NUMBA_CACHE)
 def _laws(m, buf, base, dt, c_n, c_t, damping, friction, shear, const, sum_x, sum_z, sum_t):
-    """hertz_mindlin on buf[:, :m] for slots base:base + m (their shear history and constants read
-    in place), results to shear and to the terms of the two grains' sums [sum_x, sum_z, sum_t at k:
-    fx, fz (force on j), tj; at half + k: -fx, -fz, ti; kernels.layout.Pairs] at those slots: a loop
-    without branches or gathers, which LLVM vectorises (SIMD lanes do the same IEEE operations as
-    the scalar law: same bits; -f is exact)."""
+    """The contact law (kernels.contact.pair_force) on buf[:, :m] for slots base:base + m (their
+    shear history and constants read in place), results to shear and to the terms of the two grains'
+    sums [sum_x, sum_z, sum_t at k: fx, fz (force on j), tj; at half + k: -fx, -fz, ti;
+    kernels.layout.Pairs] at those slots: a loop without branches or gathers, which LLVM
+    vectorises (SIMD lanes do the same IEEE operations as the scalar law: same bits; -f is exact)."""
     half = np.uint64((sum_x.shape[0] - 1) // 2)
     for q in range(m):
         k = np.uint64(base + q)
-        fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
+        fx, fz, ti, tj, ds, overlap, fn = pair_force(
             buf[B_DX, q], buf[B_DZ, q], buf[B_DVX, q], buf[B_DVZ, q], buf[B_WI, q], buf[B_WJ, q],
             const[PC_RI, k], const[PC_RJ, k], const[PC_REFF, k], const[PC_MEFF, k], shear[k], dt, c_n, c_t,
             damping, friction)
@@ -241,17 +241,19 @@ def contact_forces(grains, lists, pairs, drag_x, drag_z, params):
               grains.force_z, grains.torque, drag_x, drag_z)
 
 
+@njit(inline="always", cache=NUMBA_CACHE)
+def law_scalars(params):
+    """(dt, width, c_normal, c_tangential, damping, friction): the pair pass's scalars from params
+    (the law's last four arguments, kernels.contact)."""
+    return params[DT], params[WIDTH], params[C_NORMAL], params[C_TANGENTIAL], params[DAMPING], params[FRICTION]
+
+
 @njit(parallel=True, error_model="numpy", cache=NUMBA_CACHE)
 def law_pass(nb, x, z, vx, vz, spin, start, row, index, shear, const, sum_x, sum_z, sum_t, pair_buf, params):
     """The law of every listed pair, slots in nb equal ranges (_pair_range), chunk buffers
     pair_buf[part] (N_BUF, PAIR_BUF); row: the first grain of each slot (pairs.pair_row). [Arrays,
     not the records: the parallel loops keep the code they were measured with.]"""
-    dt = params[DT]
-    width = params[WIDTH]
-    c_n = params[C_NORMAL]
-    c_t = params[C_TANGENTIAL]
-    damping = params[DAMPING]
-    friction = params[FRICTION]
+    dt, width, c_n, c_t, damping, friction = law_scalars(params)
     npairs = start[x.shape[0]]
     for b in prange(nb):
         _pair_range(b * npairs // nb, (b + 1) * npairs // nb, x, z, vx, vz, spin, row, index, shear, const,

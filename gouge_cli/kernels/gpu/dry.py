@@ -36,12 +36,12 @@ from collections import namedtuple
 import numpy as np
 from numba import cuda
 
-from ..layout import (BG_DAMPING, C_NORMAL, C_TANGENTIAL, DAMPING, DT, FRICTION, K_NEEDED_CAPACITY, K_NEED_REBUILD,
-                      K_PAIRS, K_REBUILDS, K_STEP, L_BUILT, L_SCRATCH, MID_STEP, SKIN, SORT_EVERY, WIDTH, Grains, Lists)
+from ..layout import (BG_DAMPING, DT, K_NEEDED_CAPACITY, K_NEED_REBUILD, K_PAIRS, K_REBUILDS, K_STEP, L_BUILT,
+                      L_SCRATCH, MID_STEP, SKIN, SORT_EVERY, WIDTH, Grains, Lists)
 from ..neighbors import bin_cells
 from ..step import STEP_PHASES, _step, open_step, renumber, run_steps
-from .device import (d_bucket_order, d_carry_history, d_cell_grid, d_half_kick, d_hertz_mindlin, d_minimum_image,
-                     d_move_one, d_pair_constants, d_permute, d_renumber_list, d_reverse_list, d_scan_row,
+from .device import (d_bucket_order, d_carry_history, d_cell_grid, d_half_kick, d_law_scalars, d_minimum_image,
+                     d_move_one, d_pair_constants, d_pair_force, d_permute, d_renumber_list, d_reverse_list, d_scan_row,
                      d_set_wall_grain_velocity, d_spatial_order, d_sum_range, d_wall_force, d_wall_kick, device)
 from .parallel import SHARED_FLOATS, SHARED_INTS, clock64, p_bin_cells, p_renumber, p_reverse_list, p_scan
 
@@ -228,12 +228,7 @@ def _forces(block, g, li, pairs, params, drag_x, drag_z):
             li.layout[L_BUILT] = 1
         cuda.syncthreads()
         _mark(t, timers, P_REVERSE)
-    dt = params[DT]
-    width = params[WIDTH]
-    c_n = params[C_NORMAL]
-    c_t = params[C_TANGENTIAL]
-    damping = params[DAMPING]
-    friction = params[FRICTION]
+    dt, width, c_n, c_t, damping, friction = d_law_scalars(params)
     for i in range(t, n, nt):                   # the law, row by row (kernels.step._fill, _laws)
         xi = x[i]
         zi = z[i]
@@ -246,7 +241,7 @@ def _forces(block, g, li, pairs, params, drag_x, drag_z):
             j = index[k]
             rj = radius[j]
             r_ij, m_ij = d_pair_constants(ri, rj, mi, mass[j])
-            fx, fz, ti, tj, ds, overlap, fn = d_hertz_mindlin(
+            fx, fz, ti, tj, ds, overlap, fn = d_pair_force(
                 d_minimum_image(x[j] - xi, width), z[j] - zi, vx[j] - vxi, vz[j] - vzi, wi, spin[j], ri, rj, r_ij,
                 m_ij, shear[k], dt, c_n, c_t, damping, friction)
             pair_fx[k] = fx
