@@ -1,9 +1,10 @@
 """The dry step on the GPU: kernels.step.advance for B layers at once, one thread block per layer.
 
 ``advance_layers[B, threads](...)`` runs todo[b] steps of layer b in one launch (no host work
-between steps). Arrays are the fields of kernels.layout.Grains, Lists and Pairs (model.state.State)
-stacked over layers, [B, N] per grain and [B, capacity] per pair slot; wall, clock, params and
-counters are [B, N_WALL] etc.; top [B, max top grains] with ntop[b] in use.
+between steps). It takes the records of kernels.layout (Grains, Lists) whose fields are
+model.state.State's arrays stacked over layers, [B, N] per grain and [B, capacity] per pair slot,
+the pair results (pair_fx, pair_fz, pair_ti, pair_tj) likewise; wall, clock, params and counters
+are [B, N_WALL] etc.; grains.top is [B, max top grains] with ntop[b] in use.
 
 The step's sequence is the CPU's own: kernels.step._step and run_steps compiled for the device
 (gpu.device) with each phase (kernels.step.STEP_PHASES) bound to its block version here
@@ -297,27 +298,31 @@ d_run_steps = device(run_steps, _step=d_step)
 
 
 @cuda.jit
-def advance_layers(x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ntop,
-                   ident, start, index, shear, rev_start, rev_slot, x_build, z_build, new_start, new_index, new_shear,
-                   layout, cell_of, order, cell_count, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params,
-                   counters, todo, done, status, none, parallel, timers):
+def advance_layers(grains, lists, pairs, wall, clock, params, counters, ntop, todo, done, status, none, parallel,
+                   timers):
     """kernels.step.run_steps of layer blockIdx.x for todo[b] steps (module docstring); done[b]:
-    whole steps done, status[b]: OK or LIST_OVERFLOW. none: an empty float64 array (no drag).
-    parallel (0/1): the rebuild's bookkeeping by the block (kernels.gpu.parallel), same bits;
-    timers: int64 [B, N_PHASES + 1] per-phase cycles added up (timed), or [B, 0] (untimed)."""
+    whole steps done, status[b]: OK or LIST_OVERFLOW. grains, lists: kernels.layout.Grains and
+    Lists of the layers' arrays stacked (grains.top [B, max top grains], ntop[b] of them in use);
+    pairs: (pair_fx, pair_fz, pair_ti, pair_tj) [B, capacity]. none: an empty float64 array (no
+    drag). parallel (0/1): the rebuild's bookkeeping by the block (kernels.gpu.parallel), same
+    bits; timers: int64 [B, N_PHASES + 1] per-phase cycles added up (timed), or [B, 0] (untimed)."""
     sh = cuda.shared.array(SHARED_INTS, np.int64)
     shf = cuda.shared.array(SHARED_FLOATS, np.float64)
     b = cuda.blockIdx.x
     t = cuda.threadIdx.x
-    g = Grains(x[b], z[b], vx[b], vz[b], spin[b], radius[b], mass[b], inv_mass[b], inv_inertia[b], body[b],
-               force_x[b], force_z[b], torque[b], top[b, :ntop[b]], ident[b])
-    li = Lists(start[b], index[b], shear[b], rev_start[b], rev_slot[b], x_build[b], z_build[b], new_start[b],
-               new_index[b], new_shear[b], layout[b], cell_of[b], order[b], cell_count[b])
+    gs = grains
+    g = Grains(gs.x[b], gs.z[b], gs.vx[b], gs.vz[b], gs.spin[b], gs.radius[b], gs.mass[b], gs.inv_mass[b],
+               gs.inv_inertia[b], gs.body[b], gs.force_x[b], gs.force_z[b], gs.torque[b], gs.top[b, :ntop[b]],
+               gs.id[b])
+    ls = lists
+    li = Lists(ls.start[b], ls[1][b], ls.shear[b], ls.rev_start[b], ls.rev_slot[b], ls.x_build[b], ls.z_build[b],
+               ls.new_start[b], ls.new_index[b], ls.new_shear[b], ls.layout[b], ls.cell_of[b], ls.order[b],
+               ls.cell_count[b])                # (ls[1]: .index is typed as tuple.index by numba-cuda)
     timer = timers[b]
     _mark(t, timer, -1)
     block = Block(t, cuda.blockDim.x, parallel, timer, sh, shf)
-    outcome, steps = d_run_steps(block, g, li, (pair_fx[b], pair_fz[b], pair_ti[b], pair_tj[b]), wall[b], clock[b],
-                                 params[b], counters[b], todo[b], none, none)
+    outcome, steps = d_run_steps(block, g, li, (pairs[0][b], pairs[1][b], pairs[2][b], pairs[3][b]), wall[b],
+                                 clock[b], params[b], counters[b], todo[b], none, none)
     if t == 0:
         status[b] = outcome
         done[b] = steps
