@@ -508,32 +508,33 @@ def close_step(grains, wall, params):
 # are (block = (): the phases below, on this process's numba threads); kernels.gpu.dry compiles the
 # same two functions for a CUDA thread block with every name in STEP_PHASES bound to the block's own
 # phase (block: the thread, the block's size, its scratch). A phase does its part of the step and
-# leaves the state where the next one expects it.
+# leaves the state where the next one expects it. (The CPU's phases and run_steps are inlined into
+# _step and advance: each would otherwise be one more function numba compiles, about 0.5 s each.)
 
 STEP_PHASES = ("pending", "suspend", "open_phase", "drift_phase", "rebuild_phase", "force_phase", "wall_phase",
-          "close_phase")
+               "close_phase")
 
 
-@njit(cache=NUMBA_CACHE)
+@njit(inline="always", cache=NUMBA_CACHE)
 def pending(block, counters):
     """counters[K_NEED_REBUILD]: 0, 1 (rebuild the list before the forces) or MID_STEP (a step
     left drifted by an overflow: resume at the rebuild)."""
     return counters[K_NEED_REBUILD]
 
 
-@njit(cache=NUMBA_CACHE)
+@njit(inline="always", cache=NUMBA_CACHE)
 def suspend(block, counters):
     """Leave the step drifted after an overflowing rebuild: the next call resumes at the rebuild."""
     counters[K_NEED_REBUILD] = MID_STEP
 
 
-@njit(cache=NUMBA_CACHE)
+@njit(inline="always", cache=NUMBA_CACHE)
 def open_phase(block, grains, wall, clock, params):
     """Step 1 (open_step)."""
     open_step(grains, wall, clock, params)
 
 
-@njit(cache=NUMBA_CACHE)
+@njit(inline="always", cache=NUMBA_CACHE)
 def drift_phase(block, grains, lists, params, counters, owed):
     """Step 2: every grain's half kick (two if owed) and drift (kick_drift); a rebuild is pending
     if one has moved more than skin/2 since the list was built."""
@@ -544,19 +545,19 @@ def drift_phase(block, grains, lists, params, counters, owed):
         counters[K_NEED_REBUILD] = 1
 
 
-@njit(cache=NUMBA_CACHE)
+@njit(inline="always", cache=NUMBA_CACHE)
 def rebuild_phase(block, grains, lists, params, counters, drag_x, drag_z):
     """The list rebuilt (rebuild); False if it does not fit."""
     return rebuild(grains, lists, params, counters, drag_x, drag_z)
 
 
-@njit(cache=NUMBA_CACHE)
+@njit(inline="always", cache=NUMBA_CACHE)
 def force_phase(block, grains, lists, pairs, params, drag_x, drag_z):
     """Step 3: contact (+ drag) forces on every grain (contact_forces)."""
     contact_forces(grains, lists, pairs, drag_x, drag_z, params)
 
 
-@njit(cache=NUMBA_CACHE)
+@njit(inline="always", cache=NUMBA_CACHE)
 def wall_phase(block, grains, wall, clock, params, counters):
     """Step 4: the grains' force on the top wall, its spring and its second half kick; the step
     is counted."""
@@ -565,7 +566,7 @@ def wall_phase(block, grains, wall, clock, params, counters):
     counters[K_STEP] += 1
 
 
-@njit(cache=NUMBA_CACHE)
+@njit(inline="always", cache=NUMBA_CACHE)
 def close_phase(block, grains, wall, params):
     """Step 5 (close_step)."""
     close_step(grains, wall, params)
@@ -593,7 +594,7 @@ def _step(block, grains, lists, pairs, wall, clock, params, counters, drag_x, dr
     return True
 
 
-@njit(cache=NUMBA_CACHE)
+@njit(inline="always", cache=NUMBA_CACHE)
 def run_steps(block, grains, lists, pairs, wall, clock, params, counters, nsteps, drag_x, drag_z):
     """Up to nsteps dry steps (_step), the grains' half kicks between steps fused. Returns (status,
     whole steps done); status LIST_OVERFLOW asks the caller to enlarge the list arrays to
