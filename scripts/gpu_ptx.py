@@ -25,20 +25,20 @@ _dispatcher.get_current_device = _compiler.get_current_device = lambda: _device
 from gouge_cli.config import build_config  # noqa: E402
 from gouge_cli.driver.simulation import Simulation  # noqa: E402
 from gouge_cli.kernels.gpu import dry  # noqa: E402
-from gouge_cli.model.gpu_layers import GRAIN, LISTS, RECORDS, Layers  # noqa: E402
-
-ORDER = ("x", "z", "vx", "vz", "spin", "radius", "mass", "inv_mass", "inv_inertia", "body", "force_x", "force_z",
-         "torque", "top", "ntop", "id", "start", "index", "shear", "rev_start", "rev_slot", "x_build", "z_build",
-         "new_start", "new_index", "new_shear", "layout", "cell_of", "order", "cell_count", "pair_fx", "pair_fz",
-         "pair_ti", "pair_tj", "wall", "clock", "params", "counters")
-# then todo, done, status (int64), none (float64), parallel (int64), timers (int64 [B, phases])
+from gouge_cli.kernels import layout as L  # noqa: E402
+from gouge_cli.model.gpu_layers import GRAIN, LISTS, PAIR_RESULTS, RECORDS, Layers  # noqa: E402
 
 sim = Simulation(build_config({"packing": {"n_grains": 40, "width": 6}}))
 layers = Layers([sim.state], sim.params, 64)
 arrays = {name: layers._stack(name, sim.state.index.shape[0]) for name in GRAIN + LISTS + RECORDS}
-arrays.update(top=np.zeros((1, 1), np.int64), ntop=np.zeros(1, np.int64), params=layers.params)
-signature = (tuple(typeof(arrays[name]) for name in ORDER) + (types.int64[::1],) * 3 + (types.float64[::1],)
-             + (types.int64, types.int64[:, ::1]))
+arrays.update(top=np.zeros((1, 1), np.int64), params=layers.params)
+records = (L.Grains(*(arrays[f] for f in L.Grains._fields)), L.Lists(*(arrays[f] for f in L.Lists._fields)),
+           tuple(arrays[f] for f in PAIR_RESULTS))
+# advance_layers(grains, lists, pairs, wall, clock, params, counters, ntop, todo, done, status, none, parallel,
+# timers)
+signature = (tuple(typeof(r) for r in records) + tuple(typeof(arrays[f]) for f in ("wall", "clock", "params",
+                                                                                    "counters"))
+             + (types.int64[::1],) * 4 + (types.float64[::1], types.int64, types.int64[:, ::1]))
 t0 = time.perf_counter()
 ptx, _ = cuda.compile_ptx(dry.advance_layers.py_func, signature, cc=CC)
 float_atomics = len(re.findall(r"atom\.[a-z.]*\.f(32|64)", ptx))

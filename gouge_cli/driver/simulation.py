@@ -18,6 +18,7 @@ from ..kernels import layout as L
 from ..kernels import measure as M
 from ..kernels import step as K
 from ..model.packing import build_packing
+from . import engines
 from .schedules import Every
 from ..model.state import State
 from ..model.params import numba_threads
@@ -50,12 +51,10 @@ class Simulation:
         self.params = p
         self.threads = scene.threads     # every kernel of this simulation runs on these (a benchmark may set them)
         self.fluid = None
-        self.gpu = scene.device == "gpu"     # the GPU engine runs dry steps only (Scene.engine); made on the first dry advance
-        self._layers = None
+        self.engine = engines.make(scene.dry_engine)     # what advances the steps (start_fluid: the wet one)
         self.drag = (_EMPTY, _EMPTY)
         self._observables = np.zeros(L.N_OBSERVABLES)
         self._measured: dict | None = None      # measure()'s row while run fires a step's callbacks
-        self._fluid_status = np.zeros(1, np.int64)
         if arrays is not None:
             s.restore(arrays)
         else:
@@ -77,7 +76,7 @@ class Simulation:
         the fluid lives through loading, so this is called where loading starts (start_loading,
         or __init__ for a state restored in loading; later calls do nothing). With no saved
         arrays P starts at 0 on the current packing; the grain forces then include its (zero)
-        drag from the next step on."""
+        drag from the next step on, and the scene's wet engine advances the steps."""
         if self.config.fluid is None or self.fluid is not None:
             return
         from ..model.fluid import FluidGrid
@@ -94,11 +93,12 @@ class Simulation:
                 raise PhysicsError("the pressure grid could not be initialised (layer thickness <= 0)",
                                    "check the packing", s.time)
         self.drag = (self.fluid.drag_x, self.fluid.drag_z)
+        self.engine = engines.make(self.scene.wet_engine)
 
     @property
     def gpu_fallback(self) -> str:
         """Why numerics.device = gpu does not run this scene's steps now ('' if it does or was not asked)."""
-        return self.scene.fallback if self.fluid is not None else ""
+        return self.scene.fallback if self.engine.device != self.scene.device else ""
 
     # ---- phase -------------------------------------------------------------------------
     @property
@@ -142,75 +142,26 @@ class Simulation:
                 s.grow_pairs(int(s.counters[L.K_NEEDED_CAPACITY]))
 
     def advance(self, nsteps: int):
-        """Advance exactly nsteps steps (numba, on self.threads); grows the pair arrays if a
-        rebuild overflows."""
+        """Advance exactly nsteps steps (the engine in force, on self.threads); grows the pair
+        arrays if a rebuild overflows."""
         self.params[L.THREADS] = self.threads
         with numba_threads(self.threads):
             self._advance(int(nsteps))
 
-    @property
-    def engine(self) -> str:
-        """What runs the steps: 'gpu' (numerics.device gpu, dry steps: model.gpu_layers), 'coupled'
-        (kernels.coupled.advance_fluid, from the moment the fluid grid exists) or 'cpu'
-        (kernels.step.advance). The one place the choice is made (advance, compile_note)."""
-        if self.fluid is not None:
-            return "coupled"
-        return "gpu" if self.gpu else "cpu"
-
-    def _advance(self, left: int):
-        s = self.state
-        engine = self.engine
-        if engine == "gpu":
-            self._gpu_layers().advance(left, params=self.params)
-            return
-        step = self._advance_fluid if engine == "coupled" else self._advance_dry
-        while left > 0:
-            status, done = step(left)
-            left -= done
-            if status == L.LIST_OVERFLOW:
-                s.grow_pairs(int(s.counters[L.K_NEEDED_CAPACITY]))
-            elif status == L.FLUID_FAILED:
-                raise PhysicsError(*self.fluid.failure(int(self._fluid_status[0])), s.time)
+    def _advance(self, nsteps: int):
+        self.engine.advance(self, nsteps)
 
     def compile_note(self) -> str | None:
         """A line to show before the first step when its kernel is not compiled for this CPU yet
         (a fresh environment: numba compiles it once, then loads it from its cache)."""
         from ..kernels import cached_for_this_cpu
 
-        engine = self.engine
-        if engine == "gpu":
+        kernel = self.engine.kernel
+        if kernel is None or cached_for_this_cpu(kernel):
             return None
-        if engine == "coupled":
-            from ..kernels.coupled import advance_fluid
-
-            kernel, what, how_long = advance_fluid, "the coupled grain-fluid step", "1-3 minutes"
-        else:
-            kernel, what, how_long = K.advance, "the grain step", "20-60 s"
-        if cached_for_this_cpu(kernel):
-            return None
+        what, how_long = self.engine.compiling
         return (f"note: compiling {what} for this CPU (once per environment, about {how_long}; later runs load "
                 "it from the cache)")
-
-    def _gpu_layers(self):
-        """The scene as a one-layer GPU ensemble (model.gpu_layers: the same bits as K.advance)."""
-        if self._layers is None:
-            from ..model.gpu_layers import Layers
-
-            self._layers = Layers([self.state], self.params)
-        return self._layers
-
-    def _advance_dry(self, nsteps: int):
-        s = self.state
-        return K.advance(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params, s.counters, nsteps,
-                         *self.drag)
-
-    def _advance_fluid(self, nsteps: int):
-        from ..kernels.coupled import advance_fluid
-
-        s = self.state
-        return advance_fluid(s.grains(), s.lists(), s.pairs(), s.wall, s.clock, self.params, s.counters,
-                             nsteps, self.fluid.drag_x, self.fluid.drag_z, self.fluid.record(), self.fluid_interval,
-                             self.wall_planes()[0], self._fluid_status)
 
     @property
     def fluid_interval(self) -> int:

@@ -1,70 +1,36 @@
-"""Hertz-Mindlin contact law for one pair of discs (thesis Eqs. 8-11, docs/physics/contacts.md).
+"""The contact law's one selection point (thesis Eqs. 8-11, docs/physics/contacts.md).
 
-Convention: n points from grain i to grain j, t = (-n_z, n_x). The pair record
-holds the force ON j (the force on i is its negative) and the torque on each grain.
-
-Lever arms [choice, departs from the thesis; docs/physics/contacts.md]: the tangential force acts at the contact
-point, a_i = R_i - xi/2 from centre i and a_j = R_j - xi/2 from centre j, so a_i + a_j = r
-and the pair's torques balance the moment of its forces: angular momentum is conserved
-exactly (with arms R_i, R_j each contact would inject a net torque xi F_s). The same arms
-enter the slip velocity v_t, so the tangential spring does no net work. The difference to
-the thesis's R_i, R_j is O(xi / R) (about 1 % at sigma = 3e-4).
+A law is a module of kernels/ with, together:
+  pair_constants(r_i, r_j, m_i, m_j) -> (R_ij, m_ij), the pair's effective radius and mass;
+  force(dx, dz, dvx, dvz, spin_i, spin_j, r_i, r_j, r_ij, m_ij, shear, dt, c_normal, c_tangential,
+        damping, friction) -> (fx_j, fz_j, torque_i, torque_j, new_shear, overlap, normal_force);
+  energy(r_ij, overlap, shear, c_normal, c_tangential) -> elastic energy of a touching pair;
+  constants(youngs_modulus, poisson_ratio, tangential_factor) -> (c_normal, c_tangential);
+  stiffness(normal_force, r_ij, c_normal, c_tangential, power) -> (overlap, k_normal, k_tangential) at a
+        normal force, for the step's stability bound (model.timestep);
+the first three numba functions (inline), the last two plain Python. LAWS registers the laws;
+LAW is the one in force, and every caller (the CPU and GPU steps, the observables and snapshot
+forces of kernels.measure, model.timestep's constants and bound) takes it from here: a second law
+is a new module and a line in LAWS.
 """
 
 from __future__ import annotations
 
-import math
+from collections import namedtuple
 
-from numba import njit
+from . import hertz_mindlin
 
-from . import NUMBA_CACHE
-
-
-@njit(inline="always", cache=NUMBA_CACHE)
-def pair_constants(r_i, r_j, m_i, m_j):
-    """(R_ij, m_ij): effective radius 2 R_i R_j / (R_i + R_j) [d] (thesis Eq. 9) and reduced mass
-    m_i m_j / (m_i + m_j) [rho d^3] of a pair; the one expression for both (same bits wherever
-    they are computed)."""
-    return 2.0 * r_i * r_j / (r_i + r_j), m_i * m_j / (m_i + m_j)
+ContactLaw = namedtuple("ContactLaw", ("name", "pair_constants", "force", "energy", "constants", "stiffness"))
 
 
-@njit(inline="always", cache=NUMBA_CACHE)
-def hertz_mindlin(dx, dz, dvx, dvz, spin_i, spin_j, r_i, r_j, r_ij, m_ij, shear, dt,
-                  c_normal, c_tangential, damping, friction):
-    """Contact force of a touching pair.
+def register(module) -> ContactLaw:
+    """The law a module defines (module docstring), under the module's name."""
+    return ContactLaw(module.__name__.rsplit(".", 1)[-1], *(getattr(module, f) for f in ContactLaw._fields[1:]))
 
-    dx, dz: x_j - x_i (minimum image) [d]; dvx, dvz: v_j - v_i [v0];
-    spin_i, spin_j: angular velocities [1/t0]; r_ij, m_ij: effective radius [d] and reduced
-    mass [rho d^3] (pair_constants);
-    shear: tangential displacement ds before this step [d];
-    c_normal = sqrt(2) E / (3 (1 - nu^2)), c_tangential = 2^1.5 E / ((2 - nu)(1 + nu)) * factor.
-    Returns (fx_j, fz_j, torque_i, torque_j, new_shear, overlap, normal_force); all zero
-    when not touching. torque = a (-F_s) with a = R - overlap/2 (thesis Eq. 11).
-    """
-    r2 = dx * dx + dz * dz
-    rsum = r_i + r_j
-    if r2 >= rsum * rsum:
-        return 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    r = math.sqrt(r2)
-    nx = dx / r
-    nz = dz / r
-    overlap = rsum - r
-    arm_i = r_i - 0.5 * overlap
-    arm_j = r_j - 0.5 * overlap
-    root = math.sqrt(r_ij * overlap)
-    v_n = dvx * nx + dvz * nz
-    v_t = -dvx * nz + dvz * nx - (arm_i * spin_i + arm_j * spin_j)
-    f_n = c_normal * root * overlap - damping * m_ij * v_n
-    if f_n < 0.0:
-        f_n = 0.0
-    k_s = c_tangential * root
-    ds = shear + v_t * dt
-    f_s = -k_s * ds
-    limit = friction * f_n
-    if f_s > limit:
-        f_s = limit
-        ds = -f_s / k_s
-    elif f_s < -limit:
-        f_s = -limit
-        ds = -f_s / k_s
-    return f_n * nx - f_s * nz, f_n * nz + f_s * nx, -f_s * arm_i, -f_s * arm_j, ds, overlap, f_n
+
+LAWS = {law.name: law for law in map(register, (hertz_mindlin,))}
+LAW = LAWS["hertz_mindlin"]
+
+pair_constants = LAW.pair_constants
+pair_force = LAW.force
+pair_energy = LAW.energy

@@ -40,7 +40,7 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
     for st in range(nsteps):
         update = (counters[K_STEP] + 1) % interval == 0       # this step ends with a fluid update
         close = st == nsteps - 1
-        if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close, drifted):
+        if not _step((), grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close, drifted):
             return LIST_OVERFLOW, st
         owed = not close
         drifted = bool(False)

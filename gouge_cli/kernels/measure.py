@@ -10,7 +10,7 @@ from numba import njit
 from . import NUMBA_CACHE
 from .layout import (BOTTOM_FX, BOTTOM_FZ, CONTACT_ENERGY, COORDINATION, KINETIC, MAX_OVERLAP, NONFINITE, POROSITY,
                      THICKNESS, WORST_I, WORST_J, Z_BOTTOM, Z_TOP)
-from .contact import hertz_mindlin, pair_constants
+from .contact import pair_constants, pair_energy, pair_force
 from .neighbors import minimum_image
 
 
@@ -22,7 +22,7 @@ def observe(x, z, vx, vz, spin, radius, mass, body, force_x, force_z, start, ind
     contacts per free grain, largest overlap / smaller radius [-] and its pair (WORST_I, WORST_J),
     porosity between the wall centre lines (wall grains count half) [-], thickness [d], wall
     lines, grain force on the bottom wall [E d^2], the number of non-finite grain coordinates or
-    velocities, and the elastic contact energy sum 0.4 c_n sqrt(R_ij) xi^2.5 + 0.5 k_s ds^2 [E d^3]."""
+    velocities, and the elastic contact energy (kernels.contact.pair_energy) [E d^3]."""
     n = x.shape[0]
     kinetic = 0.0
     n_free = 0
@@ -72,8 +72,8 @@ def observe(x, z, vx, vz, spin, radius, mass, body, force_x, force_z, start, ind
                 relative = overlap / min(radius[i], radius[j])
                 if relative > worst:
                     worst, worst_i, worst_j = relative, i, j
-                root = math.sqrt(2.0 * radius[i] * radius[j] / (radius[i] + radius[j]) * overlap)
-                energy += 0.4 * c_normal * root * overlap * overlap + 0.5 * c_tangential * root * shear[k] ** 2
+                r_ij, _ = pair_constants(radius[i], radius[j], 1.0, 1.0)
+                energy += pair_energy(r_ij, overlap, shear[k], c_normal, c_tangential)
     thickness = z_top - z_bot
     out[KINETIC] = kinetic
     out[COORDINATION] = contacts / max(n_free, 1)
@@ -94,7 +94,7 @@ def observe(x, z, vx, vz, spin, radius, mass, body, force_x, force_z, start, ind
 def contact_list(x, z, radius, start, index, shear, width, c_normal, c_tangential, friction,
                  out_i, out_j, out_fx, out_fz):
     """Touching pairs and the elastic part of their force on j [E d^2], for snapshots: the
-    contact law (kernels.contact.hertz_mindlin) at zero relative velocity, no dashpot and no
+    contact law (kernels.contact.pair_force) at zero relative velocity, no dashpot and no
     history increment, from the stored overlap and history (the step loop keeps no per-pair
     forces). Returns the count."""
     m = 0
@@ -102,7 +102,7 @@ def contact_list(x, z, radius, start, index, shear, width, c_normal, c_tangentia
         for k in range(start[i], start[i + 1]):
             j = index[k]
             r_ij, _ = pair_constants(radius[i], radius[j], 1.0, 1.0)
-            fx, fz, _, _, _, overlap, _ = hertz_mindlin(
+            fx, fz, _, _, _, overlap, _ = pair_force(
                 minimum_image(x[j] - x[i], width), z[j] - z[i], 0.0, 0.0, 0.0, 0.0, radius[i], radius[j],
                 r_ij, 0.0, shear[k], 0.0, c_normal, c_tangential, 0.0, friction)
             if overlap > 0.0:

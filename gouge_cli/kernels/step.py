@@ -15,6 +15,13 @@ needs whole-step velocities mid-call takes them from ``closed_velocity`` (the fl
 The scene's arrays come as records addressed by field name (kernels.layout.Grains, Lists, Pairs,
 built by model.state.State); indices of params, wall, clock and counters: kernels.layout.
 
+The sequence is written once: _step and run_steps call the step's phases by name (STEP_PHASES:
+open, drift, rebuild, forces, wall, close and the rebuild flag's read and suspension), each with
+a first argument `block` saying who runs it. Here block is () and the phases are this module's
+(numba threads inside each); kernels.gpu.dry compiles the same two functions for a CUDA thread
+block with its own phases bound to those names. advance is the CPU's dry engine, coupled.py adds
+the fluid between its steps.
+
 Size (~500 lines): the pair pass (reverse_list .. sum_pass) and the step (kicks, drift,
 rebuild, advance) stay in one file for now; the pair pass is the natural next split (forces.py).
 """
@@ -30,7 +37,7 @@ from .layout import (BG_DAMPING, B_DVX, B_DVZ, B_DX, B_DZ, B_WI, B_WJ, C_ANCHOR,
                      K_PAIRS, K_REBUILDS, K_STEP, LIST_OVERFLOW, L_BUILT, L_SCRATCH, MID_STEP, OK, PAIR_BUF,
                      PARTS_PER_THREAD, PC_MEFF, PC_REFF, PC_RI, PC_RJ, SIGMA, SKIN, SORT_EVERY, SPRING, THREADS, TOP,
                      V_LOAD, WALL_MASS, WIDTH, W_FX, W_FZ, W_VX, W_VZ, W_X, W_Z)
-from .contact import hertz_mindlin, pair_constants
+from .contact import pair_constants, pair_force
 from .neighbors import bucket_order, build_neighbors, minimum_image
 from .reorder import permute, renumber_list, spatial_order
 
@@ -100,15 +107,15 @@ def _fill(k0, k1, x, z, vx, vz, spin, row, index, width, buf):
 
 @njit(error_model="numpy", cache=NUMBA_CACHE)
 def _laws(m, buf, base, dt, c_n, c_t, damping, friction, shear, const, sum_x, sum_z, sum_t):
-    """hertz_mindlin on buf[:, :m] for slots base:base + m (their shear history and constants read
-    in place), results to shear and to the terms of the two grains' sums [sum_x, sum_z, sum_t at k:
-    fx, fz (force on j), tj; at half + k: -fx, -fz, ti; kernels.layout.Pairs] at those slots: a loop
-    without branches or gathers, which LLVM vectorises (SIMD lanes do the same IEEE operations as
-    the scalar law: same bits; -f is exact)."""
+    """The contact law (kernels.contact.pair_force) on buf[:, :m] for slots base:base + m (their
+    shear history and constants read in place), results to shear and to the terms of the two grains'
+    sums [sum_x, sum_z, sum_t at k: fx, fz (force on j), tj; at half + k: -fx, -fz, ti;
+    kernels.layout.Pairs] at those slots: a loop without branches or gathers, which LLVM
+    vectorises (SIMD lanes do the same IEEE operations as the scalar law: same bits; -f is exact)."""
     half = np.uint64((sum_x.shape[0] - 1) // 2)
     for q in range(m):
         k = np.uint64(base + q)
-        fx, fz, ti, tj, ds, overlap, fn = hertz_mindlin(
+        fx, fz, ti, tj, ds, overlap, fn = pair_force(
             buf[B_DX, q], buf[B_DZ, q], buf[B_DVX, q], buf[B_DVZ, q], buf[B_WI, q], buf[B_WJ, q],
             const[PC_RI, k], const[PC_RJ, k], const[PC_REFF, k], const[PC_MEFF, k], shear[k], dt, c_n, c_t,
             damping, friction)
@@ -234,17 +241,19 @@ def contact_forces(grains, lists, pairs, drag_x, drag_z, params):
               grains.force_z, grains.torque, drag_x, drag_z)
 
 
+@njit(inline="always", cache=NUMBA_CACHE)
+def law_scalars(params):
+    """(dt, width, c_normal, c_tangential, damping, friction): the pair pass's scalars from params
+    (the law's last four arguments, kernels.contact)."""
+    return params[DT], params[WIDTH], params[C_NORMAL], params[C_TANGENTIAL], params[DAMPING], params[FRICTION]
+
+
 @njit(parallel=True, error_model="numpy", cache=NUMBA_CACHE)
 def law_pass(nb, x, z, vx, vz, spin, start, row, index, shear, const, sum_x, sum_z, sum_t, pair_buf, params):
     """The law of every listed pair, slots in nb equal ranges (_pair_range), chunk buffers
     pair_buf[part] (N_BUF, PAIR_BUF); row: the first grain of each slot (pairs.pair_row). [Arrays,
     not the records: the parallel loops keep the code they were measured with.]"""
-    dt = params[DT]
-    width = params[WIDTH]
-    c_n = params[C_NORMAL]
-    c_t = params[C_TANGENTIAL]
-    damping = params[DAMPING]
-    friction = params[FRICTION]
+    dt, width, c_n, c_t, damping, friction = law_scalars(params)
     npairs = start[x.shape[0]]
     for b in prange(nb):
         _pair_range(b * npairs // nb, (b + 1) * npairs // nb, x, z, vx, vz, spin, row, index, shear, const,
@@ -485,33 +494,6 @@ def rebuild(grains, lists, params, counters, drag_x, drag_z):
 
 
 @njit(cache=NUMBA_CACHE)
-def _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, owed, close, drifted):
-    """One step (module docstring). owed: the grains still owe the previous step their second
-    half kick, which is fused into this step's first; close: end with the grains' second half
-    kick (the state is then at a whole step), else leave it owed to the next step; drifted:
-    steps 1-2 are already done (open_step and _move_one of every grain, rebuild flag set).
-    False if the rebuild overflows the list: the step is then left drifted
-    (counters[K_NEED_REBUILD] = MID_STEP) and the next call resumes it at the rebuild."""
-    if counters[K_NEED_REBUILD] != MID_STEP and not drifted:
-        open_step(grains, wall, clock, params)
-        late = kick_drift(grains.x, grains.z, grains.vx, grains.vz, grains.spin, grains.force_x, grains.force_z,
-                          grains.torque, grains.inv_mass, grains.inv_inertia, grains.body, lists.x_build,
-                          lists.z_build, owed, params, lists.cell_of)
-        if late > 0:
-            counters[K_NEED_REBUILD] = 1
-    if counters[K_NEED_REBUILD] != 0:
-        if not rebuild(grains, lists, params, counters, drag_x, drag_z):
-            counters[K_NEED_REBUILD] = MID_STEP
-            return False
-    compute_forces(grains, lists, pair, wall, params, drag_x, drag_z)
-    wall_kick(wall, clock, params)
-    counters[K_STEP] += 1
-    if close:
-        close_step(grains, wall, params)
-    return True
-
-
-@njit(cache=NUMBA_CACHE)
 def close_step(grains, wall, params):
     """Step 5 on its own: the top wall's grains take its velocity and the free grains get the
     second half kick they owe (the state is then at a whole step)."""
@@ -520,13 +502,111 @@ def close_step(grains, wall, params):
           grains.inv_inertia, grains.body, params)
 
 
+
+# ---- the step's sequence ----------------------------------------------------------------------
+# _step and run_steps are the one description of a step's order: the CPU engines call them as they
+# are (block = (): the phases below, on this process's numba threads); kernels.gpu.dry compiles the
+# same two functions for a CUDA thread block with every name in STEP_PHASES bound to the block's own
+# phase (block: the thread, the block's size, its scratch). A phase does its part of the step and
+# leaves the state where the next one expects it. (The CPU's phases and run_steps are inlined into
+# _step and advance: each would otherwise be one more function numba compiles, about 0.5 s each.)
+
+STEP_PHASES = ("pending", "suspend", "open_phase", "drift_phase", "rebuild_phase", "force_phase", "wall_phase",
+               "close_phase")
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def pending(block, counters):
+    """counters[K_NEED_REBUILD]: 0, 1 (rebuild the list before the forces) or MID_STEP (a step
+    left drifted by an overflow: resume at the rebuild)."""
+    return counters[K_NEED_REBUILD]
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def suspend(block, counters):
+    """Leave the step drifted after an overflowing rebuild: the next call resumes at the rebuild."""
+    counters[K_NEED_REBUILD] = MID_STEP
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def open_phase(block, grains, wall, clock, params):
+    """Step 1 (open_step)."""
+    open_step(grains, wall, clock, params)
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def drift_phase(block, grains, lists, params, counters, owed):
+    """Step 2: every grain's half kick (two if owed) and drift (kick_drift); a rebuild is pending
+    if one has moved more than skin/2 since the list was built."""
+    late = kick_drift(grains.x, grains.z, grains.vx, grains.vz, grains.spin, grains.force_x, grains.force_z,
+                      grains.torque, grains.inv_mass, grains.inv_inertia, grains.body, lists.x_build, lists.z_build,
+                      owed, params, lists.cell_of)
+    if late > 0:
+        counters[K_NEED_REBUILD] = 1
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def rebuild_phase(block, grains, lists, params, counters, drag_x, drag_z):
+    """The list rebuilt (rebuild); False if it does not fit."""
+    return rebuild(grains, lists, params, counters, drag_x, drag_z)
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def force_phase(block, grains, lists, pairs, params, drag_x, drag_z):
+    """Step 3: contact (+ drag) forces on every grain (contact_forces)."""
+    contact_forces(grains, lists, pairs, drag_x, drag_z, params)
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def wall_phase(block, grains, wall, clock, params, counters):
+    """Step 4: the grains' force on the top wall, its spring and its second half kick; the step
+    is counted."""
+    wall_force(grains.force_x, grains.force_z, grains.top, wall)
+    wall_kick(wall, clock, params)
+    counters[K_STEP] += 1
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def close_phase(block, grains, wall, params):
+    """Step 5 (close_step)."""
+    close_step(grains, wall, params)
+
+
 @njit(cache=NUMBA_CACHE)
-def advance(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, drag_z):
-    """Run up to nsteps dry steps, the grains' half kicks between steps fused. Returns (status,
+def _step(block, grains, lists, pairs, wall, clock, params, counters, drag_x, drag_z, owed, close, drifted):
+    """One step (module docstring), phase by phase (STEP_PHASES). owed: the grains still owe the
+    previous step their second half kick, which is fused into this step's first; close: end with
+    the grains' second half kick (the state is then at a whole step), else leave it owed to the
+    next step; drifted: steps 1-2 are already done (open_step and _move_one of every grain,
+    rebuild flag set). False if the rebuild overflows the list: the step is then left drifted
+    (counters[K_NEED_REBUILD] = MID_STEP) and the next call resumes it at the rebuild."""
+    if pending(block, counters) != MID_STEP and not drifted:
+        open_phase(block, grains, wall, clock, params)
+        drift_phase(block, grains, lists, params, counters, owed)
+    if pending(block, counters) != 0:
+        if not rebuild_phase(block, grains, lists, params, counters, drag_x, drag_z):
+            suspend(block, counters)
+            return False
+    force_phase(block, grains, lists, pairs, params, drag_x, drag_z)
+    wall_phase(block, grains, wall, clock, params, counters)
+    if close:
+        close_phase(block, grains, wall, params)
+    return True
+
+
+@njit(inline="always", cache=NUMBA_CACHE)
+def run_steps(block, grains, lists, pairs, wall, clock, params, counters, nsteps, drag_x, drag_z):
+    """Up to nsteps dry steps (_step), the grains' half kicks between steps fused. Returns (status,
     whole steps done); status LIST_OVERFLOW asks the caller to enlarge the list arrays to
     counters[K_NEEDED_CAPACITY] and call again (the interrupted step resumes)."""
     for s in range(nsteps):
-        if not _step(grains, lists, pair, wall, clock, params, counters, drag_x, drag_z, s > 0, s == nsteps - 1,
-                     bool(False)):
+        if not _step(block, grains, lists, pairs, wall, clock, params, counters, drag_x, drag_z, s > 0,
+                     s == nsteps - 1, bool(False)):
             return LIST_OVERFLOW, s
     return OK, nsteps
+
+
+@njit(cache=NUMBA_CACHE)
+def advance(grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, drag_z):
+    """run_steps on this process's numba threads: the CPU's dry engine."""
+    return run_steps((), grains, lists, pair, wall, clock, params, counters, nsteps, drag_x, drag_z)

@@ -25,6 +25,7 @@ LISTS = ("id", "start", "index", "shear", "rev_start", "rev_slot", "x_build", "z
          "new_shear", "layout", "cell_of", "order", "cell_count", "pair_fx", "pair_fz", "pair_ti", "pair_tj")
 PAIR_SLOTS = ("index", "shear", "rev_slot", "new_index", "new_shear", "pair_fx", "pair_fz", "pair_ti", "pair_tj")
 RECORDS = ("wall", "clock", "counters")
+PAIR_RESULTS = ("pair_fx", "pair_fz", "pair_ti", "pair_tj")        # the law's results per slot (kernels.gpu.dry)
 THREADS = 256       # threads per layer's block on a GPU
 SIM_THREADS = 4     # under numba-cuda's simulator (each simulated thread is a Python thread)
 PARALLEL = True     # the rebuild's bookkeeping on the whole block (kernels.gpu.parallel): 1.9x at B = 1 (H200)
@@ -111,6 +112,12 @@ class Layers:
             s.top[...] = top[b, :s.top.shape[0]]
             s.list_changed()
 
+    def records(self) -> tuple:
+        """(Grains, Lists, pair results) of the uploaded device arrays, as advance_layers takes them."""
+        d = self.d
+        return (L.Grains(*(d[name] for name in L.Grains._fields)), L.Lists(*(d[name] for name in L.Lists._fields)),
+                tuple(d[name] for name in PAIR_RESULTS))
+
     def _launch(self, todo: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         from ..kernels.gpu.dry import advance_layers
 
@@ -118,13 +125,9 @@ class Layers:
         d = self.d
         done = cuda.to_device(np.zeros(self.size, np.int64))
         status = cuda.to_device(np.zeros(self.size, np.int64))
-        advance_layers[self.size, self.threads](
-            d["x"], d["z"], d["vx"], d["vz"], d["spin"], d["radius"], d["mass"], d["inv_mass"], d["inv_inertia"],
-            d["body"], d["force_x"], d["force_z"], d["torque"], d["top"], d["ntop"], d["id"], d["start"], d["index"],
-            d["shear"], d["rev_start"], d["rev_slot"], d["x_build"], d["z_build"], d["new_start"], d["new_index"],
-            d["new_shear"], d["layout"], d["cell_of"], d["order"], d["cell_count"], d["pair_fx"], d["pair_fz"],
-            d["pair_ti"], d["pair_tj"], d["wall"], d["clock"], d["params"], d["counters"], cuda.to_device(todo),
-            done, status, d["none"], int(self.parallel), d["timers"])
+        advance_layers[self.size, self.threads](*self.records(), d["wall"], d["clock"], d["params"], d["counters"],
+                                                d["ntop"], cuda.to_device(todo), done, status, d["none"],
+                                                int(self.parallel), d["timers"])
         self.launches += 1
         return done.copy_to_host(), status.copy_to_host()
 

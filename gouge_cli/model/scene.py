@@ -26,10 +26,14 @@ class Scene:
     c_tangential  Mindlin constant c_t [E]: k_s = c_t sqrt(R xi) (thesis Eq. 10)
     threads       numba threads of every kernel of the scene (params.choose_threads)
     device        "cpu" or "gpu": numerics.device, checked available
+    dry_engine    what advances dry steps: "cpu dry" or "gpu dry" (driver.engines)
+    wet_engine    what advances steps once the pore fluid runs: "cpu wet" (None for a dry scene;
+                  the GPU engine runs dry steps only)
     preflight     the checks' result: steps, hours, the long-run note, the threads warning
     """
 
-    __slots__ = ("config", "dt", "c_normal", "c_tangential", "threads", "device", "preflight")
+    __slots__ = ("config", "dt", "c_normal", "c_tangential", "threads", "device", "dry_engine", "wet_engine",
+                 "preflight")
 
     def __init__(self, config: Config, n_grains: int | None = None):
         """Check `config` whole (ConfigError naming the key) and derive the scene of `n_grains`
@@ -41,6 +45,8 @@ class Scene:
         self.dt = self.preflight.dt
         self.c_normal, self.c_tangential = contact_constants(config)
         self.device = config.numerics.device
+        self.dry_engine = "gpu dry" if self.device == "gpu" else "cpu dry"
+        self.wet_engine = "cpu wet" if self.wet else None
 
     @property
     def wet(self) -> bool:

@@ -2,9 +2,9 @@
 
 The stiffest mode is tangential-rotational: for two discs with sphere inertia
 I = m D^2/10 the effective mass at the contact point is m/7. Its stiffness is the
-Mindlin k_s at the overlap where the Hertz force equals a reference chain force
-F_ref = CHAIN_FACTOR * sigma * D_max (force chains carry about ten times the mean
-contact force). The bound is the smaller of
+contact law's tangential k_s (kernels.contact.LAW.stiffness; Mindlin's) at the overlap where the
+law's normal force equals a reference chain force F_ref = CHAIN_FACTOR * sigma * D_max (force
+chains carry about ten times the mean contact force). The bound is the smaller of
 
     dt_tangential = 2 sqrt((m_min / 7) / k_s(xi_ref)),   dt_normal = 2 sqrt((m_min / 2) / k_n'(xi_ref)),
 
@@ -19,18 +19,17 @@ from dataclasses import dataclass
 
 from ..config import Config
 from ..errors import ConfigError
+from ..kernels.contact import LAW
 from .portable import cube, power
 
 CHAIN_FACTOR = 10.0
 
 
 def contact_constants(config: Config) -> tuple[float, float]:
-    """(c_normal, c_tangential): F_n = c_n sqrt(R xi) xi, k_s = c_t sqrt(R xi) (thesis Eqs. 9-10)."""
+    """(c_normal, c_tangential) of the contact law in force (kernels.contact.LAW.constants; Hertz-Mindlin:
+    F_n = c_n sqrt(R xi) xi, k_s = c_t sqrt(R xi), thesis Eqs. 9-10)."""
     m = config.material
-    nu = m.poisson_ratio
-    c_normal = math.sqrt(2.0) * m.youngs_modulus / (3.0 * (1.0 - nu * nu))
-    c_tangential = 2.0 * math.sqrt(2.0) * m.youngs_modulus / ((2.0 - nu) * (1.0 + nu)) * m.tangential_stiffness_factor
-    return c_normal, c_tangential
+    return LAW.constants(m.youngs_modulus, m.poisson_ratio, m.tangential_stiffness_factor)
 
 
 @dataclass(frozen=True)
@@ -46,9 +45,7 @@ def stability_bound(config: Config) -> StepBound:
     r_pair = 0.5 * d_min  # harmonic mean radius of two smallest grains
     mass = config.material.density * math.pi * cube(d_min) / 6.0
     force = CHAIN_FACTOR * config.loading.normal_stress * config.packing.diameter_max
-    overlap = power(force / (c_normal * math.sqrt(r_pair)), 2.0 / 3.0)
-    k_s = c_tangential * math.sqrt(r_pair * overlap)
-    k_n = 1.5 * c_normal * math.sqrt(r_pair * overlap)
+    overlap, k_n, k_s = LAW.stiffness(force, r_pair, c_normal, c_tangential, power)
     dt_t = 2.0 * math.sqrt(mass / 7.0 / k_s)
     dt_n = 2.0 * math.sqrt(mass / 2.0 / k_n)
     if dt_t <= dt_n:

@@ -147,7 +147,7 @@ def law_probe(n: int = 4096, seed: int = 1, params: np.ndarray | None = None) ->
     CPU's, if it does). params: a scene's params (default: the demo scene's)."""
     from numba import cuda
 
-    from ..kernels.contact import hertz_mindlin, pair_constants
+    from ..kernels.contact import pair_constants, pair_force
     from ..kernels.gpu.device import probe_law
 
     if params is None:
@@ -170,7 +170,7 @@ def law_probe(n: int = 4096, seed: int = 1, params: np.ndarray | None = None) ->
         a = inp[k]
         r_ij, m_ij = pair_constants(a[0], a[1], a[2], a[3])
         cpu[k, :2] = r_ij, m_ij
-        cpu[k, 2:] = hertz_mindlin(a[4], a[5], a[6], a[7], a[8], a[9], a[0], a[1], r_ij, m_ij, a[10], *consts)
+        cpu[k, 2:] = pair_force(a[4], a[5], a[6], a[7], a[8], a[9], a[0], a[1], r_ij, m_ij, a[10], *consts)
     names = ("r_ij", "m_ij", "fx", "fz", "torque_i", "torque_j", "shear", "overlap", "normal_force")
     differ = gpu.view(np.int64) != cpu.view(np.int64)
     first = int(np.argmax(differ.any(axis=1))) if differ.any() else None

@@ -34,13 +34,13 @@ def plant():
     from gouge_cli.kernels import contact
     from gouge_cli.kernels.gpu import device
 
-    law = contact.hertz_mindlin.py_func
+    law = contact.pair_force.py_func
 
     def planted(*args):
         fx, fz, ti, tj, ds, overlap, fn = law(*args)
         return fx * (1.0 + 2.0 ** -52), fz, ti, tj, ds, overlap, fn
 
-    device.d_hertz_mindlin = cuda.jit(device=True)(planted)
+    device.d_pair_force = cuda.jit(device=True)(planted)
 
 
 def plant_parallel():

@@ -1,4 +1,5 @@
-"""The pair force law alone (kernels.contact.hertz_mindlin), against closed forms.
+"""The pair force law alone (kernels.hertz_mindlin.force), against closed forms; the law's one
+selection point (kernels.contact): its force, energy, constants and stiffness agree.
 
 physics.md sections 2 and 7: Hertz static law F = 0.3472 xi^1.5 for equal grains of d = 1
 (E = 1, nu = 0.2), the dashpot clip, and the Mindlin-type tangential spring with Coulomb
@@ -13,8 +14,10 @@ import numpy as np
 import pytest
 
 from gouge_cli.config import build_config
-from gouge_cli.kernels.contact import hertz_mindlin
-from gouge_cli.model.timestep import contact_constants
+from gouge_cli.kernels import contact, measure, step
+from gouge_cli.kernels.hertz_mindlin import force as hertz_mindlin
+from gouge_cli.model.portable import power
+from gouge_cli.model.timestep import contact_constants, stability_bound
 
 E, NU = 1.0, 0.2
 C_N, C_T = contact_constants(build_config({}))
@@ -154,3 +157,67 @@ def test_tangential_force_sign_and_torque_convention():
     assert mfs == pytest.approx(k_s * ds, rel=1e-12)
     assert fx == pytest.approx(mfs, rel=1e-12)          # F_s t = (-k_s ds)(-1, 0)
     assert fz == pytest.approx(fn, rel=1e-12)
+
+
+def test_the_law_in_force_is_the_registered_one_everywhere():
+    """One selection point: the steps, the observables and the time step's bound take the law
+    from kernels.contact, and a registered law is its module's five functions."""
+    from gouge_cli.kernels import hertz_mindlin as module
+
+    law = contact.LAWS["hertz_mindlin"]
+    assert contact.LAW is law and tuple(law[1:]) == (module.pair_constants, module.force, module.energy,
+                                                      module.constants, module.stiffness)
+    assert step.pair_force is measure.pair_force is contact.pair_force is law.force
+    assert measure.pair_energy is law.energy and step.pair_constants is measure.pair_constants is law.pair_constants
+    assert contact_constants(build_config({})) == law.constants(E, NU, 1.0)
+
+
+@pytest.mark.parametrize("name", sorted(contact.LAWS))
+@pytest.mark.parametrize("r_i,r_j", [(0.5, 0.5), (0.4, 0.6)])
+def test_registered_law_force_energy_and_stiffness_agree(name, r_i, r_j):
+    """For every registered law: the energy's slope is the static normal force, its tangential
+    part k_s ds^2 / 2 with the slope of the tangential force; stiffness finds the overlap of a
+    given force and the force's slopes there (what the step's stability bound uses)."""
+    law = contact.LAWS[name]
+    c_n, c_t = law.constants(E, NU, 1.0)
+    r_ij, m_ij = law.pair_constants(r_i, r_j, 1.0, 1.0)
+
+    def normal(xi):
+        return law.force(r_i + r_j - xi, 0.0, 0.0, 0.0, 0.0, 0.0, r_i, r_j, r_ij, m_ij, 0.0, 0.0, c_n, c_t, 0.0,
+                         0.5)[6]
+
+    def tangential(xi, ds):
+        return law.force(r_i + r_j - xi, 0.0, 0.0, 0.0, 0.0, 0.0, r_i, r_j, r_ij, m_ij, ds, 0.0, c_n, c_t, 0.0,
+                         10.0)[1]
+
+    for force in (1e-5, 3e-3, 0.1):
+        xi, k_n, k_t = law.stiffness(force, r_ij, c_n, c_t, power)
+        h = 1e-4 * xi
+        assert normal(xi) == pytest.approx(force, rel=1e-10)
+        assert (normal(xi + h) - normal(xi - h)) / (2 * h) == pytest.approx(k_n, rel=1e-6)
+        u = law.energy
+        assert (u(r_ij, xi + h, 0.0, c_n, c_t) - u(r_ij, xi - h, 0.0, c_n, c_t)) / (2 * h) == pytest.approx(
+            force, rel=1e-7)
+        ds = 1e-3 * xi
+        assert -tangential(xi, ds) / ds == pytest.approx(k_t, rel=1e-10)       # elastic: F_s = -k_s ds
+        assert u(r_ij, xi, ds, c_n, c_t) - u(r_ij, xi, 0.0, c_n, c_t) == pytest.approx(0.5 * k_t * ds * ds, rel=1e-6)
+
+
+def test_hertz_energy_and_bound_against_closed_forms():
+    """Equal grains of d = 1: U = 0.4 K xi^2.5 with K = 0.3472 (the integral of F = K xi^1.5);
+    the default scene's bound from k_s = c_t sqrt(R xi), k_n = 1.5 c_n sqrt(R xi) at the chain
+    force 10 sigma D_max (docs/physics/timestep.md)."""
+    law = contact.LAWS["hertz_mindlin"]
+    for xi in (1e-4, 1e-3, 1e-2):
+        assert law.energy(0.5, xi, 0.0, C_N, C_T) == pytest.approx(0.4 * K_EQUAL * xi ** 2.5, rel=1e-3)
+        assert law.energy(0.5, xi, 0.0, C_N, C_T) == pytest.approx(0.4 * C_N * math.sqrt(0.5) * xi ** 2.5, rel=1e-14)
+    cfg = build_config({})
+    d_min, sigma = cfg.packing.diameter_min, cfg.loading.normal_stress
+    force = 10.0 * sigma * cfg.packing.diameter_max
+    xi = (force / (C_N * math.sqrt(0.5 * d_min))) ** (2.0 / 3.0)
+    mass = cfg.material.density * math.pi * d_min ** 3 / 6.0
+    k_s = C_T * math.sqrt(0.5 * d_min * xi)
+    k_n = 1.5 * C_N * math.sqrt(0.5 * d_min * xi)
+    bound = stability_bound(cfg)
+    assert bound.reference_overlap == pytest.approx(xi, rel=1e-14)
+    assert bound.bound == pytest.approx(min(2 * math.sqrt(mass / 7 / k_s), 2 * math.sqrt(mass / 2 / k_n)), rel=1e-14)

@@ -68,7 +68,7 @@ def compacted():
 
 
 def brute_force_forces(st, params, shear_of):
-    """All-pairs numpy evaluation of hertz_mindlin; shear_of(i, j) -> history of the pair."""
+    """All-pairs numpy evaluation of kernels.hertz_mindlin.force; shear_of(i, j) -> history of the pair."""
     width = params[L.WIDTH]
     i, j, dx, dz, interacting = all_pairs(st, width)
     r = np.sqrt(dx * dx + dz * dz)      # as the kernel: xi = rsum - r amplifies round-off

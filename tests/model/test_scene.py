@@ -42,3 +42,16 @@ def test_a_simulation_runs_its_scene():
     assert sim.scene is scene and sim.config is scene.config
     assert sim.dt == scene.dt and sim.threads == scene.threads
     assert np.array_equal(Simulation(scene.config).params, sim.params)
+
+
+def test_the_scene_names_the_engines_and_the_simulation_runs_them():
+    """Engines chosen once by the Scene (driver.engines): the dry one from the start, the wet one
+    from the moment the fluid starts; the Simulation itself never looks at the device or the fluid
+    to decide how to step."""
+    dry = Simulation(build_config(SMALL))
+    assert (dry.scene.dry_engine, dry.scene.wet_engine, dry.engine.name) == ("cpu dry", None, "cpu dry")
+    wet = Simulation(build_config({**SMALL, "fluid": {"permeability": 1e-5}}))
+    assert (wet.scene.dry_engine, wet.scene.wet_engine, wet.engine.name) == ("cpu dry", "cpu wet", "cpu dry")
+    wet.start_loading()
+    assert wet.engine.name == "cpu wet" and wet.engine.kernel.py_func.__name__ == "advance_fluid"
+    assert wet.gpu_fallback == ""

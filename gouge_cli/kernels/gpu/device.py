@@ -13,10 +13,11 @@ import types
 
 from numba import cuda
 
-from ..contact import hertz_mindlin, pair_constants
+from ..contact import pair_constants, pair_force
 from ..neighbors import _carry_history, _scan_row, bucket_order, cell_grid, minimum_image
 from ..reorder import permute, renumber_list, spatial_order, strip_grid, strip_width
-from ..step import _half_kick, _move_one, _sum_range, _set_wall_grain_velocity, reverse_list, wall_force, wall_kick
+from ..step import (_half_kick, _move_one, _set_wall_grain_velocity, _sum_range, law_scalars, reverse_list, wall_force,
+                    wall_kick)
 
 
 def contract_off():
@@ -71,7 +72,7 @@ def device(kernel, **calls):
 contract_off()
 
 # leaves
-d_hertz_mindlin = device(hertz_mindlin)
+d_pair_force = device(pair_force)
 d_pair_constants = device(pair_constants)
 d_minimum_image = device(minimum_image)
 d_half_kick = device(_half_kick)
@@ -87,6 +88,7 @@ d_wall_force = device(wall_force)
 d_wall_kick = device(wall_kick)
 d_set_wall_grain_velocity = device(_set_wall_grain_velocity)
 d_sum_range = device(_sum_range)
+d_law_scalars = device(law_scalars)
 # callers
 d_move_one = device(_move_one, _half_kick=d_half_kick, minimum_image=d_minimum_image)
 d_reverse_list = device(reverse_list, bucket_order=d_bucket_order)
@@ -97,11 +99,11 @@ d_spatial_order = device(spatial_order, strip_grid=d_strip_grid, bucket_order=d_
 def probe_law(inp, consts, out):
     """The pair constants and contact law of pair k = inp[k] (r_i, r_j, m_i, m_j, dx, dz, dvx, dvz,
     spin_i, spin_j, shear) with consts (dt, c_normal, c_tangential, damping, friction): out[k] =
-    (R_ij, m_ij, then hertz_mindlin's 7 results); one thread per pair (studies.gpu_check.law_probe)."""
+    (R_ij, m_ij, then pair_force's 7 results); one thread per pair (studies.gpu_check.law_probe)."""
     k = cuda.grid(1)
     if k < inp.shape[0]:
         r_ij, m_ij = d_pair_constants(inp[k, 0], inp[k, 1], inp[k, 2], inp[k, 3])
-        res = d_hertz_mindlin(inp[k, 4], inp[k, 5], inp[k, 6], inp[k, 7], inp[k, 8], inp[k, 9], inp[k, 0], inp[k, 1],
+        res = d_pair_force(inp[k, 4], inp[k, 5], inp[k, 6], inp[k, 7], inp[k, 8], inp[k, 9], inp[k, 0], inp[k, 1],
                               r_ij, m_ij, inp[k, 10], consts[0], consts[1], consts[2], consts[3], consts[4])
         out[k, 0] = r_ij
         out[k, 1] = m_ij

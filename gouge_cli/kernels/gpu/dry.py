@@ -1,20 +1,24 @@
 """The dry step on the GPU: kernels.step.advance for B layers at once, one thread block per layer.
 
 ``advance_layers[B, threads](...)`` runs todo[b] steps of layer b in one launch (no host work
-between steps). Arrays are the fields of kernels.layout.Grains, Lists and Pairs (model.state.State)
-stacked over layers, [B, N] per grain and [B, capacity] per pair slot; wall, clock, params and
-counters are [B, N_WALL] etc.; top [B, max top grains] with ntop[b] in use.
+between steps). It takes the records of kernels.layout (Grains, Lists) whose fields are
+model.state.State's arrays stacked over layers, [B, N] per grain and [B, capacity] per pair slot,
+the pair results (pair_fx, pair_fz, pair_ti, pair_tj) likewise; wall, clock, params and counters
+are [B, N_WALL] etc.; grains.top is [B, max top grains] with ntop[b] in use.
 
-The step is kernels.step._step, phase by phase, with the block's threads sharing the per-grain
-and per-row loops and __syncthreads between phases:
-  1-2. open_step (thread 0: the wall and its grains), then _move_one of every grain
+The step's sequence is the CPU's own: kernels.step._step and run_steps compiled for the device
+(gpu.device) with each phase (kernels.step.STEP_PHASES) bound to its block version here
+(BLOCK_PHASES), the block's threads sharing the per-grain and per-row loops and __syncthreads
+between phases:
+  open: open_step (thread 0: the wall and its grains); drift: _move_one of every grain
        (threads stride over grains; any late grain sets counters[K_NEED_REBUILD])
   rebuild: renumber (thread 0, every SORT_EVERY rebuilds), bin_cells (thread 0), rows counted
        by _scan_row per grain, offsets (thread 0), rows written and their history carried per
        grain: the same list, row for row and slot for slot, as kernels.neighbors.build_neighbors
-  3. the law per list row (kernels.contact), then each grain sums its own pairs in _sum_range's
-       order (no atomics); reverse list by thread 0 (kernels.step.reverse_list) after a rebuild
-  4. wall force and kick (thread 0); 5. close_step's kick per grain on the last step.
+  forces: the law per list row (kernels.contact), then each grain sums its own pairs in
+       _sum_range's order (no atomics); reverse list by thread 0 (kernels.step.reverse_list)
+       after a rebuild
+  wall: force, spring and kick (thread 0); close: close_step's kick per grain on the last step.
 Every function named above is the CPU kernel's own code (gpu.device). With ``parallel`` = 1 the
 thread-0 phases of the rebuild (binning, offsets, re-numbering, reverse list) run on the whole
 block instead (kernels.gpu.parallel: counting sorts by integer atomics and prefix sums), the same
@@ -28,22 +32,27 @@ instead of stored, so pairs.pair_const is not used here (the host marks it stale
 
 from __future__ import annotations
 
+from collections import namedtuple
+
 import numpy as np
 from numba import cuda
 
-from ..layout import (BG_DAMPING, C_NORMAL, C_TANGENTIAL, DAMPING, DT, FRICTION, K_NEEDED_CAPACITY, K_NEED_REBUILD,
-                      K_PAIRS, K_REBUILDS, K_STEP, L_BUILT, L_SCRATCH, LIST_OVERFLOW, MID_STEP, OK, SKIN, SORT_EVERY,
-                      WIDTH, Grains, Lists)
+from ..layout import (BG_DAMPING, DT, K_NEEDED_CAPACITY, K_NEED_REBUILD, K_PAIRS, K_REBUILDS, K_STEP, L_BUILT,
+                      L_SCRATCH, MID_STEP, SKIN, SORT_EVERY, WIDTH, Grains, Lists)
 from ..neighbors import bin_cells
-from ..step import open_step, renumber
-from .device import (d_bucket_order, d_carry_history, d_cell_grid, d_half_kick, d_hertz_mindlin, d_minimum_image,
-                     d_move_one, d_pair_constants, d_permute, d_renumber_list, d_reverse_list, d_scan_row,
+from ..step import STEP_PHASES, _step, open_step, renumber, run_steps
+from .device import (d_bucket_order, d_carry_history, d_cell_grid, d_half_kick, d_law_scalars, d_minimum_image,
+                     d_move_one, d_pair_constants, d_pair_force, d_permute, d_renumber_list, d_reverse_list, d_scan_row,
                      d_set_wall_grain_velocity, d_spatial_order, d_sum_range, d_wall_force, d_wall_kick, device)
 from .parallel import SHARED_FLOATS, SHARED_INTS, clock64, p_bin_cells, p_renumber, p_reverse_list, p_scan
 
 d_open_step = device(open_step, wall_kick=d_wall_kick, _set_wall_grain_velocity=d_set_wall_grain_velocity)
 d_renumber = device(renumber, spatial_order=d_spatial_order, renumber_list=d_renumber_list, permute=d_permute)
 d_bin_cells = device(bin_cells, bucket_order=d_bucket_order, cell_grid=d_cell_grid)
+
+# who runs a phase (kernels.step's `block`): this thread, the block's size, the rebuild's bookkeeping
+# by the whole block (0/1), the layer's timers row, the block's shared scratch (kernels.gpu.parallel)
+Block = namedtuple("Block", ("t", "nt", "parallel", "timers", "sh", "shf"))
 
 # layout[L_SCRATCH:] of each layer (the CPU build's per-block counters) carries the build's
 # cell grid from thread 0 to the block (thread-0 binning)
@@ -128,15 +137,60 @@ def _build(t, nt, g, li, params, parallel, timers, sh, shf):
 
 
 @cuda.jit(device=True)
-def _rebuild(t, nt, g, li, params, counters, none, parallel, timers, sh, shf):
-    """kernels.step.rebuild by the block; False (K_NEEDED_CAPACITY set) if the list does not fit."""
+def _pending(block, counters):
+    """kernels.step.pending for the block: the flag as every thread read it before any writes it."""
+    value = counters[K_NEED_REBUILD]
+    cuda.syncthreads()
+    return value
+
+
+@cuda.jit(device=True)
+def _suspend(block, counters):
+    """kernels.step.suspend by thread 0."""
+    if block.t == 0:
+        counters[K_NEED_REBUILD] = MID_STEP
+    cuda.syncthreads()
+
+
+@cuda.jit(device=True)
+def _open(block, g, wall, clock, params):
+    """kernels.step.open_phase by thread 0 (the wall and its grains)."""
+    if block.t == 0:
+        d_open_step(g, wall, clock, params)
+    cuda.syncthreads()
+    _mark(block.t, block.timers, P_OPEN)
+
+
+@cuda.jit(device=True)
+def _drift(block, g, li, params, counters, owed):
+    """kernels.step.drift_phase: the threads stride over the grains (kernels.step.move_range);
+    any late grain sets counters[K_NEED_REBUILD]."""
+    t = block.t
+    dt = params[DT]
+    width = params[WIDTH]
+    damp = params[BG_DAMPING]
+    reach = 0.5 * params[SKIN]
+    reach2 = reach * reach
+    for i in range(t, g.x.shape[0], block.nt):
+        if d_move_one(i, g.x, g.z, g.vx, g.vz, g.spin, g.force_x, g.force_z, g.torque, g.inv_mass, g.inv_inertia,
+                      g.body, li.x_build, li.z_build, owed, dt, width, damp, reach2) > 0:
+            counters[K_NEED_REBUILD] = 1
+    cuda.syncthreads()
+    _mark(t, block.timers, P_MOVE)
+
+
+@cuda.jit(device=True)
+def _rebuild(block, g, li, params, counters, drag_x, drag_z):
+    """kernels.step.rebuild_phase by the block; False (K_NEEDED_CAPACITY set) if the list does not
+    fit. drag_x, drag_z: empty (the GPU steps are dry)."""
+    t, nt, parallel, timers, sh, shf = block
     every = int(params[SORT_EVERY])
     if every > 0 and counters[K_REBUILDS] % every == 0:
         if parallel:
             p_renumber(t, nt, g, li, params[WIDTH], sh, shf)
         else:
             if t == 0:
-                d_renumber(g, li, none, none, params[WIDTH])
+                d_renumber(g, li, drag_x, drag_z, params[WIDTH])
             cuda.syncthreads()
         _mark(t, timers, P_RENUMBER)
     npairs = _build(t, nt, g, li, params, parallel, timers, sh, shf)
@@ -154,9 +208,12 @@ def _rebuild(t, nt, g, li, params, counters, none, parallel, timers, sh, shf):
 
 
 @cuda.jit(device=True)
-def _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none, parallel, timers,
-            sh):
-    """kernels.step.compute_forces and the wall's second half kick (step 3-4)."""
+def _forces(block, g, li, pairs, params, drag_x, drag_z):
+    """kernels.step.force_phase by the block: the reverse list after a rebuild, the law per list
+    row (kernels.contact), then each grain sums its own pairs in _sum_range's order (no atomics).
+    pairs: (pair_fx, pair_fz, pair_ti, pair_tj) per slot."""
+    t, nt, parallel, timers, sh, shf = block
+    pair_fx, pair_fz, pair_ti, pair_tj = pairs
     x, z, vx, vz, spin, radius, mass = g.x, g.z, g.vx, g.vz, g.spin, g.radius, g.mass
     start, index, shear = li.start, li[1], li.shear
     n = x.shape[0]
@@ -172,12 +229,7 @@ def _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, param
             li.layout[L_BUILT] = 1
         cuda.syncthreads()
         _mark(t, timers, P_REVERSE)
-    dt = params[DT]
-    width = params[WIDTH]
-    c_n = params[C_NORMAL]
-    c_t = params[C_TANGENTIAL]
-    damping = params[DAMPING]
-    friction = params[FRICTION]
+    dt, width, c_n, c_t, damping, friction = d_law_scalars(params)
     for i in range(t, n, nt):                   # the law, row by row (kernels.step._fill, _laws)
         xi = x[i]
         zi = z[i]
@@ -190,7 +242,7 @@ def _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, param
             j = index[k]
             rj = radius[j]
             r_ij, m_ij = d_pair_constants(ri, rj, mi, mass[j])
-            fx, fz, ti, tj, ds, overlap, fn = d_hertz_mindlin(
+            fx, fz, ti, tj, ds, overlap, fn = d_pair_force(
                 d_minimum_image(x[j] - xi, width), z[j] - zi, vx[j] - vxi, vz[j] - vzi, wi, spin[j], ri, rj, r_ij,
                 m_ij, shear[k], dt, c_n, c_t, damping, friction)
             pair_fx[k] = fx
@@ -202,100 +254,75 @@ def _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, param
     _mark(t, timers, P_LAW)
     for i in range(t, n, nt):                   # each grain gathers its pairs in the CPU's order
         d_sum_range(i, i + 1, start, li.rev_start, li.rev_slot, pair_fx, pair_fz, pair_ti, pair_tj, g.force_x,
-                    g.force_z, g.torque, False, none, none)
+                    g.force_z, g.torque, False, drag_x, drag_z)
     cuda.syncthreads()
     _mark(t, timers, P_SUM)
-    if t == 0:
+
+
+@cuda.jit(device=True)
+def _wall(block, g, wall, clock, params, counters):
+    """kernels.step.wall_phase by thread 0 (O(top grains))."""
+    if block.t == 0:
         d_wall_force(g.force_x, g.force_z, g.top, wall)
         d_wall_kick(wall, clock, params)
         counters[K_STEP] += 1
     cuda.syncthreads()
-    _mark(t, timers, P_WALL)
+    _mark(block.t, block.timers, P_WALL)
 
 
 @cuda.jit(device=True)
-def _close(t, nt, g, wall, params, timers):
-    """kernels.step.close_step by the block: the wall's grains take its velocity, free grains
-    get their second half kick (kernels.step._kick)."""
+def _close(block, g, wall, params):
+    """kernels.step.close_phase by the block: the wall's grains take its velocity (thread 0), free
+    grains get their second half kick (kernels.step._kick)."""
+    t = block.t
     if t == 0:
         d_set_wall_grain_velocity(g.vx, g.vz, g.spin, g.top, wall)
     half = 0.5 * params[DT]
     damp = params[BG_DAMPING]
-    for i in range(t, g.x.shape[0], nt):
+    for i in range(t, g.x.shape[0], block.nt):
         if g.body[i] == 0:
             g.vx[i] = d_half_kick(g.vx[i], g.force_x[i] * g.inv_mass[i], half, damp)
             g.vz[i] = d_half_kick(g.vz[i], g.force_z[i] * g.inv_mass[i], half, damp)
             g.spin[i] = d_half_kick(g.spin[i], g.torque[i] * g.inv_inertia[i], half, damp)
     cuda.syncthreads()
-    _mark(t, timers, P_CLOSE)
+    _mark(t, block.timers, P_CLOSE)
 
 
-@cuda.jit(device=True)
-def _step(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none, owed, close,
-          parallel, timers, sh, shf):
-    """kernels.step._step (drifted False) by the block; False if the rebuild overflows (the
-    step is then left drifted, counters[K_NEED_REBUILD] = MID_STEP)."""
-    resume = counters[K_NEED_REBUILD] == MID_STEP
-    cuda.syncthreads()
-    if not resume:
-        if t == 0:
-            d_open_step(g, wall, clock, params)
-        cuda.syncthreads()
-        _mark(t, timers, P_OPEN)
-        dt = params[DT]
-        width = params[WIDTH]
-        damp = params[BG_DAMPING]
-        reach = 0.5 * params[SKIN]
-        reach2 = reach * reach
-        for i in range(t, g.x.shape[0], nt):     # kernels.step.move_range
-            if d_move_one(i, g.x, g.z, g.vx, g.vz, g.spin, g.force_x, g.force_z, g.torque, g.inv_mass,
-                          g.inv_inertia, g.body, li.x_build, li.z_build, owed, dt, width, damp, reach2) > 0:
-                counters[K_NEED_REBUILD] = 1
-        cuda.syncthreads()
-        _mark(t, timers, P_MOVE)
-    pending = counters[K_NEED_REBUILD] != 0
-    cuda.syncthreads()
-    if pending:
-        if not _rebuild(t, nt, g, li, params, counters, none, parallel, timers, sh, shf):
-            if t == 0:
-                counters[K_NEED_REBUILD] = MID_STEP
-            cuda.syncthreads()
-            return False
-    _forces(t, nt, g, li, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params, counters, none, parallel, timers,
-            sh)
-    if close:
-        _close(t, nt, g, wall, params, timers)
-    return True
+# the step's sequence is the CPU's own (kernels.step._step, run_steps), its phases bound to the block's
+BLOCK_PHASES = {"pending": _pending, "suspend": _suspend, "open_phase": _open, "drift_phase": _drift,
+                "rebuild_phase": _rebuild, "force_phase": _forces, "wall_phase": _wall, "close_phase": _close}
+if set(BLOCK_PHASES) != set(STEP_PHASES):        # (an unbound phase would run the CPU's under the simulator)
+    raise ImportError(f"kernels.gpu.dry binds {sorted(BLOCK_PHASES)}, the step has {sorted(STEP_PHASES)}")
+d_step = device(_step, **BLOCK_PHASES)
+d_run_steps = device(run_steps, _step=d_step)
 
 
 @cuda.jit
-def advance_layers(x, z, vx, vz, spin, radius, mass, inv_mass, inv_inertia, body, force_x, force_z, torque, top, ntop,
-                   ident, start, index, shear, rev_start, rev_slot, x_build, z_build, new_start, new_index, new_shear,
-                   layout, cell_of, order, cell_count, pair_fx, pair_fz, pair_ti, pair_tj, wall, clock, params,
-                   counters, todo, done, status, none, parallel, timers):
-    """kernels.step.advance of layer blockIdx.x for todo[b] steps (module docstring); done[b]:
-    whole steps done, status[b]: OK or LIST_OVERFLOW. none: an empty float64 array (no drag).
-    parallel (0/1): the rebuild's bookkeeping by the block (kernels.gpu.parallel), same bits;
-    timers: int64 [B, N_PHASES + 1] per-phase cycles added up (timed), or [B, 0] (untimed)."""
+def advance_layers(grains, lists, pairs, wall, clock, params, counters, ntop, todo, done, status, none, parallel,
+                   timers):
+    """kernels.step.run_steps of layer blockIdx.x for todo[b] steps (module docstring); done[b]:
+    whole steps done, status[b]: OK or LIST_OVERFLOW. grains, lists: kernels.layout.Grains and
+    Lists of the layers' arrays stacked (grains.top [B, max top grains], ntop[b] of them in use);
+    pairs: (pair_fx, pair_fz, pair_ti, pair_tj) [B, capacity]. none: an empty float64 array (no
+    drag). parallel (0/1): the rebuild's bookkeeping by the block (kernels.gpu.parallel), same
+    bits; timers: int64 [B, N_PHASES + 1] per-phase cycles added up (timed), or [B, 0] (untimed)."""
     sh = cuda.shared.array(SHARED_INTS, np.int64)
     shf = cuda.shared.array(SHARED_FLOATS, np.float64)
     b = cuda.blockIdx.x
     t = cuda.threadIdx.x
-    nt = cuda.blockDim.x
-    g = Grains(x[b], z[b], vx[b], vz[b], spin[b], radius[b], mass[b], inv_mass[b], inv_inertia[b], body[b],
-               force_x[b], force_z[b], torque[b], top[b, :ntop[b]], ident[b])
-    li = Lists(start[b], index[b], shear[b], rev_start[b], rev_slot[b], x_build[b], z_build[b], new_start[b],
-               new_index[b], new_shear[b], layout[b], cell_of[b], order[b], cell_count[b])
-    nsteps = todo[b]
+    gs = grains
+    g = Grains(gs.x[b], gs.z[b], gs.vx[b], gs.vz[b], gs.spin[b], gs.radius[b], gs.mass[b], gs.inv_mass[b],
+               gs.inv_inertia[b], gs.body[b], gs.force_x[b], gs.force_z[b], gs.torque[b], gs.top[b, :ntop[b]],
+               gs.id[b])
+    ls = lists
+    li = Lists(ls.start[b], ls[1][b], ls.shear[b], ls.rev_start[b], ls.rev_slot[b], ls.x_build[b], ls.z_build[b],
+               ls.new_start[b], ls.new_index[b], ls.new_shear[b], ls.layout[b], ls.cell_of[b], ls.order[b],
+               ls.cell_count[b])                # (ls[1]: .index is typed as tuple.index by numba-cuda)
     timer = timers[b]
     _mark(t, timer, -1)
-    for s in range(nsteps):
-        if not _step(t, nt, g, li, pair_fx[b], pair_fz[b], pair_ti[b], pair_tj[b], wall[b], clock[b], params[b],
-                     counters[b], none, s > 0, s == nsteps - 1, parallel, timer, sh, shf):
-            if t == 0:
-                status[b] = LIST_OVERFLOW
-                done[b] = s
-            return
+    block = Block(t, cuda.blockDim.x, parallel, timer, sh, shf)
+    outcome, steps = d_run_steps(block, g, li, (pairs[0][b], pairs[1][b], pairs[2][b], pairs[3][b]), wall[b],
+                                 clock[b], params[b], counters[b], todo[b], none, none)
     if t == 0:
-        status[b] = OK
-        done[b] = nsteps
+        status[b] = outcome
+        done[b] = steps
