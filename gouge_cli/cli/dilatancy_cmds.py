@@ -30,6 +30,7 @@ def register(app: typer.Typer) -> None:
         report: Optional[Path] = typer.Option(None, "--report", help="folder for segments.csv, summary.md, dilatancy.png "
                                     "(default: --out)"),
         set_: List[str] = typer.Option([], "--set", help="config override"),
+        tables: bool = typer.Option(False, "--tables", help="run nothing: the tables and figure from the kept points"),
     ):
         """Dilatancy coefficient eps = dphi/dlnV from velocity steps, and the undrained strengthening it predicts."""
         from ..config import load_config
@@ -46,7 +47,8 @@ def register(app: typer.Typer) -> None:
         cfg = load_config(config, set_)
         sigmas = sigma or [cfg.loading.normal_stress]
         say = lambda m: out.print(m, highlight=False)  # noqa: E731
-        runs = run_study(cfg, seed_list, sigmas, out_dir, workers=workers, on_progress=say, ratios=tuple(ratio),
+        runs = run_study(cfg, seed_list, sigmas, out_dir, workers=workers, on_progress=say, tables_only=tables,
+                         ratios=tuple(ratio),
                          perm=perm if perm > 0 else None, stiff=stiff, slip=slip, run_in=run_in)
         report = report or out_dir
         for path in write_outputs(runs, report):

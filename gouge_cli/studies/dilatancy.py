@@ -145,10 +145,11 @@ def _one(args) -> StepRun:
     return run_steps(config, seed, sigma, **kw)
 
 
-def run_study(config: Config, seeds, sigmas, out: Path, *, workers: int = 1, on_progress=None,
+def run_study(config: Config, seeds, sigmas, out: Path, *, workers: int = 1, on_progress=None, tables_only=False,
               **kw) -> list[StepRun]:
     """Every (seed, sigma) not yet in ``out/dilatancy_runs.json``, `workers` processes at a time,
-    each kept as it finishes; returns the requested runs (finished ones included)."""
+    each kept as it finishes; returns the requested runs (finished ones included). With
+    `tables_only` nothing runs: the requested runs already kept."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     kw = {"ratios": tuple(kw.get("ratios", RATIOS)), "perm": kw.get("perm", PERM), "stiff": kw.get("stiff", STIFF),
@@ -158,7 +159,12 @@ def run_study(config: Config, seeds, sigmas, out: Path, *, workers: int = 1, on_
     todo = [(config, int(s), float(g), kw) for s in seeds for g in sigmas      # seed by seed: every stress
             if not records.has(int(s), float(g))]                            # has a seed early
     say = on_progress or (lambda m: None)
-    say(f"{len(todo)} of {len(seeds) * len(sigmas)} (seed, sigma) points to run, {workers} at a time")
+    if tables_only:
+        say(f"{len(seeds) * len(sigmas) - len(todo)} of {len(seeds) * len(sigmas)} (seed, sigma) points kept; "
+            "none run (--tables)")
+        todo = []
+    else:
+        say(f"{len(todo)} of {len(seeds) * len(sigmas)} (seed, sigma) points to run, {workers} at a time")
     if workers <= 1:
         for args in todo:
             run = _one(args)

@@ -87,5 +87,9 @@ def test_study_keeps_finished_points_and_refuses_other_settings(tmp_path, monkey
     again = CliRunner().invoke(app, args)
     assert again.exit_code == 0, again.output
     assert "0 of 2 (seed, sigma) points to run" in again.output
+    (out / "summary.md").unlink()
+    tables = CliRunner().invoke(app, [*args[:2], "--seeds", "5-7", *args[4:], "--tables"])
+    assert tables.exit_code == 0 and "2 of 3 (seed, sigma) points kept" in tables.output, tables.output
+    assert f"{cell.eps[0]:.2e}" in (out / "summary.md").read_text()
     with pytest.raises(ConfigError, match="another scene or settings"):
         D.run_study(build_config(SCENE), [5], [3e-4], out, ratios=(10.0,), perm=None, stiff=2e-2, slip=4, run_in=4)
