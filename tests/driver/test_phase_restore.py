@@ -231,7 +231,7 @@ def test_slip_checkpoint_starts_a_fork_that_retraces_the_run(reference, tmp_path
     assert ck.header.slip == entry.number and ck.header.onset_time == entry.onset_time
     assert set(ck.states) == {SLIP_RECORDER, "guards"}
     summary = run_fork(ForkRequest(run, entry.number), quiet=True)
-    assert summary["branches"]["drained"]["first_slip"] is not None
+    assert summary.branches["drained"].first_slip is not None
     branch = RunLayout(run).fork(entry.number).branch(None).run_file
     with h5py.File(RunLayout(run).run_file, "r") as ho, h5py.File(branch, "r") as hf:
         t = hf["series/time"][...]
