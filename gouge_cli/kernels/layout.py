@@ -22,7 +22,7 @@ Grains = namedtuple("Grains", ("x", "z", "vx", "vz", "spin", "radius", "mass", "
                                "force_x", "force_z", "torque", "top", "id"))
 # the half neighbour list (kernels.neighbors) and its scratch: start (N + 1,) int64 row offsets,
 # index int32 / shear float64 (capacity,) per pair slot, the list by second grain rev_start
-# (N + 1,) int64 / rev_slot (capacity,) int32 (kernels.step.reverse_list), x_build/z_build (N,)
+# (N + 1,) int64 / rev_slot (capacity,) int32 (kernels.forces.reverse_list), x_build/z_build (N,)
 # positions at the last build, new_* the rebuild's second buffers, layout int64 (N_LAYOUT,),
 # cell_of/order (N,) and cell_count (2N + 64,) int64 (cell_of between rebuilds: the per-grain
 # flags of the skin check; cell_count: scratch, also of kernels.coupled's solve-and-drift tasks)
@@ -36,7 +36,7 @@ Lists = namedtuple("Lists", ("start", "index", "shear", "rev_start", "rev_slot",
 # (fx, fz, tj), at e = capacity + k those it adds to its first grain's (-fx, -fz, ti), at e = 2 capacity
 # -0.0 (a term that adds nothing); sum_start (N + 1,) int64 and sum_end int32 (2 capacity + N + 2,):
 # grain g's terms are e = sum_end[sum_start[g]:sum_start[g + 1]] in the order of its sums
-# (kernels.step.sum_list). pair_row, pair_const and the sum list are set with rev_start/rev_slot
+# (kernels.forces.sum_list). pair_row, pair_const and the sum list are set with rev_start/rev_slot
 # (layout[L_BUILT]).
 Pairs = namedtuple("Pairs", ("pair_fx", "pair_fz", "pair_ti", "pair_tj", "pair_const", "pair_buf", "pair_row",
                              "sum_x", "sum_z", "sum_t", "sum_start", "sum_end"))

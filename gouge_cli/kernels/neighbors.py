@@ -2,7 +2,7 @@
 
 The list is CSR: the neighbours j > i of grain i are ``index[start[i]:start[i+1]]``;
 ``shear`` (same layout) is the tangential displacement of each pair. The list is the same
-for any thread count, so is the order of every force sum (kernels.step.contact_forces).
+for any thread count, so is the order of every force sum (kernels.forces.contact_forces).
 """
 
 from __future__ import annotations

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..driver.simulation import Simulation
 from ..kernels import layout as L
+from ..kernels import forces as F
 from ..kernels import step as K
 from .bench_scene import bench_config
 
@@ -116,18 +117,18 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
         s.shear[:] = shear0
         s.vx[:], s.vz[:], s.spin[:], s.x[:], s.z[:] = v0
 
-    nb = K.force_parts(threads, s.n, pairs.pair_buf.shape[0])
+    nb = F.force_parts(threads, s.n, pairs.pair_buf.shape[0])
     out = {
         "contact_forces": timed(lambda: K.compute_forces(g, lists, pairs, s.wall, p, *sim.drag), reset=reset),
-        "law_pass": timed(lambda: K.law_pass(nb, g.x, g.z, g.vx, g.vz, g.spin, lists.start, pairs.pair_row,
+        "law_pass": timed(lambda: F.law_pass(nb, g.x, g.z, g.vx, g.vz, g.spin, lists.start, pairs.pair_row,
                                              lists.index, lists.shear, pairs.pair_const, pairs.sum_x, pairs.sum_z,
                                              pairs.sum_t, pairs.pair_buf, p), reset=reset),
-        "sum_pass": timed(lambda: K.sum_pass(nb, pairs.sum_start, pairs.sum_end, pairs.sum_x, pairs.sum_z,
+        "sum_pass": timed(lambda: F.sum_pass(nb, pairs.sum_start, pairs.sum_end, pairs.sum_x, pairs.sum_z,
                                              pairs.sum_t, g.force_x, g.force_z, g.torque, *sim.drag)),
         "kick_drift": timed(lambda: K.kick_drift(g.x, g.z, g.vx, g.vz, g.spin, g.force_x, g.force_z, g.torque,
                                                   g.inv_mass, g.inv_inertia, g.body, lists.x_build, lists.z_build,
                                                   True, p, lists.cell_of), reset=reset),
-        "rebuild_each": timed(lambda: (K.rebuild(g, lists, p, s.counters, *sim.drag), K.derive_list(g, lists, pairs)),
+        "rebuild_each": timed(lambda: (K.rebuild(g, lists, p, s.counters, *sim.drag), F.derive_list(g, lists, pairs)),
                               n=max(3, repeats // 10), reset=reset),
         "steps_per_rebuild": per_rebuild_steps,
         "renumber_each": timed(lambda: K.renumber(g, lists, *sim.drag, p[L.WIDTH]), n=max(3, repeats // 10)),
@@ -146,7 +147,7 @@ def profile_step(sim: Simulation, start: dict, threads: int, repeats: int = 50) 
 
 def sub_system(s, m: int) -> tuple[L.Grains, L.Lists, L.Pairs]:
     """Grains 0..m-1 of state s and the listed pairs among them (same order, shear copied), as the
-    records kernels.step.contact_forces takes for one thread (without drag): fields the contact
+    records kernels.forces.contact_forces takes for one thread (without drag): fields the contact
     pass does not read are empty, every field has the state's dtype (an int64 list array here
     once compiled the kernel a second time); the reverse list and pair constants are derived on
     the first call."""
@@ -184,8 +185,8 @@ def footprint_profile(sim: Simulation, start: dict, sizes, repeats: int = 5) -> 
         grains, lists, pairs = sub_system(s, m)
         npairs = int(lists.start[-1])
         none = np.zeros(0)
-        K.contact_forces(grains, lists, pairs, none, none, p)
-        best = best_seconds(lambda: K.contact_forces(grains, lists, pairs, none, none, p), max(3, 200000 // m),
+        F.contact_forces(grains, lists, pairs, none, none, p)
+        best = best_seconds(lambda: F.contact_forces(grains, lists, pairs, none, none, p), max(3, 200000 // m),
                             repeats)
         touched = sum(a.nbytes for a in (*grains, lists.start, lists.index, lists.shear))   # grains, list, forces
         out.append({"of_n_grains": s.n, "first_grains": m, "pairs_per_grain": npairs / m,

@@ -25,7 +25,7 @@ from gouge_cli.studies import bench, bench_profile
 from gouge_cli.io.checkpoint import CheckpointHeader, read_checkpoint, snapshot_of, write_checkpoint
 from gouge_cli.config import build_config
 from gouge_cli.kernels import layout as L
-from gouge_cli.kernels import step as K
+from gouge_cli.kernels import forces as F
 from gouge_cli.driver.compaction import compact
 from gouge_cli.driver.simulation import Simulation
 from gouge_cli.model.state import State
@@ -47,7 +47,7 @@ def specialisations() -> dict[str, set[str]]:
 
 
 def contact_forces_args(sim: Simulation) -> tuple:
-    """kernels.step.contact_forces arguments exactly as compute_forces passes them (one thread)."""
+    """kernels.forces.contact_forces arguments exactly as compute_forces passes them (one thread)."""
     s = sim.state
     params = sim.params.copy()
     params[L.THREADS] = 1
@@ -79,7 +79,7 @@ def reference():
     step_and_observe(wet)
     start = dry.state.arrays()
     bench_profile.profile_step(dry, start, 1, repeats=1)
-    K.contact_forces(*contact_forces_args(dry))
+    F.contact_forces(*contact_forces_args(dry))
     yield dry, wet, start, specialisations()
     numba.set_num_threads(before)
 

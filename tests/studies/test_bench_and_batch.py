@@ -16,6 +16,7 @@ from gouge_cli.studies.bench import paired_scaling, prepare, run_benchmark
 from gouge_cli.studies.bench_profile import footprint_profile, sub_system
 from gouge_cli.studies.bench_report import bench_report
 from gouge_cli.kernels import layout as L
+from gouge_cli.kernels import forces as F
 from gouge_cli.kernels import step as K
 from gouge_cli.kernels.probe import stream_probe
 from needs import two_threads
@@ -89,7 +90,7 @@ def test_footprint_sub_systems_are_the_first_rows_of_the_packing():
     s, p = sim.state, sim.params.copy()
     p[L.THREADS] = 1
     grains, lists, pairs = sub_system(s, s.n)   # every pair: the contact pass gives the run's own forces, bit for bit
-    K.contact_forces(grains, lists, pairs, np.zeros(0), np.zeros(0), p)
+    F.contact_forces(grains, lists, pairs, np.zeros(0), np.zeros(0), p)
     K.compute_forces(s.grains(), s.lists(), s.pairs(), s.wall, p, np.zeros(0), np.zeros(0))
     assert np.array_equal(grains.force_x, s.force_x) and np.array_equal(grains.torque, s.torque)
     assert np.array_equal(lists.shear, s.shear[:s.start[-1]])

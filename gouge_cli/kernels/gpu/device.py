@@ -16,8 +16,8 @@ from numba import cuda
 from ..contact import pair_constants, pair_force
 from ..neighbors import _carry_history, _scan_row, bucket_order, cell_grid, minimum_image
 from ..reorder import permute, renumber_list, spatial_order, strip_grid, strip_width
-from ..step import (_half_kick, _move_one, _set_wall_grain_velocity, _sum_range, law_scalars, reverse_list, wall_force,
-                    wall_kick)
+from ..forces import _sum_range, law_scalars, reverse_list
+from ..step import (_half_kick, _move_one, _set_wall_grain_velocity, wall_force, wall_kick)
 
 
 def contract_off():

@@ -16,7 +16,7 @@ between phases:
        by _scan_row per grain, offsets (thread 0), rows written and their history carried per
        grain: the same list, row for row and slot for slot, as kernels.neighbors.build_neighbors
   forces: the law per list row (kernels.contact), then each grain sums its own pairs in
-       _sum_range's order (no atomics); reverse list by thread 0 (kernels.step.reverse_list)
+       _sum_range's order (no atomics); reverse list by thread 0 (kernels.forces.reverse_list)
        after a rebuild
   wall: force, spring and kick (thread 0); close: close_step's kick per grain on the last step.
 Every function named above is the CPU kernel's own code (gpu.device). With ``parallel`` = 1 the
@@ -230,7 +230,7 @@ def _forces(block, g, li, pairs, params, drag_x, drag_z):
         cuda.syncthreads()
         _mark(t, timers, P_REVERSE)
     dt, width, c_n, c_t, damping, friction = d_law_scalars(params)
-    for i in range(t, n, nt):                   # the law, row by row (kernels.step._fill, _laws)
+    for i in range(t, n, nt):                   # the law, row by row (kernels.forces._fill, _laws)
         xi = x[i]
         zi = z[i]
         vxi = vx[i]

@@ -329,6 +329,6 @@ def p_renumber(t, nt, g, li, width, sh, shf):
 
 @cuda.jit(device=True)
 def p_reverse_list(t, nt, start, index, n, rev_start, rev_slot, sh):
-    """kernels.step.reverse_list by the block."""
+    """kernels.forces.reverse_list by the block."""
     p_bucket_order(t, nt, index, start[n], n, rev_start, rev_slot, sh)
 
