@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from gouge_cli.config import build_config
-from gouge_cli.kernels import contact, measure, step
+from gouge_cli.kernels import contact, forces, measure
 from gouge_cli.kernels.hertz_mindlin import force as hertz_mindlin
 from gouge_cli.model.portable import power
 from gouge_cli.model.timestep import contact_constants, stability_bound
@@ -160,15 +160,15 @@ def test_tangential_force_sign_and_torque_convention():
 
 
 def test_the_law_in_force_is_the_registered_one_everywhere():
-    """One selection point: the steps, the observables and the time step's bound take the law
+    """One selection point: the pair pass, the observables and the time step's bound take the law
     from kernels.contact, and a registered law is its module's five functions."""
     from gouge_cli.kernels import hertz_mindlin as module
 
     law = contact.LAWS["hertz_mindlin"]
     assert contact.LAW is law and tuple(law[1:]) == (module.pair_constants, module.force, module.energy,
                                                       module.constants, module.stiffness)
-    assert step.pair_force is measure.pair_force is contact.pair_force is law.force
-    assert measure.pair_energy is law.energy and step.pair_constants is measure.pair_constants is law.pair_constants
+    assert forces.pair_force is measure.pair_force is contact.pair_force is law.force
+    assert measure.pair_energy is law.energy and forces.pair_constants is measure.pair_constants is law.pair_constants
     assert contact_constants(build_config({})) == law.constants(E, NU, 1.0)
 
 
