@@ -66,6 +66,12 @@ class StepRun:
         a, b = self.segment(1.0, True), self.segment(ratio, True)
         return (b.porosity - a.porosity) / math.log(ratio) if a and b else float("nan")
 
+    def slope(self, ratio: float) -> float:
+        """Drained (phi_r - phi_1) / (I_r - I_1) [-]: b of the dense-flow law phi = phi_c - b I
+        (with the sign of a dilation: positive when the faster layer is looser)."""
+        a, b = self.segment(1.0, True), self.segment(ratio, True)
+        return (b.porosity - a.porosity) / (b.inertial - a.inertial) if a and b else float("nan")
+
     def predicted_pressure(self, ratio: float) -> float:
         """Undrained pore pressure [E] of the drained dilation (module docstring)."""
         a, b = self.segment(1.0, True), self.segment(ratio, True)
@@ -139,6 +145,7 @@ class Cell:
     steady: int
     inertial: float
     eps: tuple[float, float, float]
+    slope: tuple[float, float, float]
     predicted: tuple[float, float, float]
     measured: tuple[float, float, float]
     pressure_ratio: tuple[float, float, float]
@@ -169,6 +176,7 @@ def cells(runs: list[StepRun]) -> list[Cell]:
             out.append(Cell(sigma=sigma, ratio=ratio, n_seeds=len(group), steady=sum(r.steady() for r in group),
                             inertial=float(np.mean([s.inertial for s in seg if s])),
                             eps=seed_mean([r.eps(ratio) for r in group]),
+                            slope=seed_mean([r.slope(ratio) for r in group]),
                             predicted=seed_mean([r.predicted_strengthening(ratio) for r in group]),
                             measured=seed_mean([r.measured_strengthening(ratio) for r in group]),
                             pressure_ratio=seed_mean([r.measured_pressure(ratio) / r.predicted_pressure(ratio)
@@ -186,11 +194,12 @@ def _ci(v: tuple[float, float, float], fmt: str) -> str:
 
 def summary_markdown(runs: list[StepRun]) -> str:
     """The table of cells (markdown), seed means and 95 % t intervals."""
-    lines = ["| sigma [E] | V2/V1 | seeds (steady) | I at V2 | eps = dphi/dlnV | d(tau/sigma) predicted "
-             "| d(tau/sigma) measured | P measured / predicted |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = ["| sigma [E] | V2/V1 | seeds (steady) | I at V2 | eps = dphi/dlnV | b = dphi/dI "
+             "| d(tau/sigma) predicted | d(tau/sigma) measured | P measured / predicted |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for c in cells(runs):
         lines.append(f"| {c.sigma:g} | {c.ratio:g} | {c.n_seeds} ({c.steady}) | {c.inertial:.2g} | "
-                     f"{_ci(c.eps, '.2e')} | {_ci(c.predicted, '.3f')} | {_ci(c.measured, '.3f')} | "
+                     f"{_ci(c.eps, '.2e')} | {_ci(c.slope, '.3f')} | {_ci(c.predicted, '.3f')} | "
+                     f"{_ci(c.measured, '.3f')} | "
                      f"{_ci(c.pressure_ratio, '.2f')} |")
     return "\n".join(lines) + "\n"

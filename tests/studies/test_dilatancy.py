@@ -57,6 +57,7 @@ def test_faster_sliding_dilates_and_undrained_dilation_hardens():
     assert run.steady() and drained.speed == pytest.approx(60 * SCENE["loading"]["velocity"], rel=0.1)
     assert drained.porosity - run.segment(1.0, True).porosity > 2e-3, run
     assert run.eps(60.0) > 5e-4
+    assert 0.03 < run.slope(60.0) < 0.5, run.slope(60.0)     # b of phi = phi_c - b I: ~0.17 on the study layer
     assert undrained.pressure < 0 and run.measured_strengthening(60.0) > 0, run
     assert run.predicted_pressure(60.0) < 0 and run.predicted_strengthening(60.0) > 0
 
