@@ -19,12 +19,16 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from ..config import FluidConfig
+from .seedboot import seed_mean
+
 @dataclass(frozen=True)
 class Segment:
     """The steady state (second half) of one segment at ratio r = V / V_1.
 
-    velocity [v0], inertial number I [-], porosity phi [-] and its batch-means standard error,
-    friction tau/sigma [-] (the spring's), wall speed mean [v0] and coefficient of variation [-],
+    velocity: the wall's mean speed [v0], inertial number I [-], porosity phi [-] and its
+    batch-means standard error, friction tau/sigma [-] (the spring's), the wall speed's
+    coefficient of variation [-],
     ``stuck``: the wall stopped at least once (stick-slip, not steady sliding), mean pore pressure
     [E] (NaN drained), duration [t0]."""
 
@@ -35,7 +39,6 @@ class Segment:
     porosity: float
     porosity_se: float
     friction: float
-    speed: float
     speed_cv: float
     stuck: bool
     pressure: float
@@ -51,7 +54,7 @@ class StepRun:
     perm: float
     stiff: float
     segments: tuple[Segment, ...]
-    beta: float = 36.0
+    beta: float = FluidConfig().compressibility
     wall_seconds: float = 0.0
 
     def segment(self, ratio: float, drained: bool) -> Segment | None:
@@ -100,7 +103,8 @@ class StepRun:
 
     @classmethod
     def from_dict(cls, data: dict) -> StepRun:
-        segments = tuple(Segment(**s) for s in data["segments"])
+        # (records written before 2026-12-08 also hold "speed", the same number as "velocity")
+        segments = tuple(Segment(**{k: v for k, v in s.items() if k != "speed"}) for s in data["segments"])
         return cls(**{**data, "segments": segments})
 
 
@@ -119,7 +123,7 @@ def steady_state(rows: list[dict], start_time: float, ratio: float, drained: boo
     return Segment(ratio=ratio, drained=drained, velocity=velocity,
                    inertial=velocity / thickness / math.sqrt(sigma),
                    porosity=float(phi.mean()), porosity_se=float(np.std(batches, ddof=1) / math.sqrt(len(batches))),
-                   friction=float(np.mean([r["tau_over_sigma"] for r in pick])), speed=velocity,
+                   friction=float(np.mean([r["tau_over_sigma"] for r in pick])),
                    speed_cv=float(np.std(speed) / abs(velocity)) if velocity else float("inf"),
                    stuck=bool(np.min(speed) <= 0.0), pressure=pressure, duration=float(end - start_time))
 
@@ -149,20 +153,6 @@ class Cell:
     predicted: tuple[float, float, float]
     measured: tuple[float, float, float]
     pressure_ratio: tuple[float, float, float]
-
-
-def seed_mean(values) -> tuple[float, float, float]:
-    """(mean, lower, upper): Student-t 95 % interval over seeds (NaN interval for one seed)."""
-    from scipy import stats
-
-    x = np.asarray([v for v in values if math.isfinite(v)], dtype=float)
-    if x.size == 0:
-        return (float("nan"),) * 3
-    m = float(x.mean())
-    if x.size < 2:
-        return m, float("nan"), float("nan")
-    h = float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
-    return m, m - h, m + h
 
 
 def cells(runs: list[StepRun]) -> list[Cell]:

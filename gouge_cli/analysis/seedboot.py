@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["seed_fraction", "seed_median", "cluster_bootstrap", "BOOT_SEED", "N_BOOT"]
+__all__ = ["seed_fraction", "seed_median", "seed_mean", "cluster_bootstrap", "BOOT_SEED", "N_BOOT"]
 
 BOOT_SEED = 20261127
 N_BOOT = 4000
@@ -81,3 +81,18 @@ def seed_median(groups, n_boot: int = N_BOOT, level: float = 0.95,
                 seed: int = BOOT_SEED) -> tuple[float, float, float]:
     """(median of all pairs, lower, upper): :func:`cluster_bootstrap` of the median."""
     return cluster_bootstrap(groups, np.median, n_boot, level, seed)
+
+
+def seed_mean(values, level: float = 0.95) -> tuple[float, float, float]:
+    """(mean, lower, upper) of one value per seed: the Student-t interval (no bootstrap: each seed
+    gives one number, e.g. a dilatancy coefficient); NaN bounds for one seed, all NaN for none."""
+    from scipy import stats
+
+    x = np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=float)
+    if x.size == 0:
+        return _NAN, _NAN, _NAN
+    m = float(x.mean())
+    if x.size < 2:
+        return m, _NAN, _NAN
+    h = float(stats.t.ppf(0.5 + level / 2.0, x.size - 1) * x.std(ddof=1) / np.sqrt(x.size))
+    return m, m - h, m + h

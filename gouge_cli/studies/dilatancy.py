@@ -29,12 +29,12 @@ each finishes, so an interrupted study keeps its finished points and a rerun ski
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..config import Config, build_config
+from ..config import Config, FluidConfig, build_config
 from ..errors import ConfigError
+from ..io.outputs import temporary
 from ..analysis.dilatancy import SEGMENT_COLUMNS, StepRun, cells, segment_rows, steady_state, summary_markdown
 
 #: Defaults: the velocity ratios, the spring [E/d], the slip per segment and of the run-in [d], kappa_c [d^2].
@@ -52,17 +52,13 @@ def scene(config: Config, seed: int, sigma: float, stiff: float) -> Config:
     scenes use to set the slip duration, would ring for many periods after each step)."""
     data = config.to_dict()
     data.pop("fluid", None)
-    data["seed"] = int(seed)
-    data["loading"] = {**data["loading"], "normal_stress": float(sigma), "spring_constant": float(stiff),
-                       "wall_mass": None}
-    return build_config(data)
+    return build_config(data, {"seed": int(seed), "loading.normal_stress": float(sigma),
+                               "loading.spring_constant": float(stiff), "loading.wall_mass": None})
 
 
 def wet(config: Config, perm: float) -> Config:
     """`config` with the pore fluid at kappa_c `perm` [d^2] (the fluid defaults otherwise)."""
-    data = config.to_dict()
-    data["fluid"] = {**(data.get("fluid") or {}), "permeability": float(perm)}
-    return build_config(data)
+    return build_config(config.to_dict(), {"fluid.permeability": float(perm)})
 
 
 def run_steps(config: Config, seed: int, sigma: float, *, ratios=RATIOS, perm: float | None = PERM,
@@ -79,8 +75,9 @@ def run_steps(config: Config, seed: int, sigma: float, *, ratios=RATIOS, perm: f
     v1 = dry.loading.velocity
     guarded_run(sim, run_in / v1, interval=run_in / v1 / 100)
     start = sim.state.arrays()
+    branches = [(dry, True)] + ([(wet(dry, perm), False)] if perm is not None else [])
     segments = []
-    for cfg, drained in ((dry, True), *(((wet(dry, perm), False),) if perm is not None else ())):
+    for cfg, drained in branches:
         for ratio in (1.0, *ratios):
             branch = Simulation(cfg, arrays=start)
             branch.set_loading_velocity(ratio * v1)
@@ -88,9 +85,9 @@ def run_steps(config: Config, seed: int, sigma: float, *, ratios=RATIOS, perm: f
             t0 = branch.state.time
             rows = guarded_run(branch, duration, interval=duration / SAMPLES)
             segments.append(steady_state(rows, t0, ratio, drained, sigma))
-    beta = wet(dry, perm).fluid.compressibility if perm is not None else 36.0
+    fluid = branches[-1][0].fluid or FluidConfig()      # (drained only: beta of the default fluid)
     return StepRun(seed=int(seed), sigma=float(sigma), perm=float(perm) if perm is not None else float("nan"),
-                   stiff=float(stiff), segments=tuple(segments), beta=float(beta),
+                   stiff=float(stiff), segments=tuple(segments), beta=float(fluid.compressibility),
                    wall_seconds=time.perf_counter() - t_start)
 
 
@@ -121,10 +118,9 @@ class Records:
     def add(self, run: StepRun):
         self.runs = [r for r in self.runs if not (r.seed == run.seed and r.sigma == run.sigma)] + [run]
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_suffix(f".tmp{os.getpid()}")
-        tmp.write_text(json.dumps({"scene": self.scene, "runs": [r.to_dict() for r in self.runs]}, indent=1,
-                                  allow_nan=True))
-        os.replace(tmp, self.path)
+        with temporary(self.path) as tmp:
+            tmp.write_text(json.dumps({"scene": self.scene, "runs": [r.to_dict() for r in self.runs]}, indent=1,
+                                      allow_nan=True))
 
 
 def scene_digest(config: Config, ratios, perm, stiff, slip, run_in) -> str:
@@ -151,6 +147,7 @@ def run_study(config: Config, seeds, sigmas, out: Path, *, workers: int = 1, on_
     each kept as it finishes; returns the requested runs (finished ones included). With
     `tables_only` nothing runs: the requested runs already kept."""
     from concurrent.futures import ProcessPoolExecutor, as_completed
+    from contextlib import nullcontext
 
     kw = {"ratios": tuple(kw.get("ratios", RATIOS)), "perm": kw.get("perm", PERM), "stiff": kw.get("stiff", STIFF),
           "slip": kw.get("slip", SLIP), "run_in": kw.get("run_in", RUN_IN)}
@@ -165,17 +162,12 @@ def run_study(config: Config, seeds, sigmas, out: Path, *, workers: int = 1, on_
         todo = []
     else:
         say(f"{len(todo)} of {len(seeds) * len(sigmas)} (seed, sigma) points to run, {workers} at a time")
-    if workers <= 1:
-        for args in todo:
-            run = _one(args)
+    with ProcessPoolExecutor(workers) if workers > 1 and todo else nullcontext() as pool:
+        finished = (map(_one, todo) if pool is None
+                    else (f.result() for f in as_completed([pool.submit(_one, a) for a in todo])))
+        for run in finished:
             records.add(run)
             say(f"seed {run.seed} sigma {run.sigma:g}: done ({run.wall_seconds:.0f} s)")
-    else:
-        with ProcessPoolExecutor(workers) as pool:
-            for fut in as_completed([pool.submit(_one, a) for a in todo]):
-                run = fut.result()
-                records.add(run)
-                say(f"seed {run.seed} sigma {run.sigma:g}: done ({run.wall_seconds:.0f} s)")
     wanted = {(int(s), float(g)) for s in seeds for g in sigmas}
     return [r for r in records.runs if (r.seed, r.sigma) in wanted]
 

@@ -118,3 +118,15 @@ def test_coverage_from_a_two_level_binomial_model(n_seeds, rho, least):
     assert seed_cov >= least
     if rho > 0:
         assert wilson_cov < least                 # the check can fail: it fails the per-pair view
+
+
+def test_seed_mean_is_the_student_t_interval():
+    """One value per seed: mean 2, sample sd 1, and with 2 degrees of freedom the t quantile has a
+    closed form, t_p = (2p - 1) sqrt(2 / (4 p (1 - p))) = 4.3027 at p = 0.975: half-width t / sqrt(3)
+    (to the quantile's numerical precision); one seed has no interval; non-finite values are left out."""
+    from gouge_cli.analysis.seedboot import seed_mean
+
+    m, lo, hi = seed_mean([1.0, 2.0, float("nan"), 3.0])
+    h = 0.95 * math.sqrt(2.0 / (4 * 0.975 * 0.025)) / math.sqrt(3.0)
+    assert m == 2.0 and lo == pytest.approx(2.0 - h, rel=1e-9) and hi == pytest.approx(2.0 + h, rel=1e-9)
+    assert np.isnan(seed_mean([5.0])[1]) and seed_mean([5.0])[0] == 5.0

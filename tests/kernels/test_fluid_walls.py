@@ -66,14 +66,19 @@ def prescribed(kind, lift=0.03, total=100.0, steps=100):
     else:
         rise = (np.abs(z0 - Z_TOP) < 0.3).astype(float)
     speed = lift / total
-    vz = speed * rise
+    return moving(x, z0, radius, speed * rise, speed, total, steps)
+
+
+def moving(x, z0, radius, vz, top_speed, total, steps):
+    """(grid, initial pore area): the undrained grid (kappa_c 1e-12) while the grains move at `vz`
+    and the top plane at `top_speed` [d/t0] for `total` t0 in `steps` updates."""
     zero = np.zeros_like(x)
     grid = FluidGrid.from_config(FluidConfig(permeability=1e-12), WIDTH, Z_BOT, Z_TOP, x.size)
     assert grid.init(x, z0, zero, vz, radius, Z_BOT, Z_TOP) == L.STATUS_OK
     pore0 = grid.porosity.sum() * grid.dx * grid.dz
     dt = total / steps
     for k in range(1, steps + 1):
-        status = grid.update(x, z0 + vz * dt * k, zero, vz, radius, Z_BOT, Z_TOP + speed * dt * k, dt)
+        status = grid.update(x, z0 + vz * dt * k, zero, vz, radius, Z_BOT, Z_TOP + top_speed * dt * k, dt)
         assert status == L.STATUS_OK
     return grid, pore0
 
@@ -114,15 +119,6 @@ def test_uniform_dilation_conserves_the_fluid_mass():
     x, z0, radius = wall_lattice()
     strain, total, steps = 1.5e-3, 100.0, 50
     vz = strain * (z0 - Z_BOT) / total
-    zero = np.zeros_like(x)
-    grid = FluidGrid.from_config(FluidConfig(permeability=1e-12), WIDTH, Z_BOT, Z_TOP, x.size)
-    assert grid.init(x, z0, zero, vz, radius, Z_BOT, Z_TOP) == L.STATUS_OK
-    pore0 = grid.porosity.sum() * grid.dx * grid.dz
-    dt = total / steps
-    for k in range(1, steps + 1):
-        factor = strain * k / steps
-        status = grid.update(x, z0 + factor * (z0 - Z_BOT), zero, vz, radius, Z_BOT,
-                             Z_TOP + factor * (Z_TOP - Z_BOT), dt)
-        assert status == L.STATUS_OK
+    grid, pore0 = moving(x, z0, radius, vz, strain * (Z_TOP - Z_BOT) / total, total, steps)
     assert grid.pressure.max() < 0.0
     assert abs(fluid_mass_error(grid, pore0)) < 1e-3

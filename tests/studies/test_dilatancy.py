@@ -54,7 +54,7 @@ def test_faster_sliding_dilates_and_undrained_dilation_hardens():
     (mean P < 0) and slides stronger than the drained one (dilatant hardening)."""
     run = D.run_steps(build_config(SCENE), SCENE["seed"], 3e-4, ratios=(60.0,), perm=1e-9, slip=12.0, run_in=10.0)
     drained, undrained = run.segment(60.0, True), run.segment(60.0, False)
-    assert run.steady() and drained.speed == pytest.approx(60 * SCENE["loading"]["velocity"], rel=0.1)
+    assert run.steady() and drained.velocity == pytest.approx(60 * SCENE["loading"]["velocity"], rel=0.1)
     assert drained.porosity - run.segment(1.0, True).porosity > 2e-3, run
     assert run.eps(60.0) > 5e-4
     assert 0.03 < run.slope(60.0) < 0.5, run.slope(60.0)     # b of phi = phi_c - b I: ~0.17 on the study layer
