@@ -22,7 +22,7 @@ corners : float64[N_CORNERS, N]    per-grain deposit cells and areas (see deposi
 partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit);
                             allocate it zeroed: between calls it is zero outside the columns flagged
                             in it (M_FLAG)
-taps_x : float64[nx], bands_z : float64[2, 2 nz - 1, nz]   the filter's operators (kernels.filter), scratch
+taps_x : float64[nx], bands_z : float64[3, 2 nz - 1, nz]   the filter's operators (kernels.filter), scratch
 drag_x, drag_z : float64[N]        force on each grain [E d^2]
 
 Status: STATUS_OK 0; STATUS_SOLVER 1 (CG not converged in max_iter: P is the
@@ -212,7 +212,7 @@ def _filter_part(stage, k, fluid, Lx, z_bot, z_top, mx, mz, i0, i1):
     elif stage == FORWARD_X:
         filter_x(_forward_field(fluid, k), tmp, fluid.taps_x, mx, i0, i1)
     elif stage == FORWARD_Z:
-        filter_z(tmp, _forward_field(fluid, k), fluid.bands_z[0], mz, i0, i1)
+        filter_z(tmp, _forward_field(fluid, k), fluid.bands_z[2 if k == 4 else 0], mz, i0, i1)
     elif stage == VELOCITIES:
         velocities_of_moments(fluid.s, fluid.ux, fluid.uz, i0, i1)
     elif stage == BACK_Z:

@@ -170,7 +170,9 @@ CELL_OUTSIDE = CELL_CODE - 1.0
 # same times vx and times vz - w(z), and the z-slope terms (a00 + a01) dfz, (a10 + a11) dfz
 M_S, M_U, M_W, M_G = 0, 4, 8, 12
 M_FLAG = 15            # in the first record of a grid column: 1 if the group added to that column
-N_MOMENTS = 16         # (14 moments and the flag; padded so that a record is two cache lines)
+M_H = 16               # the mirror shares of grad_z s (4): a W mu, mu = -+2/dz for a grain between a plane and
+                       # the boundary cell centre (kernels.deposit: the mirror-extended deposit's gradient)
+N_MOMENTS = 24         # (18 moments and the flag; padded so that a record is three cache lines)
 N_SUMMED = 14
 
 # ---- observables (kernels.measure) --------------------------------------------------------------

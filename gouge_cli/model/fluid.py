@@ -48,7 +48,7 @@ class FluidGrid:
       permeability [nx, nz] Carman-Kozeny kappa [d^2]
       div_u [nx, nz] solid volumetric strain rate over the last update [1/t0]
       drag_x, drag_z [N] fluid force on each grain [E d^2]
-      taps_x [nx], bands_z [2, 2 nz - 1, nz] the filter's operators (kernels.filter), rebuilt each update
+      taps_x [nx], bands_z [3, 2 nz - 1, nz] the filter's operators (kernels.filter), rebuilt each update
       params [N_PARAMS], state [N_STATE], work [N_WORK, nx, nz] (kernel layouts)
     Evolving state to checkpoint (everything else is rebuilt by each update):
     pressure, solid_fraction, state, drag_x, drag_z; see arrays() / restore().
@@ -106,7 +106,7 @@ class FluidGrid:
         self.work = np.zeros((L.N_GRID_WORK, nx, nz))
         self.partial = aligned_zeros((L.DEPOSIT_GROUPS, nx * nz, L.N_MOMENTS))   # (records on whole cache lines)
         self.taps_x = np.zeros(nx)
-        self.bands_z = np.zeros((2, 2 * nz - 1, nz))
+        self.bands_z = np.zeros((3, 2 * nz - 1, nz))
 
     @classmethod
     def from_config(cls, fluid_config, Lx: float, z_bot: float, z_top: float, n_grains: int) -> "FluidGrid":

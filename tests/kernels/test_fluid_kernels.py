@@ -401,7 +401,7 @@ def test_from_config_and_kernel_args():
     assert len(grid.kernel_args()) == 3 and len(grid.record()) == len(L.FluidArrays._fields)
     default = FluidGrid.from_config(FluidConfig(filter_width=4.0), 200.0, 1.0, 51.0, 10)   # h = w / 2
     assert (default.nx, default.nz) == (100, 25)
-    assert default.taps_x.shape == (100,) and default.bands_z.shape == (2, 49, 25)
+    assert default.taps_x.shape == (100,) and default.bands_z.shape == (3, 49, 25)
     thin = FluidGrid.from_config(FluidConfig(cell_size=20.0, filter_width=20.0), 5.0, 0.0, 3.0, 4)
     assert (thin.nx, thin.nz) == (1, 2)
     explicit = FluidGrid.from_config(FluidConfig(solver="explicit"), 20.0, 0.0, 10.0, 4)
