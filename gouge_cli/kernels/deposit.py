@@ -37,7 +37,7 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (CELL_BITS, CELL_CODE, CELL_OUTSIDE, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ, CR_U, CR_W,
+from .layout import (CELL_BITS, CELL_CODE, CELL_OUTSIDE, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ, CR_U, CR_W, CR_Z,
                      DEPOSIT_GROUPS, M_FLAG, M_G, M_H, M_S, M_U, M_W, N_MOMENTS)
 from .deposit_weights import NEAR_PLANE, cell_weights, corner_shares, grain_area, near_side_area
 from .lanes import add2, add4, add4_scaled
@@ -62,7 +62,8 @@ def deposit(discs, n, Lx, planes, fields, corners=None, partial=None, grain_kick
     corners : float64[N_CORNERS, >= n] out (rows CR_*), per grain: the flat index c00 of its
                  corner cell (i0, j0) (row CR_CELL, coded: kernels.layout.CELL_CODE; c00 < 0
                  for a grain outside the layer), the areas a00, a10, a01, a11 its four cells
-                 receive and d fz/dz, reused by grain_drag_at for the drag; and the velocity it
+                 receive and d fz/dz, reused by grain_drag_at for the drag, its height (z - z_bot) / (z_top - z_bot)
+                 (row CR_Z, for the planes' fluid force); and the velocity it
                  deposits (rows CR_U, CR_W), scratch.
     partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS] scratch. With corners and partial,
                  the fast form: vectorised passes for the cells and areas (_corners_range)
@@ -277,6 +278,8 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
     fnz = float(nz)
     cell, a00, a10, a01, a11, dfz = (corners[CR_CELL], corners[CR_A00], corners[CR_A10], corners[CR_A01],
                                      corners[CR_A11], corners[CR_DFZ])
+    height = corners[CR_Z]
+    inv_h = 1.0 / (z_top - z_bot)
     odd_count = 0
     for kk in range(first, last):
         k = np.uint64(kk)
@@ -303,6 +306,7 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
         a10[k] = a0 * fx
         a01[k] = a1 * (1.0 - fx)
         a11[k] = a1 * fx
+        height[k] = hb * inv_h
         cut = ((hb < r) & (abs(hb) > NEAR_PLANE * r)) | ((ht < r) & (abs(ht) > NEAR_PLANE * r))
         odd = cut | (area <= 0.0) | (fi < 0.0) | (fi != fi) | (fi >= fnx)   # (a NaN x is odd)
         dfz[k] = -1.0 if odd else (inv_dz if inside else 0.0)
@@ -499,6 +503,7 @@ def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w
             corners[CR_A01, k] = a01
             corners[CR_A11, k] = a11
             corners[CR_DFZ, k] = dfz
+            corners[CR_Z, k] = (z[k] - z_bot) / thickness
         a0 = area * (1.0 - fz)
         a1 = area * fz
         vxk = vx[k]

@@ -151,6 +151,8 @@ class FluidGrid:
         for name in self.EVOLVING:
             target = getattr(self, name)
             source = np.asarray(arrays[name])
+            if name == "state" and source.shape[0] < target.shape[0]:   # (a checkpoint before the plane forces)
+                source = np.concatenate([source, target[source.shape[0]:]])
             if source.shape != target.shape:
                 raise ValueError(f"fluid array {name!r} in the checkpoint has shape {source.shape}, "
                                  f"the scene needs {target.shape} (a different number of grains?)")

@@ -194,8 +194,24 @@ def test_solid_fraction_gradient_is_the_derivative_of_the_deposit():
         scratch = [np.empty((5, 4)) for _ in range(4)]
         _deposit(x + dxk, z + dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_plus, *scratch)
         _deposit(x - dxk, z - dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_minus, *scratch)
-        # moving every grain by +delta is moving the cells by -delta
-        np.testing.assert_allclose(-(s_plus - s_minus) / (2 * shift), slope, atol=1e-6)
+        # moving every grain by +delta is moving the cells by -delta; grad_z s is that of the
+        # mirror-extended deposit: a grain between a plane and the boundary centre adds -+2/dz its
+        # x weights in the boundary row (its clamped weights do not vary with z)
+        derivative = -(s_plus - s_minus) / (2 * shift)
+        if dzk:
+            dx, dz = width / 5, (z_top - z_bot) / 4
+            for xk, zk, rk in zip(x, z, radius):
+                zeta = (zk - z_bot) / dz - 0.5
+                if 0.0 <= zeta < 3.0:
+                    continue
+                row, mu = (0, -2.0 / dz) if zeta < 0.0 else (3, 2.0 / dz)
+                xi = xk / dx - 0.5
+                fx = xi - np.floor(xi)
+                i0 = int(np.floor(xi)) % 5
+                area = KW.in_domain_area(zk, rk, z_bot, z_top) / (dx * dz)
+                derivative[i0, row] += mu * area * (1 - fx)
+                derivative[(i0 + 1) % 5, row] += mu * area * fx
+        np.testing.assert_allclose(derivative, slope, atol=1e-6)
 
 
 def test_deposit_velocity_is_relative_to_the_stretching_grid():
