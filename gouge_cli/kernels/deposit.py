@@ -25,7 +25,12 @@ where w_bot, w_top are the plane velocities over the last fluid step. The
 gradient of s is taken from the same deposit, grad s_c = -sum_k a_k dW_kc/dx_k
 / (dx dz) (the derivative of s_c with respect to the cell position), not by
 differencing s between cells: only this one cancels the change of s when the
-packing slides rigidly through the grid.
+packing slides rigidly through the grid. In z it is the derivative of the deposit
+extended by its mirror image across each plane: a grain between a plane and the
+boundary cell centre (whose clamped weights do not vary with z) adds its x weights
+times -2/dz (bottom) or +2/dz (top) to the boundary row (itself and its image), so
+that grad_z s holds no jump of s to zero beyond the plane (a jump the source would
+carry with the solid's grid-relative velocity: docs/physics/fluid.md, NOTES-wall-force.md).
 
 Arrays and indices: :mod:`gouge_cli.kernels.layout` (CR_* corner rows, M_* moments). One grain's
 in-domain area and cell weights: :mod:`gouge_cli.kernels.deposit_weights` (shared with the drag).

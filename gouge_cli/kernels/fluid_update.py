@@ -178,8 +178,9 @@ def grid_stage(stage, index, parts, Lx, z_bot, z_top, dt_f, fluid, mx, mz):
     field's columns are cut into `parts` parts (k = index // parts). Each stage needs the one
     before it complete on every column; within a stage the parts are independent and each cell's
     sums run in one order, so any thread may take any part (the same bits). The filtered s and
-    grad s are S s and S grad s: the same linear map of the same deposit, so still its derivative
-    with respect to the cell position. With no filter (mx = mz = 0) the filter's stages do nothing."""
+    grad s are S s and S grad s (grad_z s through S_z with odd images, bands_z[2]): the same linear
+    map of the same deposit, so still its derivative with respect to the cell position, that of
+    the deposit mirror-extended across the planes (kernels.deposit). With no filter (mx = mz = 0) the filter's stages do nothing."""
     work = fluid.work
     nx = work.shape[1]
     part = index % parts
