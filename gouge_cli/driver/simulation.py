@@ -89,6 +89,9 @@ class Simulation:
         else:
             with numba_threads(self.threads):
                 status = self.fluid.init(s.x, s.z, s.vx, s.vz, s.radius, z_bot, z_top)
+                if status == 0:           # the top plane's fluid force onto the top body (kernels.fluid_update)
+                    from ..kernels.fluid_update import add_top_plane_force
+                    add_top_plane_force(self.fluid.record(), s.top, self.fluid.drag_z, status)
             if status != 0:
                 raise PhysicsError("the pressure grid could not be initialised (layer thickness <= 0)",
                                    "check the packing", s.time)

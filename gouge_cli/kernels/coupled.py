@@ -10,7 +10,7 @@ from .atomics import fetch_add
 from .layout import (BG_DAMPING, DT, FLUID_FAILED, K_NEED_REBUILD, K_STEP, LIST_OVERFLOW, OK, STATUS_NONFINITE,
                      THREADS, WIDTH, W_VX, W_VZ, W_Z)
 from .fluid_update import (BACK_Z, COLLECT, DENSITY, N_STAGES, PREDICT, TAPS, filter_half_widths, fluid_begin,
-                           fluid_drag, fluid_solve, grid_stage, pressure_choose, pressure_close, stage_parts)
+                           add_top_plane_force, fluid_drag, fluid_solve, grid_stage, pressure_choose, pressure_close, stage_parts)
 from .step import _step, close_step, move_range, open_step
 
 
@@ -64,6 +64,7 @@ def advance_fluid(grains, lists, pair, wall, clock, params, counters, nsteps, dr
                 status = lists.cell_count[0]
                 drifted = True
             fluid_drag(n, width, fluid, drag_x, drag_z, status)
+            add_top_plane_force(fluid, grains.top, drag_z, status)
         if status != 0:
             if owed and not drifted:
                 close_step(grains, wall, params)

@@ -25,7 +25,12 @@ where w_bot, w_top are the plane velocities over the last fluid step. The
 gradient of s is taken from the same deposit, grad s_c = -sum_k a_k dW_kc/dx_k
 / (dx dz) (the derivative of s_c with respect to the cell position), not by
 differencing s between cells: only this one cancels the change of s when the
-packing slides rigidly through the grid.
+packing slides rigidly through the grid. In z it is the derivative of the deposit
+extended by its mirror image across each plane: a grain between a plane and the
+boundary cell centre (whose clamped weights do not vary with z) adds its x weights
+times -2/dz (bottom) or +2/dz (top) to the boundary row (itself and its image), so
+that grad_z s holds no jump of s to zero beyond the plane (a jump the source would
+carry with the solid's grid-relative velocity: docs/physics/fluid.md, NOTES-wall-force.md).
 
 Arrays and indices: :mod:`gouge_cli.kernels.layout` (CR_* corner rows, M_* moments). One grain's
 in-domain area and cell weights: :mod:`gouge_cli.kernels.deposit_weights` (shared with the drag).
@@ -37,8 +42,8 @@ import numpy as np
 from numba import njit, prange
 
 from . import NUMBA_CACHE
-from .layout import (CELL_BITS, CELL_CODE, CELL_OUTSIDE, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ, CR_U, CR_W,
-                     DEPOSIT_GROUPS, M_FLAG, M_G, M_S, M_U, M_W, N_MOMENTS)
+from .layout import (CELL_BITS, CELL_CODE, CELL_OUTSIDE, CR_A00, CR_A01, CR_A10, CR_A11, CR_CELL, CR_DFZ, CR_U, CR_W, CR_Z,
+                     DEPOSIT_GROUPS, M_FLAG, M_G, M_H, M_S, M_U, M_W, N_MOMENTS)
 from .deposit_weights import NEAR_PLANE, cell_weights, corner_shares, grain_area, near_side_area
 from .lanes import add2, add4, add4_scaled
 from .step import closed_velocity
@@ -62,7 +67,8 @@ def deposit(discs, n, Lx, planes, fields, corners=None, partial=None, grain_kick
     corners : float64[N_CORNERS, >= n] out (rows CR_*), per grain: the flat index c00 of its
                  corner cell (i0, j0) (row CR_CELL, coded: kernels.layout.CELL_CODE; c00 < 0
                  for a grain outside the layer), the areas a00, a10, a01, a11 its four cells
-                 receive and d fz/dz, reused by grain_drag_at for the drag; and the velocity it
+                 receive and d fz/dz, reused by grain_drag_at for the drag, its height (z - z_bot) / (z_top - z_bot)
+                 (row CR_Z, for the planes' fluid force); and the velocity it
                  deposits (rows CR_U, CR_W), scratch.
     partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS] scratch. With corners and partial,
                  the fast form: vectorised passes for the cells and areas (_corners_range)
@@ -185,7 +191,7 @@ def _group(g, x, z, vx, vz, radius, n, Lx, z_bot, z_top, w_bot, w_top, nx, nz, c
     last = (g + 1) * n // DEPOSIT_GROUPS
     _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
     _velocity_range(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners, grain_kick)
-    _moments_range(first, last, partial[g], corners, nz)
+    _moments_range(first, last, partial[g], corners, nz, nz / (z_top - z_bot))
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")
@@ -277,6 +283,8 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
     fnz = float(nz)
     cell, a00, a10, a01, a11, dfz = (corners[CR_CELL], corners[CR_A00], corners[CR_A10], corners[CR_A01],
                                      corners[CR_A11], corners[CR_DFZ])
+    height = corners[CR_Z]
+    inv_h = 1.0 / (z_top - z_bot)
     odd_count = 0
     for kk in range(first, last):
         k = np.uint64(kk)
@@ -303,6 +311,7 @@ def _corners_range(x, z, radius, first, last, Lx, z_bot, z_top, nx, nz, corners)
         a10[k] = a0 * fx
         a01[k] = a1 * (1.0 - fx)
         a11[k] = a1 * fx
+        height[k] = hb * inv_h
         cut = ((hb < r) & (abs(hb) > NEAR_PLANE * r)) | ((ht < r) & (abs(ht) > NEAR_PLANE * r))
         odd = cut | (area <= 0.0) | (fi < 0.0) | (fi != fi) | (fi >= fnx)   # (a NaN x is odd)
         dfz[k] = -1.0 if odd else (inv_dz if inside else 0.0)
@@ -356,7 +365,7 @@ def _velocity_loop(z, vx, vz, first, last, z_bot, z_top, w_bot, w_top, corners, 
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")
-def _moments_range(first, last, moments, corners, nz):
+def _moments_range(first, last, moments, corners, nz, inv_dz):
     """moments (nx * nz, N_MOMENTS) of grains first:last from their corners and velocities,
     flagging (M_FLAG) the grid columns they may add to (_flag_columns). Zeroes the columns
     flagged by the previous call first, so the rest of moments must be zero on entry (a zeroed
@@ -385,6 +394,9 @@ def _moments_range(first, last, moments, corners, nz):
         add4_scaled(flat, r + np.uint64(M_U), a00, a10, a01, a11, us[k])
         add4_scaled(flat, r + np.uint64(M_W), a00, a10, a01, a11, ws[k])
         add2(flat, r + np.uint64(M_G), (a00 + a01) * dfz[k], (a10 + a11) * dfz[k])
+        if dfz[k] == 0.0:                     # between a plane and the boundary centre: the mirror term
+            mu = 2.0 * inv_dz if a00 + a10 == 0.0 else -2.0 * inv_dz
+            add4_scaled(flat, r + np.uint64(M_H), a00, a10, a01, a11, mu)
     _flag_columns(first, last, corners[CR_CELL], moments, nz)
 
 
@@ -439,6 +451,7 @@ def _expand_column(records, i, nx, nz, inv_dx, inv_area, solid, momentum_x, mome
     u0, u1, u2, u3 = np.uint64(M_U), np.uint64(M_U + 1), np.uint64(M_U + 2), np.uint64(M_U + 3)
     w0, w1, w2, w3 = np.uint64(M_W), np.uint64(M_W + 1), np.uint64(M_W + 2), np.uint64(M_W + 3)
     g0, g1 = np.uint64(M_G), np.uint64(M_G + 1)
+    h0, h1, h2, h3 = np.uint64(M_H), np.uint64(M_H + 1), np.uint64(M_H + 2), np.uint64(M_H + 3)
     own = (np.uint64(_source(records, i, nx, nz)) * np.uint64(nx) + np.uint64(i)) * np.uint64(nz) * m
     left = (np.uint64(_source(records, il, nx, nz)) * np.uint64(nx) + np.uint64(il)) * np.uint64(nz) * m
     c = np.uint64(i * nz)
@@ -448,6 +461,7 @@ def _expand_column(records, i, nx, nz, inv_dx, inv_area, solid, momentum_x, mome
         e = records[own + w0] + records[left + w1]
         gx = (records[own + s0] + records[own + s1]) - (records[left + s0] + records[left + s1])
         gz = records[own + g0] + records[left + g1]
+        hz = records[own + h0] + records[left + h1]
         if j > 0:
             below = own - m
             corner = left - m
@@ -456,8 +470,9 @@ def _expand_column(records, i, nx, nz, inv_dx, inv_area, solid, momentum_x, mome
             e += records[below + w2] + records[corner + w3]
             gx += (records[below + s2] + records[below + s3]) - (records[corner + s2] + records[corner + s3])
             gz -= records[below + g0] + records[corner + g1]
+            hz += records[below + h2] + records[corner + h3]
         solid[c], momentum_x[c], momentum_z[c], slope_x[c], slope_z[c] = _normalised(
-            a, b, e, gx * inv_dx, gz, inv_area)
+            a, b, e, gx * inv_dx, gz + hz, inv_area)
         own += m
         left += m
         c += np.uint64(1)
@@ -493,6 +508,7 @@ def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w
             corners[CR_A01, k] = a01
             corners[CR_A11, k] = a11
             corners[CR_DFZ, k] = dfz
+            corners[CR_Z, k] = (z[k] - z_bot) / thickness
         a0 = area * (1.0 - fz)
         a1 = area * fz
         vxk = vx[k]
@@ -521,6 +537,12 @@ def _deposit_range(x, z, vx, vz, radius, first, last, Lx, z_bot, z_top, w_bot, w
         slope_z[c01] -= gz0
         slope_z[c10] += gz1
         slope_z[c11] -= gz1
+        if dfz == 0.0:            # between a plane and the boundary centre: the grain and its mirror image
+            mu = 2.0 * inv_dz if fz == 1.0 else -2.0 * inv_dz
+            slope_z[c00] += a00 * mu
+            slope_z[c10] += a10 * mu
+            slope_z[c01] += a01 * mu
+            slope_z[c11] += a11 * mu
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy", inline="always")

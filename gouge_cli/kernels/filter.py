@@ -66,8 +66,9 @@ def filter_setup(width, dx, dz, taps_x, bands_z):
     widths in cells (0: no smoothing on that axis).
 
     taps_x : float64[nx] out, taps_x[m] for offsets 0..mx (symmetric), summing to 1 over -mx..mx
-    bands_z : float64[2, 2 nz - 1, nz] out, the diagonals of S_z and of S_z^T (module doc); zero
-              where a diagonal leaves the grid
+    bands_z : float64[2 or 3, 2 nz - 1, nz] out, the diagonals of S_z and of S_z^T (module doc); zero
+              where a diagonal leaves the grid; [2]: S_z with odd mirror images (the filter of an odd
+              field such as grad_z s of the mirror-extended deposit), normalised as the even one
     """
     nx = taps_x.shape[0]
     nz = bands_z.shape[2]
@@ -86,8 +87,8 @@ def filter_setup(width, dx, dz, taps_x, bands_z):
         reach = TRUNCATION * sz
         for b in range(2 * mz + 1):
             for j in range(nz):
-                bands_z[0, b, j] = 0.0
-                bands_z[1, b, j] = 0.0
+                for h in range(bands_z.shape[0]):
+                    bands_z[h, b, j] = 0.0
         for ji in range(nz):
             zi = (ji + 0.5) * dz
             total = 0.0
@@ -104,6 +105,14 @@ def filter_setup(width, dx, dz, taps_x, bands_z):
                 value = bands_z[1, mz + jo - ji, ji] / total
                 bands_z[1, mz + jo - ji, ji] = value
                 bands_z[0, mz + ji - jo, jo] = value          # the same entry on the row diagonal
+                if bands_z.shape[0] > 2:                      # the odd images (grad_z s), the even norm
+                    zo = (jo + 0.5) * dz
+                    odd = 0.0
+                    for sign, distance in ((1.0, zo - zi), (-1.0, zo + zi), (-1.0, 2.0 * thickness - zo - zi)):
+                        if abs(distance) <= reach:
+                            u = distance / sz
+                            odd += sign * math.exp(-0.5 * u * u)
+                    bands_z[2, mz + ji - jo, jo] = odd / total
     return mx, mz
 
 

@@ -22,7 +22,7 @@ corners : float64[N_CORNERS, N]    per-grain deposit cells and areas (see deposi
 partial : float64[DEPOSIT_GROUPS, nx * nz, N_MOMENTS]   per-group deposit moments (see deposit);
                             allocate it zeroed: between calls it is zero outside the columns flagged
                             in it (M_FLAG)
-taps_x : float64[nx], bands_z : float64[2, 2 nz - 1, nz]   the filter's operators (kernels.filter), scratch
+taps_x : float64[nx], bands_z : float64[3, 2 nz - 1, nz]   the filter's operators (kernels.filter), scratch
 drag_x, drag_z : float64[N]        force on each grain [E d^2]
 
 Status: STATUS_OK 0; STATUS_SOLVER 1 (CG not converged in max_iter: P is the
@@ -37,7 +37,7 @@ import numpy as np
 from numba import njit
 
 from . import NUMBA_CACHE
-from .layout import (AUTO_EXPLICIT, Deposited, Discs, Planes, G_CAPACITY, G_DIAG, G_FQ, G_FX, G_FZ, G_P, G_PREV, G_Q, G_R, G_RHS, G_SX,
+from .layout import (AUTO_EXPLICIT, CR_Z, S_F_BOT, S_F_TOP, Deposited, Discs, Planes, G_CAPACITY, G_DIAG, G_FQ, G_FX, G_FZ, G_P, G_PREV, G_Q, G_R, G_RHS, G_SX,
                      G_SZ, G_TB, G_TMP, G_TX, G_TZ, G_Z, P_BETA, P_ETA, P_FILTER_WIDTH, P_KAPPA_C, P_MAX_ITER,
                      P_MAX_SUBSTEPS, P_PHI_MAX, P_PHI_MIN, P_SAFETY, P_SOLVER, P_TOL, SOLVER_AUTO, SOLVER_EXPLICIT,
                      STATUS_NONFINITE, STATUS_OK, STATUS_SOLVER, S_DT_MAX, S_EXPLICIT_UPDATES, S_ITERATIONS,
@@ -178,8 +178,9 @@ def grid_stage(stage, index, parts, Lx, z_bot, z_top, dt_f, fluid, mx, mz):
     field's columns are cut into `parts` parts (k = index // parts). Each stage needs the one
     before it complete on every column; within a stage the parts are independent and each cell's
     sums run in one order, so any thread may take any part (the same bits). The filtered s and
-    grad s are S s and S grad s: the same linear map of the same deposit, so still its derivative
-    with respect to the cell position. With no filter (mx = mz = 0) the filter's stages do nothing."""
+    grad s are S s and S grad s (grad_z s through S_z with odd images, bands_z[2]): the same linear
+    map of the same deposit, so still its derivative with respect to the cell position, that of
+    the deposit mirror-extended across the planes (kernels.deposit). With no filter (mx = mz = 0) the filter's stages do nothing."""
     work = fluid.work
     nx = work.shape[1]
     part = index % parts
@@ -212,7 +213,7 @@ def _filter_part(stage, k, fluid, Lx, z_bot, z_top, mx, mz, i0, i1):
     elif stage == FORWARD_X:
         filter_x(_forward_field(fluid, k), tmp, fluid.taps_x, mx, i0, i1)
     elif stage == FORWARD_Z:
-        filter_z(tmp, _forward_field(fluid, k), fluid.bands_z[0], mz, i0, i1)
+        filter_z(tmp, _forward_field(fluid, k), fluid.bands_z[2 if k == 4 else 0], mz, i0, i1)
     elif stage == VELOCITIES:
         velocities_of_moments(fluid.s, fluid.ux, fluid.uz, i0, i1)
     elif stage == BACK_Z:
@@ -275,6 +276,52 @@ def fluid_drag(n, Lx, fluid, drag_x, drag_z, status):
         return
     work = fluid.work
     grain_drag_consistent(fluid.corners, n, work.shape[2], work.shape[1] / Lx, _triples(work), drag_x, drag_z)
+    fluid.state[S_F_BOT], fluid.state[S_F_TOP] = plane_forces(n, Lx, fluid, drag_z)
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def plane_forces(n, Lx, fluid, drag_z):
+    """(F_bot, F_top) [E d]: the fluid's z force on the two wall planes, minus the derivative of the
+    power the pressure source stores with respect to each plane's velocity (the deposit's adjoint
+    with respect to the planes, as the drag is with respect to the grains; docs/physics/fluid.md):
+
+        F_top = dx dz / H sum_c P'_c - sum_k F_k,z h_k,   F_bot = -dx dz / H sum_c P'_c - sum_k F_k,z (1 - h_k)
+
+    with P' the drag's (extrapolated) pressure over cells holding solid, F_k,z the grains' drag and
+    h_k = (z_k - z_bot) / H their height in the layer at the deposit (corners row CR_Z). The first
+    term is the cells' height growing with H (s = A / (dx dz)), the second the grid's stretching
+    under the grains (their weights and grid-relative velocity). A uniform suction -|P| pulls the
+    top plane down and the bottom one up by |P| L_x; F_bot + F_top + sum_k F_k,z = 0 (action and
+    reaction). The in-domain areas of the grains a plane cuts are left out of both this and the
+    drag: a top-wall grain moves with its plane, so its area does not change. Call after the drag."""
+    ext, s = fluid.work[G_PREV], fluid.s
+    nx, nz = s.shape
+    total = 0.0
+    for i in range(nx):
+        for j in range(nz):
+            if s[i, j] > 0.0:
+                total += ext[i, j]
+    cells_term = total * (Lx / nx) / nz
+    heights = fluid.corners[CR_Z]
+    lever = 0.0
+    drag = 0.0
+    for k in range(n):
+        if drag_z[k] != 0.0:                 # (a grain outside the layer has no drag)
+            lever += drag_z[k] * heights[k]
+            drag += drag_z[k]
+    return -cells_term - (drag - lever), cells_term - lever
+
+
+@njit(cache=NUMBA_CACHE, error_model="numpy")
+def add_top_plane_force(fluid, top, drag_z, status):
+    """Share the top plane's fluid force (state S_F_TOP, plane_forces) equally among the top-wall grains'
+    drag_z, so that kernels.step.wall_force takes it into the top body's force (the wet engine's
+    path; those grains move with the body, so their drag work is the plane's)."""
+    if status != STATUS_OK or top.shape[0] == 0:
+        return
+    share = fluid.state[S_F_TOP] / top.shape[0]
+    for m in range(top.shape[0]):
+        drag_z[top[m]] += share
 
 
 @njit(cache=NUMBA_CACHE, error_model="numpy")

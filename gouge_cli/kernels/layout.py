@@ -109,7 +109,9 @@ S_SUBSTEPS = 4       # explicit sub-steps of the last update
 S_DT_MAX = 5         # explicit stability bound of the last update [t0]
 S_UPDATES = 6        # number of fluid updates since fluid_init
 S_EXPLICIT_UPDATES = 7   # of them, those an explicit scheme did (solver explicit: FTCS; auto: Heun)
-N_FLUID_STATE = 8
+S_F_BOT = 8          # fluid force on the bottom plane [E d] (kernels.fluid_update.plane_forces)
+S_F_TOP = 9          # fluid force on the top plane [E d]; added to the top-wall grains' drag_z
+N_FLUID_STATE = 10
 
 G_TX = 0             # conductance of face (i+1/2, j)
 G_TZ = 1             # conductance of face (i, j+1/2), j < nz-1
@@ -157,8 +159,8 @@ DEPOSIT_GROUPS = 4     # grains deposit in this many fixed groups, summed in gro
 # corners rows: a grain's cell (i0, j0) as c00 + CELL_CODE (below), the areas its four cells
 # (i0, j0), (i1, j0), (i0, j0 + 1), (i1, j0 + 1) receive, and d fz / dz (see cell_weights); then
 # the velocity it deposits, vx and vz - w(z). (i1, j0) is c00 + nz, less nx nz past the last column.
-CR_CELL, CR_A00, CR_A10, CR_A01, CR_A11, CR_DFZ, CR_U, CR_W = range(8)
-N_CORNERS = 8
+CR_CELL, CR_A00, CR_A10, CR_A01, CR_A11, CR_DFZ, CR_U, CR_W, CR_Z = range(9)   # CR_Z: (z - z_bot) / H
+N_CORNERS = 9
 # the cell row holds the float c00 + 2^52, exact, whose bits read as int64 are CELL_BITS + c00 (the
 # float bits of 2^52 + v for integers 0 <= v < 2^52 are those of 2^52 plus v): vector loops write it,
 # scalar loops read an integer without a float -> int conversion. A grain outside the layer has
@@ -170,7 +172,9 @@ CELL_OUTSIDE = CELL_CODE - 1.0
 # same times vx and times vz - w(z), and the z-slope terms (a00 + a01) dfz, (a10 + a11) dfz
 M_S, M_U, M_W, M_G = 0, 4, 8, 12
 M_FLAG = 15            # in the first record of a grid column: 1 if the group added to that column
-N_MOMENTS = 16         # (14 moments and the flag; padded so that a record is two cache lines)
+M_H = 16               # the mirror shares of grad_z s (4): a W mu, mu = -+2/dz for a grain between a plane and
+                       # the boundary cell centre (kernels.deposit: the mirror-extended deposit's gradient)
+N_MOMENTS = 24         # (18 moments and the flag; padded so that a record is three cache lines)
 N_SUMMED = 14
 
 # ---- observables (kernels.measure) --------------------------------------------------------------

@@ -35,6 +35,12 @@ def aligned_zeros(shape: tuple, align: int = 64) -> np.ndarray:
     return buffer[start:start + size].reshape(shape)
 
 
+COUPLING_REVISION = 2
+"""Revision of the coupling's discretisation, part of every wet result's settings digest (campaign
+forks, dilatancy steps), so that results of two revisions never mix under one digest. Bumped when a
+change alters wet results: 1, gouge <= 0.2 and the filtered grid; 2, the wall planes' mirrored
+gradient of s and the pore pressure's force on the planes (docs/physics/fluid.md)."""
+
 SOLVERS = {"implicit": L.SOLVER_IMPLICIT, "explicit": L.SOLVER_EXPLICIT, "auto": L.SOLVER_AUTO}
 
 
@@ -48,7 +54,7 @@ class FluidGrid:
       permeability [nx, nz] Carman-Kozeny kappa [d^2]
       div_u [nx, nz] solid volumetric strain rate over the last update [1/t0]
       drag_x, drag_z [N] fluid force on each grain [E d^2]
-      taps_x [nx], bands_z [2, 2 nz - 1, nz] the filter's operators (kernels.filter), rebuilt each update
+      taps_x [nx], bands_z [3, 2 nz - 1, nz] the filter's operators (kernels.filter), rebuilt each update
       params [N_PARAMS], state [N_STATE], work [N_WORK, nx, nz] (kernel layouts)
     Evolving state to checkpoint (everything else is rebuilt by each update):
     pressure, solid_fraction, state, drag_x, drag_z; see arrays() / restore().
@@ -106,7 +112,7 @@ class FluidGrid:
         self.work = np.zeros((L.N_GRID_WORK, nx, nz))
         self.partial = aligned_zeros((L.DEPOSIT_GROUPS, nx * nz, L.N_MOMENTS))   # (records on whole cache lines)
         self.taps_x = np.zeros(nx)
-        self.bands_z = np.zeros((2, 2 * nz - 1, nz))
+        self.bands_z = np.zeros((3, 2 * nz - 1, nz))
 
     @classmethod
     def from_config(cls, fluid_config, Lx: float, z_bot: float, z_top: float, n_grains: int) -> "FluidGrid":
@@ -151,6 +157,8 @@ class FluidGrid:
         for name in self.EVOLVING:
             target = getattr(self, name)
             source = np.asarray(arrays[name])
+            if name == "state" and source.shape[0] < target.shape[0]:   # (a checkpoint before the plane forces)
+                source = np.concatenate([source, target[source.shape[0]:]])
             if source.shape != target.shape:
                 raise ValueError(f"fluid array {name!r} in the checkpoint has shape {source.shape}, "
                                  f"the scene needs {target.shape} (a different number of grains?)")

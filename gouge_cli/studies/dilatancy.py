@@ -35,6 +35,7 @@ from pathlib import Path
 from ..config import Config, FluidConfig, build_config
 from ..errors import ConfigError
 from ..io.outputs import temporary
+from ..model.fluid import COUPLING_REVISION
 from ..analysis.dilatancy import SEGMENT_COLUMNS, StepRun, cells, segment_rows, steady_state, summary_markdown
 
 #: Defaults: the velocity ratios, the spring [E/d], the slip per segment and of the run-in [d], kappa_c [d^2].
@@ -133,6 +134,7 @@ def scene_digest(config: Config, ratios, perm, stiff, slip, run_in) -> str:
     data["loading"] = {k: v for k, v in data["loading"].items() if k not in ("normal_stress", "spring_constant")}
     data["numerics"] = {k: v for k, v in data["numerics"].items() if k != "threads"}
     data["steps"] = {"ratios": list(map(float, ratios)), "perm": perm, "stiff": stiff, "slip": slip, "run_in": run_in}
+    data["coupling"] = COUPLING_REVISION
     return hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 

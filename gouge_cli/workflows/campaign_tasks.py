@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..config import Config, build_config
 from ..io.layout import ForkLayout, RunLayout
+from ..model.fluid import COUPLING_REVISION
 from .campaign_results import RUN_PIECE, PieceRecord, Results, fork_piece, settings_digest
 from .campaign_spec import CampaignSpec
 
@@ -282,7 +283,7 @@ class StudyAction(Action):
             return run
         study = self.spec.study
         out = {"run": digest(run), "slip": piece.slip, "permeabilities": list(study.permeabilities),
-               "duration": study.duration}
+               "duration": study.duration, "coupling": COUPLING_REVISION}
         if study.variants:
             out["variants"] = study.variants
         return out

@@ -29,7 +29,7 @@ from needs import two_threads
 
 REPO = Path(__file__).resolve().parents[2]
 
-GOLDEN = {"dry": "e9db53e39dbb39ad", "undrained": "998b6bbb331e65b6", "undrained-heun": "8d46fa779dee2700"}
+GOLDEN = {"dry": "e9db53e39dbb39ad", "undrained": "1fb8cb4453300786", "undrained-heun": "01e3d2fd4b2c9a7d"}
 DEMO_HASH, DEMO_SLIPS = "330891096953c867", 5
 
 

@@ -194,8 +194,24 @@ def test_solid_fraction_gradient_is_the_derivative_of_the_deposit():
         scratch = [np.empty((5, 4)) for _ in range(4)]
         _deposit(x + dxk, z + dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_plus, *scratch)
         _deposit(x - dxk, z - dzk, v, v, radius, x.size, width, z_bot, z_top, 0.0, 0.0, s_minus, *scratch)
-        # moving every grain by +delta is moving the cells by -delta
-        np.testing.assert_allclose(-(s_plus - s_minus) / (2 * shift), slope, atol=1e-6)
+        # moving every grain by +delta is moving the cells by -delta; grad_z s is that of the
+        # mirror-extended deposit: a grain between a plane and the boundary centre adds -+2/dz its
+        # x weights in the boundary row (its clamped weights do not vary with z)
+        derivative = -(s_plus - s_minus) / (2 * shift)
+        if dzk:
+            dx, dz = width / 5, (z_top - z_bot) / 4
+            for xk, zk, rk in zip(x, z, radius):
+                zeta = (zk - z_bot) / dz - 0.5
+                if 0.0 <= zeta < 3.0:
+                    continue
+                row, mu = (0, -2.0 / dz) if zeta < 0.0 else (3, 2.0 / dz)
+                xi = xk / dx - 0.5
+                fx = xi - np.floor(xi)
+                i0 = int(np.floor(xi)) % 5
+                area = KW.in_domain_area(zk, rk, z_bot, z_top) / (dx * dz)
+                derivative[i0, row] += mu * area * (1 - fx)
+                derivative[(i0 + 1) % 5, row] += mu * area * fx
+        np.testing.assert_allclose(derivative, slope, atol=1e-6)
 
 
 def test_deposit_velocity_is_relative_to_the_stretching_grid():
@@ -401,7 +417,7 @@ def test_from_config_and_kernel_args():
     assert len(grid.kernel_args()) == 3 and len(grid.record()) == len(L.FluidArrays._fields)
     default = FluidGrid.from_config(FluidConfig(filter_width=4.0), 200.0, 1.0, 51.0, 10)   # h = w / 2
     assert (default.nx, default.nz) == (100, 25)
-    assert default.taps_x.shape == (100,) and default.bands_z.shape == (2, 49, 25)
+    assert default.taps_x.shape == (100,) and default.bands_z.shape == (3, 49, 25)
     thin = FluidGrid.from_config(FluidConfig(cell_size=20.0, filter_width=20.0), 5.0, 0.0, 3.0, 4)
     assert (thin.nx, thin.nz) == (1, 2)
     explicit = FluidGrid.from_config(FluidConfig(solver="explicit"), 20.0, 0.0, 10.0, 4)

@@ -91,7 +91,6 @@ def fluid_mass_error(grid, pore0):
     return (fluid - pore0) / (pore - pore0)
 
 
-@pytest.mark.xfail(strict=True, reason=DEFECT)
 def test_still_material_next_to_a_still_wall_keeps_zero_pressure():
     """Band dilation: the two rows next to the still bottom wall hold material that does not move
     at all; their pressure must stay ~0 (3 % of the band's suction asked; measured: 16 %)."""
@@ -101,7 +100,6 @@ def test_still_material_next_to_a_still_wall_keeps_zero_pressure():
     assert np.abs(rows[:2]).max() < 0.03 * np.abs(rows).max()
 
 
-@pytest.mark.xfail(strict=True, reason=DEFECT)
 @pytest.mark.parametrize("kind", ["band", "gap"])
 def test_undrained_dilation_conserves_the_fluid_mass(kind):
     """Undrained, nothing crosses the walls: the fluid mass sum((1 + beta P) phi dV) keeps its

@@ -172,26 +172,31 @@ def test_dry_scene_builds_no_fluid_machinery():
     assert "fluid modules: []" in out
 
 
-def test_undrained_energy_budget_closes(sheared):
-    """Nearly undrained (kappa_c = 1e-12 d^2, De ~ 1e5): the work the drag does on the grains is
-    minus the change of the energy stored in the pore fluid, update by update (the drag is the
-    deposit's adjoint, taken at the pressure extrapolated to the middle of each interval): over
-    480 fluid updates of 0.25 t0 the stored energy follows minus the cumulated work within 15 % of
-    its range. A drag that is not the adjoint, or a lagged one, creates or destroys energy at a
-    rate that grows with the stored energy: the cause of the old high-De blow-up.
+@pytest.mark.parametrize("wall", ["still", "free"])
+def test_undrained_energy_budget_closes(sheared, wall):
+    """Nearly undrained (kappa_c = 1e-12 d^2, De ~ 1e5): the work the fluid's forces do on the grains
+    and the top wall is minus the change of the energy stored in the pore fluid, update by update
+    (the drag is the deposit's adjoint, taken at the pressure extrapolated to the middle of each
+    interval, and the planes' force its adjoint with respect to the planes, carried by the top-wall
+    grains' drag): over 480 fluid updates of 0.25 t0 the stored energy follows minus the cumulated
+    work within 5 % of its range. A drag that is not the adjoint, or a lagged one, creates or
+    destroys energy at a rate that grows with the stored energy: the cause of the old high-De
+    blow-up.
 
-    The wall planes are held still (a top wall 1e7 times heavier, at rest): the grid moves with
-    them, and a moving plane exchanges energy with the fluid through the grid (the layer's area
-    and the in-domain areas of the grains it crosses), which the drag's work does not count
-    (docs/physics/fluid.md). Measured with the wall free, fluid.step 0.5 t0, seed offsets 0, 1, 2:
-    0.9 %, 17.7 %, 24 % of the range (offset 1 starts in a slip, the wall at 2.4e-4 d/t0); wall
-    still: 0.4 %, 5.1 %, 13.8 %, and at 0.25 t0 offset 2 6.7 % (first order in the fluid step)."""
+    "still": the wall planes held still (a top wall 1e7 times heavier, at rest); "free": the wall
+    as loaded (it moves: up to 1.6e-2 d over the window on offset 1, which starts in a slip).
+    Measured (scripts/fluid_energy_budget.py, seed offsets 0, 1, 2, fluid.step 0.25 t0): still
+    0.12 %, 0.12 %, 0.64 %; free 0.09 %, 0.20 %, 0.20 %; at 0.5 t0 still 0.18 %, 0.31 %, 2.14 %,
+    free 0.03 %, 0.72 %, 0.33 %. Before the mirrored grad s and the plane force (gouge at 47726d3,
+    the same replay): still 0.38 %, 2.3 %, 5.1 % and free 5.0 %, 16.6 %, 23.4 % at 0.25 t0; free
+    0.93 %, 17.7 %, 24.4 % at 0.5 t0 (docs/physics/fluid.md)."""
     config, arrays = sheared
     branch = branch_config(config, 1e-12)
-    branch = branch.model_copy(update={"loading": branch.loading.model_copy(update={"wall_mass": 1e7}),
-                                       "fluid": branch.fluid.model_copy(update={"step": 0.25})})
+    branch = branch.model_copy(update={"fluid": branch.fluid.model_copy(update={"step": 0.25})})
     arrays = dict(arrays, wall=arrays["wall"].copy())
-    arrays["wall"][W_VZ] = 0.0
+    if wall == "still":
+        branch = branch.model_copy(update={"loading": branch.loading.model_copy(update={"wall_mass": 1e7})})
+        arrays["wall"][W_VZ] = 0.0
     sim = Simulation(branch, arrays=arrays)
     interval = sim.fluid_interval
     sim.advance(interval - sim.state.step % interval)      # to an update: the drag is then the new one
@@ -213,4 +218,4 @@ def test_undrained_energy_budget_closes(sheared):
     span = np.ptp(stored)
     assert span > 0 and np.ptp(work) > 0
     mismatch = float(np.abs(stored + work).max())
-    assert mismatch < 0.15 * span, (mismatch, span)
+    assert mismatch < 0.05 * span, (mismatch, span)
