@@ -7,17 +7,15 @@ pressure is split into the terms of the source
 
     P* - P^n = (1 + beta P^n) (s_e - s^n) / (beta s^n (1 - s_e)),  s_e = s^{n+1} + dt u_rel . grad s
 
-(the Eulerian change of s; u_x grad_x s; u_z grad_z s and the part of it due to the wall planes' jump
-in s), the diffusion with the P = 0 walls, the omitted advection of P, the clamped cells, and the
-fluid mass sum((1 + beta P) phi dV), which no undrained motion may change. A second replay takes
-grad_z s of the mirror-extended deposit (no plane jump; a source-only prototype, the drag left as
-it is). Usage: PYTHONPATH=. NUMBA_NUM_THREADS=1 python scripts/fluid_wall_budget.py [updates]
+(the Eulerian change of s; u_x grad_x s; u_z grad_z s, the mirror-extended deposit's gradient since
+coupling revision 2), the diffusion with the P = 0 walls, the omitted advection of P, the clamped cells, and the
+fluid mass sum((1 + beta P) phi dV), which no undrained motion may change (revision 1 lost 67 % of the pore area made here:
+docs/physics/fluid.md, "The wall planes"). Usage: PYTHONPATH=. NUMBA_NUM_THREADS=1 python scripts/fluid_wall_budget.py [updates]
 (about a minute after compilation for 1200 updates).
 """
 
 from __future__ import annotations
 
-import math
 import sys
 
 import numpy as np
@@ -27,8 +25,6 @@ from gouge_cli.driver.phases import guarded_run
 from gouge_cli.driver.simulation import Simulation
 from gouge_cli.kernels import fluid_update as KF
 from gouge_cli.kernels import layout as L
-from gouge_cli.kernels.deposit_weights import grain_area
-from gouge_cli.kernels.filter import TRUNCATION, filter_sigmas, half_widths
 from gouge_cli.model.fluid import FluidGrid
 from gouge_cli.studies import dilatancy as D
 
@@ -56,55 +52,7 @@ def record(updates):
     return wet.config, s.radius.copy(), s.width, every * wet.dt, start, frames
 
 
-def z_filter(width, dx, dz, nz, odd):
-    """S_z as a matrix (kernels.filter.filter_setup), with odd mirror images if `odd` (the filter
-    of an odd field: the gradient of an evenly extended one), normalised as the even one."""
-    _, sz = filter_sigmas(width, dx, dz)
-    _, mz = half_widths(width, dx, dz, 3, nz)
-    if mz == 0:
-        return np.eye(nz)
-    K = np.zeros((nz, nz))
-    thickness, reach = nz * dz, TRUNCATION * sz
-
-    def g(d):
-        return math.exp(-0.5 * (d / sz) ** 2) if abs(d) <= reach else 0.0
-
-    for ji in range(nz):
-        zi = (ji + 0.5) * dz
-        total = 0.0
-        for jo in range(max(0, ji - mz), min(nz, ji + mz + 1)):
-            zo = (jo + 0.5) * dz
-            images = g(zo + zi) + g(2 * thickness - zo - zi)
-            K[jo, ji] = g(zo - zi) + (-images if odd else images)
-            total += g(zo - zi) + images
-        K[:, ji] /= total
-    return K
-
-
-def mirror_gradient_z(grid, raw, x, z, radius, z_bot, z_top):
-    """grad_z s of the mirror-extended deposit from the raw (unfiltered) deposit gradient: the
-    grains between a plane and the first cell centre get weight slope +-2/dz on the boundary
-    cell (a grain and its image), then S_x and the odd S_z."""
-    nx, nz, Lx = grid.nx, grid.nz, grid.Lx
-    dx, dz = Lx / nx, (z_top - z_bot) / nz
-    raw = raw.copy()
-    zeta = (z - z_bot) / dz - 0.5
-    for k in np.flatnonzero((zeta < 0) | (np.floor(zeta) >= nz - 1)):
-        a = grain_area(z[k], radius[k], z_bot, z_top)
-        xi = x[k] / dx - 0.5
-        fx = xi - math.floor(xi)
-        i0 = int(math.floor(xi)) % nx
-        j, sign = (0, -1.0) if zeta[k] < 0 else (nz - 1, 1.0)
-        raw[i0, j] += sign * 2 * a * (1 - fx) / (dx * dz * dz)
-        raw[(i0 + 1) % nx, j] += sign * 2 * a * fx / (dx * dz * dz)
-    mx, _ = KF.filter_half_widths(Lx, z_bot, z_top, grid.record())
-    out = grid.taps_x[0] * raw
-    for m in range(1, mx + 1):
-        out += grid.taps_x[m] * (np.roll(raw, m, axis=0) + np.roll(raw, -m, axis=0))
-    return out @ z_filter(grid.params[L.P_FILTER_WIDTH], dx, dz, nz, odd=True).T
-
-
-def replay(config, radius, width, dt, start, frames, mirror):
+def replay(config, radius, width, dt, start, frames):
     P0, s0, state0, zb0, zt0 = start
     grid = FluidGrid.from_config(config.fluid, width, zb0, zt0, radius.size)
     grid.restore({"pressure": P0, "solid_fraction": s0, "state": state0,
@@ -113,23 +61,16 @@ def replay(config, radius, width, dt, start, frames, mirror):
     phi0 = grid.porosity.mean()
     mass0 = ((1 + BETA * grid.pressure) * grid.porosity).sum() * grid.dx * grid.dz
     pore0 = grid.porosity.sum() * grid.dx * grid.dz
-    terms = dict.fromkeys(("source", "eulerian", "ux_gx", "uz_gz", "jump", "diffusion", "advection"), 0.0)
+    terms = dict.fromkeys(("source", "eulerian", "ux_gx", "uz_gz", "diffusion", "advection"), 0.0)
     clamped, drift, prev = 0, 0.0, (zb0, zt0)
-    print(f"\n{'grad_z s of the mirror-extended deposit' if mirror else 'as run'}:")
     for n, (x, z, vx, vz, zb, zt, recorded) in enumerate(frames):
         Pn = grid.pressure.copy()
         assert KF.fluid_begin(x, z, vx, vz, radius, x.size, width, zb, zt, dt, f, None, True, True) == 0
-        raw = grid.work[L.G_SZ].copy()
         KF.grid_stages(KF.TAPS, KF.SOURCE, width, zb, zt, 0.0, f)
-        g_run = grid.work[L.G_SZ].copy()
-        g_mirror = mirror_gradient_z(grid, raw, x, z, radius, zb, zt)
-        if mirror:
-            grid.work[L.G_SZ][...] = g_mirror
         status = KF.pressure_stage(width, zb, zt, dt, f)
         KF.grid_stages(KF.BACK_Z, KF.N_STAGES, width, zb, zt, dt, f)
         assert status == 0
-        if not mirror:
-            drift = max(drift, float(np.abs(grid.pressure - recorded).max()))
+        drift = max(drift, float(np.abs(grid.pressure - recorded).max()))
         s, so = grid.solid_fraction, grid.previous_solid_fraction
         w = ((zb - prev[0]) + (np.arange(nz) + 0.5) / nz * ((zt - prev[1]) - (zb - prev[0]))) / dt
         prev = (zb, zt)
@@ -141,7 +82,6 @@ def replay(config, radius, width, dt, start, frames, mirror):
         terms["eulerian"] += (c * (s - so)).sum()
         terms["ux_gx"] += (c * dt * ux * grid.work[L.G_SX]).sum()
         terms["uz_gz"] += (c * dt * uz * grid.work[L.G_SZ]).sum()
-        terms["jump"] += (c * dt * uz * (g_run - g_mirror)).sum()
         padded = np.concatenate([np.zeros((grid.nx, 1)), Pn, np.zeros((grid.nx, 1))], axis=1)
         dpz = (padded[:, 2:] - padded[:, :-2]) / (2 * grid.dz)
         dpx = (np.roll(Pn, -1, 0) - np.roll(Pn, 1, 0)) / (2 * grid.dx)
@@ -154,16 +94,14 @@ def replay(config, radius, width, dt, start, frames, mirror):
             area = grid.dx * grid.dz
             mass = ((1 + BETA * grid.pressure) * grid.porosity).sum() * area
             pore = grid.porosity.sum() * area
-            jump = "" if mirror else f" (plane jump {terms['jump']:+.2e})"
             print(f"t {(n + 1) * dt:5.0f}: phi {phi:.4f} mean P {grid.pressure.mean():+.2e} undrained {predicted:+.2e} | "
                   f"source {terms['source']:+.2e} = Eulerian {terms['eulerian']:+.2e} + u_x.g_x {terms['ux_gx']:+.2e} "
-                  f"+ u_z.g_z {terms['uz_gz']:+.2e}{jump}; diffusion {terms['diffusion']:+.1e}; P advection omitted "
+                  f"+ u_z.g_z {terms['uz_gz']:+.2e}; diffusion {terms['diffusion']:+.1e}; P advection omitted "
                   f"{terms['advection']:+.1e} | fluid mass lost {(mass - mass0) / (pore - pore0):.0%} of the pore area made")
-    print(f"clamped cells {clamped}" + ("" if mirror else f"; replay vs run: max |dP| {drift:.1e}"))
+    print(f"clamped cells {clamped}; replay vs run: max |dP| {drift:.1e}")
     print("mean P per row [1e-4 E]:", np.array2string(grid.pressure.mean(0) * 1e4, precision=1, max_line_width=200))
 
 
 if __name__ == "__main__":
     run = record(int(sys.argv[1]) if len(sys.argv) > 1 else 1200)
-    replay(*run, mirror=False)
-    replay(*run, mirror=True)
+    replay(*run)

@@ -30,7 +30,7 @@ extended by its mirror image across each plane: a grain between a plane and the
 boundary cell centre (whose clamped weights do not vary with z) adds its x weights
 times -2/dz (bottom) or +2/dz (top) to the boundary row (itself and its image), so
 that grad_z s holds no jump of s to zero beyond the plane (a jump the source would
-carry with the solid's grid-relative velocity: docs/physics/fluid.md, NOTES-wall-force.md).
+carry with the solid's grid-relative velocity: docs/physics/fluid.md, "The wall planes").
 
 Arrays and indices: :mod:`gouge_cli.kernels.layout` (CR_* corner rows, M_* moments). One grain's
 in-domain area and cell weights: :mod:`gouge_cli.kernels.deposit_weights` (shared with the drag).

@@ -170,7 +170,8 @@ def grain_drag_at(corners, n, nz, pairs, drag_x, drag_z):
 #
 #     F_k = -a_k sum_c [ q_c dW_kc/dx_k + W_kc r_c ],   q = P / s,  r = (P / s^2) grad s,
 #
-# (grad s the deposit's own gradient). Summed by parts in the continuum this is -a_k grad P / s,
+# (grad s the deposit's own gradient, mirrored across the wall planes in z). Summed by parts in the
+# continuum this is -a_k grad P / s,
 # the drag of Eq. 12; on the grid it is its adjoint, so the coupling neither creates nor destroys
 # energy at any wavelength the grid holds (the gradient form, with the centred difference of P,
 # does not see grid-scale modes the deposit makes, and pumps energy into them when no diffusion

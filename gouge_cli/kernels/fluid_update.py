@@ -121,7 +121,8 @@ def _finish_grid(Lx, z_bot, z_top, fluid, w_bot, w_top, extrapolate):
 
 @njit(cache=NUMBA_CACHE, inline="always")
 def _deposited(fluid):
-    """The deposit's five fields in the grid's arrays: s, ux, uz and grad s in work rows G_SX, G_SZ."""
+    """The deposit's five fields in the grid's arrays: s, ux, uz and grad s in work rows G_SX, G_SZ
+    (grad_z s of the deposit mirrored across the wall planes)."""
     return Deposited(fluid.s, fluid.ux, fluid.uz, fluid.work[G_SX], fluid.work[G_SZ])
 
 
