@@ -41,6 +41,14 @@ forks, dilatancy steps), so that results of two revisions never mix under one di
 change alters wet results: 1, gouge <= 0.2 and the filtered grid; 2, the wall planes' mirrored
 gradient of s and the pore pressure's force on the planes (docs/physics/fluid.md)."""
 
+
+
+def saved_revision(arrays: dict) -> int:
+    """The coupling revision that wrote a checkpoint's fluid arrays (FluidGrid.arrays()): 1 where
+    the fluid state lacks the planes' forces (S_F_BOT, S_F_TOP), else COUPLING_REVISION."""
+    return 1 if np.shape(arrays["state"])[0] < L.S_F_TOP + 1 else COUPLING_REVISION
+
+
 SOLVERS = {"implicit": L.SOLVER_IMPLICIT, "explicit": L.SOLVER_EXPLICIT, "auto": L.SOLVER_AUTO}
 
 

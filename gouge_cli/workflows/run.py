@@ -18,6 +18,7 @@ from ..io.layout import RunLayout
 from ..io.recovery import mend_series_tail, rebuild_openable
 from ..io.runwriter import RunFile
 from ..io.verify import continued_problems
+from ..model.fluid import COUPLING_REVISION, saved_revision
 from ..model.scene import Scene
 from ..driver.compaction import compaction_phase
 from ..driver.phases import load_phase
@@ -168,6 +169,10 @@ def resume_run(run_dir: Path, live: bool | None = None, quiet: bool = False) -> 
         note = provenance.risk_line(ck.provenance, f"{latest}")
         if note:
             print(note, file=sys.stderr, flush=True)
+        if ck.fluid and saved_revision(ck.fluid) != COUPLING_REVISION:
+            print(f"note: {latest} was written by coupling revision {saved_revision(ck.fluid)}; the run continues "
+                  f"on revision {COUPLING_REVISION} (docs: physics/fluid, 'The wall planes'), so its wet results mix "
+                  "the two: run it again from its config for one revision's", file=sys.stderr, flush=True)
         sim = Simulation(ck.config, arrays=ck.state, fluid_arrays=ck.fluid)
         if sim.phase == L.COMPACTION:       # run.h5 holds nothing but its attributes yet: written anew
             writer = _fresh_run_file(sim, run_dir)

@@ -219,3 +219,26 @@ def test_undrained_energy_budget_closes(sheared, wall):
     assert span > 0 and np.ptp(work) > 0
     mismatch = float(np.abs(stored + work).max())
     assert mismatch < 0.05 * span, (mismatch, span)
+
+
+def test_revision_1_checkpoint_restores_with_the_planes_forces_cleared(sheared):
+    """A fluid state saved before the planes' forces (coupling revision 1: 8 numbers) is read as
+    revision 1 and restored with those two slots zero, the rest bit for bit; the next update sets
+    them (`gouge resume` says that such a run mixes the two revisions)."""
+    from gouge_cli.kernels.layout import N_FLUID_STATE, S_F_BOT, S_F_TOP
+    from gouge_cli.model.fluid import COUPLING_REVISION, saved_revision
+
+    config, arrays = sheared
+    wet = Simulation(branch_config(config, 1e-9), arrays=arrays)
+    wet.advance(300)
+    saved = wet.fluid.arrays()
+    assert saved_revision(saved) == COUPLING_REVISION == 2
+    old = {**saved, "state": saved["state"][:S_F_BOT]}
+    assert saved_revision(old) == 1
+    again = Simulation(branch_config(config, 1e-9), arrays=wet.state.arrays(), fluid_arrays=old)
+    state = again.fluid.state
+    assert state.shape == (N_FLUID_STATE,)
+    assert np.array_equal(state[:S_F_BOT], saved["state"][:S_F_BOT])
+    assert state[S_F_BOT] == state[S_F_TOP] == 0.0
+    again.advance(again.fluid_interval)
+    assert again.fluid.state[S_F_TOP] != 0.0
