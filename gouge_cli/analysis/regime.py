@@ -41,7 +41,7 @@ from .seedboot import seed_fraction, seed_median
 __all__ = ["wilson", "bootstrap_median", "regime_rows", "thesis_point", "REGIME_COLUMNS",
            "RATIO_MEDIANS", "FRACTIONS", "ThesisPoint", "delay_rows", "onset_delay", "DELAY_COLUMNS",
            "DELAY_EDGES", "delay_points", "abscissa", "DEBORAH_COLUMNS", "THESIS_NORMAL_STRESS",
-           "Estimate", "GroupCell", "group_cells", "COMPARED", "GROUP_COLUMNS"]
+           "Estimate", "GroupCell", "pair_deborah", "group_cells", "COMPARED", "GROUP_COLUMNS"]
 
 Z95 = 1.959963984540054
 #: the Deborah numbers of a group (median, min, max of each): the slip's, then the undrained branches'
@@ -199,6 +199,16 @@ def abscissa(row: dict) -> str:
     """The De column a regime row is placed at: the slip's (``deborah_drained``), or, for a table
     made before it existed, the undrained branches' largest (``deborah_max``)."""
     return "deborah_drained" if np.isfinite(_num(row, "deborah_drained_median")) else "deborah_max"
+
+
+def pair_deborah(pair_rows: list[dict]) -> tuple[str, list[float]]:
+    """(column, its finite values) of the measured De of a set of pairs, by :func:`abscissa`'s
+    rule: the slip's (``deborah_drained``) where any pair has it, else ``deborah_max``."""
+    for col in ("deborah_drained", "deborah_max"):
+        vals = [v for v in (_num(r, col) for r in pair_rows) if np.isfinite(v)]
+        if vals:
+            return col, vals
+    return "", []
 
 
 #: columns of regime.csv (the keys of a group's statistics, after kappa_c and seed)

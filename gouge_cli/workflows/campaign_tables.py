@@ -74,6 +74,7 @@ def write_results(s: Survey, log=print) -> dict:
     """table.csv (one row per run and per pair), phase_diagram.csv and the figures, from the
     results records alone."""
     from ..analysis.campaign_table import PHASE_COLUMNS, pairs_by_permeability, phase_cells, write_table
+    from ..analysis.regime import thesis_point
     from ..plots.phase import pair_histograms, phase_diagram_figure, sweep_figure
     from .campaign_spec import phase_axes
 
@@ -92,7 +93,7 @@ def write_results(s: Survey, log=print) -> dict:
             if cells:
                 out[f"phase_diagram{where}"] = phase_diagram_figure(
                     cells, x, y, figs / f"phase_diagram{where}.png",
-                    s.spec.name + (f", variant {variant}" if variant else ""))
+                    s.spec.name + (f", variant {variant}" if variant else ""), thesis_point())
             out[f"pair_histograms{where}"] = pair_histograms(pairs_by_permeability(vrows),
                                                              figs / variant if variant else figs)
             for c in cells:
