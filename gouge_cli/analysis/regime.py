@@ -224,8 +224,9 @@ COMPARED = ("type_II", "complex", "slower", "smaller_drop", "peak_velocity_ratio
 
 @dataclass(frozen=True)
 class Estimate:
-    """A pooled finding and its seed-level 95 % interval (seeds resampled, then pairs within them:
-    ``analysis.seedboot``; NaN bounds for a single seed): a fraction of pairs, or a median ratio."""
+    """A pooled finding and its seed-level 95 % interval (NaN bounds for a single seed): here a
+    fraction of pairs or a median ratio (seeds resampled, then pairs within them:
+    ``analysis.seedboot``); a mean over seeds in ``analysis.recurrence`` (Student t)."""
 
     value: float
     seed_lo: float
