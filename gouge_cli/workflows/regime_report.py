@@ -40,6 +40,14 @@ class Source:
     label: str
     rows: list[dict]
     keys: list[str]
+    table: bool = False        # a pair table: ``keys`` are candidates (:func:`table_keys`)
+
+
+def table_keys(rows: list[dict]) -> list[str]:
+    """The columns of a pair table that its pairs are never pooled over: the swept (dotted) config
+    keys and the study variant, those that take more than one value among ``rows``."""
+    candidates = [k for k in (rows[0] if rows else {}) if "." in k or k == "variant"]
+    return [k for k in candidates if len({str(r.get(k)) for r in rows}) > 1]
 
 
 def read_sources(args: list[str]) -> list[Source]:
@@ -59,7 +67,7 @@ def read_sources(args: list[str]) -> list[Source]:
         rows, keys = spec_pairs(path) if spec else (read_pairs(path), [])
         if not label and len(args) > 1:
             label = path.stem if spec else path.resolve().parent.name
-        sources.append(Source(label, rows, keys))
+        sources.append(Source(label, rows, keys, table=not spec))
     labels = [s.label for s in sources]
     if len(set(labels)) < len(labels):
         raise InputError(f"two inputs share a label ({', '.join(labels)}): give each LABEL=PATH")
@@ -70,22 +78,21 @@ def select_sources(sources: list[Source], where: dict[str, str]) -> list[Source]
     """:func:`select` on each source, with the conditions on its own columns: a condition on a
     column that one source lacks leaves that source whole (e.g. ``variant=w3`` keeps a campaign
     without variants), but a column that no source has is refused. A source left without pairs
-    is refused, naming it."""
+    is refused, naming it. A pair table's groups are then its :func:`table_keys` (a table.csv of
+    a thickness sweep is split by thickness, never pooled; one value left by --where: one map)."""
     if len(sources) == 1:
-        only = sources[0]
-        chosen = [Source(only.label, select(only.rows, where), only.keys)]
+        chosen = [(sources[0], select(sources[0].rows, where))]
     else:
         columns = [set(s.rows[0]) if s.rows else set() for s in sources]
         for key in where:
             if not any(key in c for c in columns):
                 raise InputError(f"--where {key}: no input has such a column")
-        chosen = [Source(s.label, select(s.rows, {k: v for k, v in where.items() if k in c}), s.keys)
-                  for s, c in zip(sources, columns)]
-    for s in chosen:
-        if not s.rows:
+        chosen = [(s, select(s.rows, {k: v for k, v in where.items() if k in c})) for s, c in zip(sources, columns)]
+    for s, rows in chosen:
+        if not rows:
             raise InputError(f"{s.label or 'input'}: no pair rows" +
                              (" with " + ", ".join(f"{k}={v}" for k, v in where.items()) if where else ""))
-    return chosen
+    return [Source(s.label, rows, table_keys(rows) if s.table else s.keys, s.table) for s, rows in chosen]
 
 
 def write_groups(pair_rows: list[dict], keys: list[str], root: Path, title: str = "") -> dict:
