@@ -223,15 +223,17 @@ def groups_figure(cells: list[GroupCell], thesis: ThesisPoint | None, path: Path
             ax.errorbar([thesis.deborah], [f], yerr=[[f - flo], [fhi - f]], fmt="*", color="k", ms=11,
                         capsize=2, lw=0.8, label="thesis (Table 3, Wilson)")
         _style(ax, key)
+    columns = sorted({c.de_column for c in cells})
     for ax in axes[1]:
-        ax.set_xlabel("measured De (median over the pairs; De of the slip, u₀: drained peak wall speed)"
-                      if all(c.de_column == "deborah_drained" for c in cells)
-                      else "measured De (median over the pairs; " + ", ".join(sorted({c.de_column for c in cells})) + ")")
+        ax.set_xlabel("measured De of the slip (median)" if columns == ["deborah_drained"]
+                      else f"measured De (median; {', '.join(columns)})")
     axes.flat[0].set_ylabel("fraction of pairs")
     axes.flat[3].set_ylabel("share of pairs / ratio")
-    axes.flat[0].legend(fontsize=7, loc="best")
-    fig.suptitle((title + ": " if title else "") + "pooled over seeds, bars: seed-level 95 % intervals", fontsize=10)
-    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7.5, loc="lower center", ncol=min(3, len(labels)), frameon=False)
+    fig.suptitle((title + ": " if title else "") + "pooled over seeds, bars: seed-level 95 % intervals; grey: the "
+                 "De range of the pairs (u₀: the drained twin's peak wall speed)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.07, 1, 0.95))
     return save(fig, path, {"Title": title or "findings by group",
                             "Description": "pair fractions and ratio medians against the slip's Deborah number, "
                                            "one line per group of pairs (never pooled), seed-level intervals"})
