@@ -15,6 +15,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from .catalog import catalog_table, read_catalog, summary_statistics
 from .forkpairs import classify_fork, PAIR_COLUMNS
 from .report import _write_csv
@@ -23,7 +25,7 @@ from ..io.runreader import RunReader
 
 PHASE_COLUMNS = ("x", "y", "n_pairs", "n_unclassified", "n_seeds", "n_complex", "n_type_I", "n_type_II",
                  "frac_complex", "frac_complex_lo", "frac_complex_hi", "frac_type_II", "frac_type_II_lo",
-                 "frac_type_II_hi")
+                 "frac_type_II_hi", "de_column", "de_median", "de_min", "de_max")
 RUN_STATS = ("stress_drop", "peak_velocity_over_Vs", "duration", "recurrence", "static_strength", "slip")
 _NAN = float("nan")
 
@@ -114,8 +116,10 @@ def phase_cells(pair_rows: list[dict], x: str, y: str | None) -> list[dict]:
     each with its seed-level 95 % interval (``_lo``, ``_hi``: :func:`.seedboot.seed_fraction`,
     the seed as the sampling unit, since a seed's pairs share one packing); n_seeds: the seeds
     with a classified pair in the cell (rows without a ``seed`` column count as one seed); the
-    intervals are NaN for a single seed, as in the regime map (:func:`.regime.seed_interval`)."""
-    from .regime import seed_interval
+    intervals are NaN for a single seed, as in the regime map (:func:`.regime.seed_interval`).
+    de_median, de_min, de_max: the measured De over the classified pairs (``de_column``:
+    :func:`.regime.pair_deborah`, the slip's where the pairs have it), for reading the cell by De."""
+    from .regime import pair_deborah, seed_interval
 
     xs = sorted({_axis_value(r, x) for r in pair_rows})
     ys = sorted({_axis_value(r, y) for r in pair_rows}) if y else [None]
@@ -133,10 +137,13 @@ def phase_cells(pair_rows: list[dict], x: str, y: str | None) -> list[dict]:
                 seeds.setdefault(r.get("seed"), []).append(r)
             c_lo, c_hi = seed_interval(list(seeds.values()), "complex")
             t_lo, t_hi = seed_interval(list(seeds.values()), "type_II")
+            de_column, de = pair_deborah(classified)
             cells.append({"x": xv, "y": yv, "n_pairs": n, "n_unclassified": len(inside) - n, "n_seeds": len(seeds),
                           "n_complex": n_c, "n_type_I": n_1, "n_type_II": n_2,
                           "frac_complex": n_c / n if n else _NAN, "frac_complex_lo": c_lo, "frac_complex_hi": c_hi,
-                          "frac_type_II": n_2 / n if n else _NAN, "frac_type_II_lo": t_lo, "frac_type_II_hi": t_hi})
+                          "frac_type_II": n_2 / n if n else _NAN, "frac_type_II_lo": t_lo, "frac_type_II_hi": t_hi,
+                          "de_column": de_column, "de_median": float(np.median(de)) if de else _NAN,
+                          "de_min": min(de) if de else _NAN, "de_max": max(de) if de else _NAN})
     return cells
 
 

@@ -40,7 +40,8 @@ from .seedboot import seed_fraction, seed_median
 
 __all__ = ["wilson", "bootstrap_median", "regime_rows", "thesis_point", "REGIME_COLUMNS",
            "RATIO_MEDIANS", "FRACTIONS", "ThesisPoint", "delay_rows", "onset_delay", "DELAY_COLUMNS",
-           "DELAY_EDGES", "delay_points", "abscissa", "DEBORAH_COLUMNS"]
+           "DELAY_EDGES", "delay_points", "abscissa", "DEBORAH_COLUMNS", "THESIS_NORMAL_STRESS",
+           "Estimate", "GroupCell", "pair_deborah", "group_cells", "COMPARED", "GROUP_COLUMNS"]
 
 Z95 = 1.959963984540054
 #: the Deborah numbers of a group (median, min, max of each): the slip's, then the undrained branches'
@@ -200,8 +201,110 @@ def abscissa(row: dict) -> str:
     return "deborah_drained" if np.isfinite(_num(row, "deborah_drained_median")) else "deborah_max"
 
 
+def pair_deborah(pair_rows: list[dict]) -> tuple[str, list[float]]:
+    """(column, its finite values) of the measured De of a set of pairs, by :func:`abscissa`'s
+    rule: the slip's (``deborah_drained``) where any pair has it, else ``deborah_max``."""
+    for col in ("deborah_drained", "deborah_max"):
+        vals = [v for v in (_num(r, col) for r in pair_rows) if np.isfinite(v)]
+        if vals:
+            return col, vals
+    return "", []
+
+
 #: columns of regime.csv (the keys of a group's statistics, after kappa_c and seed)
 REGIME_COLUMNS = ["kappa_c", "seed", *_group_stats([]).keys(), *_seed_stats([]).keys()]
+
+
+# --------------------------------------------------------------------------- groups on one set of axes
+
+#: the findings compared between groups of pairs (thicknesses, stresses, couplings): four
+#: fractions, then two medians of undrained / drained ratios
+COMPARED = ("type_II", "complex", "slower", "smaller_drop", "peak_velocity_ratio", "stress_drop_ratio")
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A pooled finding and its seed-level 95 % interval (NaN bounds for a single seed): here a
+    fraction of pairs or a median ratio (seeds resampled, then pairs within them:
+    ``analysis.seedboot``); a mean over seeds in ``analysis.recurrence`` (Student t)."""
+
+    value: float
+    seed_lo: float
+    seed_hi: float
+
+
+@dataclass(frozen=True)
+class GroupCell:
+    """One group of pairs (a layer thickness, a normal stress, a coupling: never pooled with
+    another) at one permeability, pooled over its seeds: a row of groups.csv, a point of groups.png.
+
+    kappa_c: the undrained branches' [d^2]. n_pairs: the non-transient pairs; n_classified: those
+    with a slip in both branches (the fractions' denominator), of which n_type_II, n_complex,
+    n_slower and n_smaller_drop. de_column: the pair column De is read from (:func:`abscissa`:
+    ``deborah_drained``, the slip's, or ``deborah_max`` in tables made before it); de_median /
+    de_min / de_max: over the cell's pairs (the figure's abscissa and its range); de_max_median:
+    the undrained branches' largest De, kept beside it. The six findings (:data:`COMPARED`).
+    """
+
+    group: str
+    kappa_c: float
+    n_seeds: int
+    n_pairs: int
+    n_classified: int
+    n_type_II: int
+    n_complex: int
+    n_slower: int
+    n_smaller_drop: int
+    de_column: str
+    de_median: float
+    de_min: float
+    de_max: float
+    de_max_median: float
+    type_II: Estimate
+    complex: Estimate
+    slower: Estimate
+    smaller_drop: Estimate
+    peak_velocity_ratio: Estimate
+    stress_drop_ratio: Estimate
+
+    def finding(self, key: str) -> Estimate:
+        """The :data:`COMPARED` finding ``key``."""
+        if key not in COMPARED:
+            raise KeyError(key)
+        return getattr(self, key)
+
+    def csv_row(self) -> dict:
+        """The cell as one flat row (:data:`GROUP_COLUMNS`): each finding as key, key_seed_lo, key_seed_hi."""
+        row = {k: getattr(self, k) for k in _GROUP_SCALARS}
+        for key in COMPARED:
+            e = self.finding(key)
+            row[key], row[f"{key}_seed_lo"], row[f"{key}_seed_hi"] = e.value, e.seed_lo, e.seed_hi
+        return row
+
+
+_GROUP_SCALARS = ("group", "kappa_c", "n_seeds", "n_pairs", "n_classified", "n_type_II", "n_complex", "n_slower",
+                  "n_smaller_drop", "de_column", "de_median", "de_min", "de_max", "de_max_median")
+#: columns of groups.csv
+GROUP_COLUMNS = [*_GROUP_SCALARS, *[f"{k}{s}" for k in COMPARED for s in ("", "_seed_lo", "_seed_hi")]]
+
+
+def group_cells(group: str, rows: list[dict]) -> list[GroupCell]:
+    """The pooled rows ("all") of :func:`regime_rows` of one group of pairs as :class:`GroupCell`,
+    in order of kappa_c."""
+    out = []
+    for r in rows:
+        if r["seed"] != "all":
+            continue
+        x = abscissa(r)
+
+        def est(key: str) -> Estimate:
+            value = r[f"{key}_median"] if key in RATIO_MEDIANS else r[key]
+            return Estimate(value, r[f"{key}_seed_lo"], r[f"{key}_seed_hi"])
+
+        out.append(GroupCell(group, r["kappa_c"], r["n_seeds"], r["n_pairs"], r["n_classified"], r["n_type_II"],
+                             r["n_complex"], r["n_slower"], r["n_smaller_drop"], x, r[f"{x}_median"], r[f"{x}_min"],
+                             r[f"{x}_max"], r["deborah_max_median"], *(est(k) for k in COMPARED)))
+    return out
 
 
 # --------------------------------------------------------------------------- slower, at equal footing
@@ -293,6 +396,17 @@ class ThesisPoint:
     fractions: dict          # name -> (fraction, lower, upper)
     n_pairs: int
     assumptions: str
+    kappa_c: float = 1e-5          # its permeability [d^2] (Table 3)
+    normal_stress: float = 3e-4    # its sigma [E]: THESIS_NORMAL_STRESS
+
+    def at(self, key: str) -> float | None:
+        """The thesis's value of a phase-diagram axis (``permeability`` [d^2] or
+        ``loading.normal_stress`` [E]); None for an axis it has no value on."""
+        return {"permeability": self.kappa_c, "loading.normal_stress": self.normal_stress}.get(key)
+
+
+#: the thesis's normal stress [E]: every run of its Table 3 (configs/thesis/*.yaml, loading.normal_stress)
+THESIS_NORMAL_STRESS = 3e-4
 
 
 def _diffusivity(kappa_c: float, phi: float, eta: float, beta: float) -> float:
@@ -330,4 +444,4 @@ def thesis_point(kappa_c: float = 1e-5, eta: float = 1.43e-7, beta: float = 36.0
     text = ("De = l u0 / D at the undrained peak: l = 25 d (12.5-25), u0 = 7.53 V_s (5-15 V_s), "
             f"V_s = {v_med:g} v0 (Table 3 median; {v_lo:g}-{v_hi:g}), D at kappa_c = {perm_text(kappa_c)} d^2 "
             "and porosity 0.15 (0.12-0.20)")
-    return ThesisPoint(de[0], de[1], de[2], fractions, n, text)
+    return ThesisPoint(de[0], de[1], de[2], fractions, n, text, kappa_c, THESIS_NORMAL_STRESS)

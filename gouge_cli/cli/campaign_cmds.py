@@ -95,19 +95,21 @@ def register(app: typer.Typer):
     @app.command()
     @guarded
     def regime(
-        pairs: Path = typer.Argument(..., help="a pair table (a campaign's table.csv or a pairs.csv: rows of kind "
-                                     "'pair'), or a campaign file (its results records; one map per variant and "
-                                     "swept value)"),
+        inputs: List[str] = typer.Argument(..., help="[LABEL=]PATH, one or more: a pair table (a campaign's "
+                                           "table.csv or a pairs.csv: rows of kind 'pair'), or a campaign file "
+                                           "(its results records; one map per variant and swept value). Several "
+                                           "inputs are never pooled: their groups are drawn on one set of axes "
+                                           "(groups.png, groups.csv), each under LABEL (default: the file's name)"),
         out_dir: Path = typer.Option(..., "--out", help="folder for regime.csv, delay.csv, regime_map.png and regime_delay.png"),
         title: str = typer.Option("", "--title", help="title line of the figures"),
         where: List[str] = typer.Option([], "--where", help="KEY=VALUE: only the pairs whose swept column KEY holds "
-                                        "VALUE (e.g. packing.n_grains=3640); repeatable"),
+                                        "VALUE (e.g. packing.n_grains=3640); repeatable; with several inputs, an "
+                                        "input without column KEY is kept whole (e.g. variant=w3)"),
     ):
         """Write the regime map (per seed, pooled, seed-level and per-pair intervals) and the onset-delay
-        view from a table of pairs; nothing is simulated."""
+        view from tables of pairs; nothing is simulated."""
         from ..errors import InputError
-        from ..workflows.campaign_tables import spec_pairs
-        from ..workflows.regime_report import read_pairs, select, write_groups, write_regime
+        from ..workflows.regime_report import read_sources, select_sources, write_regime, write_sources
 
         conditions = {}
         for item in where:
@@ -115,14 +117,10 @@ def register(app: typer.Typer):
             if not sep or not key.strip():
                 raise InputError(f"--where {item!r}: give KEY=VALUE, e.g. loading.normal_stress=3e-4")
             conditions[key.strip()] = value.strip()
-        keys: list[str] = []
-        if pairs.suffix in (".yaml", ".yml") and pairs.is_file():
-            rows, keys = spec_pairs(pairs)
+        sources = select_sources(read_sources(inputs), conditions)
+        if len(sources) == 1 and not sources[0].keys:
+            written = write_regime(sources[0].rows, out_dir, out_dir, title)
         else:
-            rows = read_pairs(pairs)
-        rows = select(rows, conditions)
-        if not rows:
-            raise InputError(f"{pairs}: no pair rows" + (f" with {', '.join(where)}" if where else ""))
-        written = write_groups(rows, keys, out_dir, title) if keys else write_regime(rows, out_dir, out_dir, title)
+            written = write_sources(sources, out_dir, title)
         for name, path in written.items():
             out.print(f"{name}: {path}", highlight=False, markup=False)

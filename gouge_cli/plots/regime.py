@@ -23,7 +23,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..analysis.regime import ThesisPoint, abscissa
+from ..analysis.regime import COMPARED, GroupCell, ThesisPoint, abscissa
 from .style import DPI, save
 
 _COLOURS = {"type_I": "#d62728", "type_II": "#1f5fbf", "tie": "0.5", "type_I_sign": "#ff7f0e",
@@ -37,6 +37,7 @@ _PANELS = ("type_I", "type_II", "tie", "type_I_sign", "complex", "slower", "smal
            "peak_velocity_ratio", "stress_drop_ratio", "duration_ratio")
 _MEDIANS = ("peak_velocity_ratio", "stress_drop_ratio", "duration_ratio")
 _WIDE, _RIGHT = 1.0 / 1.10, 1.13           # log-x offsets of the per-pair bar and the seed strip
+_MARKERS = ("o", "s", "^", "D", "v", "P")     # one per group in groups_figure
 
 
 def _mid(r: dict, key: str) -> float:
@@ -188,47 +189,51 @@ def delay_figure(pair_rows: list[dict], delay: list[dict], path: Path, title: st
                             "Description": "ratios and slower / smaller-drop shares against the undrained onset delay"})
 
 
-_COMPARED = ("type_II", "complex", "slower", "smaller_drop", "peak_velocity_ratio", "stress_drop_ratio")
-
-
-def groups_figure(groups: list[tuple[str, list[dict]]], thesis: ThesisPoint | None, path: Path,
-                  title: str = "") -> Path:
+def groups_figure(cells: list[GroupCell], thesis: ThesisPoint | None, path: Path, title: str = "") -> Path:
     """The findings of several groups of pairs (couplings, layer thicknesses, normal stresses: never
-    pooled) on one set of axes against the slip's De: per group and permeability the pooled value
-    with its seed-level 95 % interval, a group's permeabilities joined by a line. groups: (label,
-    :func:`~gouge_cli.analysis.regime.regime_rows` rows) per group."""
+    pooled) on one set of axes against the measured De (``GroupCell.de_median``; the thin grey
+    bar: its range over the cell's pairs): per group and permeability the pooled value with its
+    seed-level 95 % interval, a group's permeabilities joined by a line, one colour and marker
+    per group. cells: :func:`~gouge_cli.analysis.regime.group_cells` of every group (groups.csv's rows)."""
     fig, axes = plt.subplots(2, 3, figsize=(14.0, 7.4), dpi=DPI, sharex=True)
     cmap = plt.get_cmap("tab10")
-    for g, (label, rows) in enumerate(groups):
-        pooled = sorted((r for r in rows if r["seed"] == "all" and np.isfinite(r[f"{abscissa(r)}_median"])),
-                        key=lambda r: r[f"{abscissa(r)}_median"])
+    names = list(dict.fromkeys(c.group for c in cells))
+    for g, label in enumerate(names):
+        pooled = sorted((c for c in cells if c.group == label and np.isfinite(c.de_median)), key=lambda c: c.de_median)
         if not pooled:
             continue
-        n_seeds = max(int(r["n_seeds"]) for r in pooled)
-        shift = 1.0 + 0.04 * (g - (len(groups) - 1) / 2)          # (groups side by side on a log axis)
-        for ax, key in zip(axes.flat, _COMPARED):
-            de = np.array([r[f"{abscissa(r)}_median"] for r in pooled]) * shift
-            mid = np.array([_mid(r, key) for r in pooled])
-            lo = np.array([r.get(f"{key}_seed_lo", np.nan) for r in pooled])
-            hi = np.array([r.get(f"{key}_seed_hi", np.nan) for r in pooled])
-            ax.plot(de, mid, "-o", color=cmap(g % 10), ms=5, mec="k", mew=0.4, lw=1.0,
+        n_seeds = max(c.n_seeds for c in pooled)
+        shift = 1.0 + 0.04 * (g - (len(names) - 1) / 2)          # (groups side by side on a log axis)
+        colour, marker = cmap(g % 10), _MARKERS[g % len(_MARKERS)]
+        for ax, key in zip(axes.flat, COMPARED):
+            de = np.array([c.de_median for c in pooled]) * shift
+            est = [c.finding(key) for c in pooled]
+            mid = np.array([e.value for e in est])
+            lo, hi = np.array([e.seed_lo for e in est]), np.array([e.seed_hi for e in est])
+            for c, m in zip(pooled, mid):
+                ax.plot([c.de_min * shift, c.de_max * shift], [m, m], color="0.8", lw=0.7, zorder=1)
+            ax.plot(de, mid, "-", marker=marker, color=colour, ms=5, mec="k", mew=0.4, lw=1.0,
                     label=f"{label} ({n_seeds} seeds)")
             ok = np.isfinite(lo) & np.isfinite(hi)
             ax.errorbar(de[ok], mid[ok], yerr=[np.maximum(mid - lo, 0)[ok], np.maximum(hi - mid, 0)[ok]], fmt="none",
-                        ecolor=cmap(g % 10), elinewidth=2.0, alpha=0.45, capsize=0)
-    for ax, key in zip(axes.flat, _COMPARED):
+                        ecolor=colour, elinewidth=2.0, alpha=0.45, capsize=0)
+    for ax, key in zip(axes.flat, COMPARED):
         if thesis is not None and key in thesis.fractions:
             f, flo, fhi = thesis.fractions[key]
             ax.errorbar([thesis.deborah], [f], yerr=[[f - flo], [fhi - f]], fmt="*", color="k", ms=11,
                         capsize=2, lw=0.8, label="thesis (Table 3, Wilson)")
         _style(ax, key)
+    columns = sorted({c.de_column for c in cells})
     for ax in axes[1]:
-        ax.set_xlabel("De of the slip (u₀: drained peak wall speed)")
+        ax.set_xlabel("measured De of the slip (median)" if columns == ["deborah_drained"]
+                      else f"measured De (median; {', '.join(columns)})")
     axes.flat[0].set_ylabel("fraction of pairs")
     axes.flat[3].set_ylabel("share of pairs / ratio")
-    axes.flat[0].legend(fontsize=7, loc="best")
-    fig.suptitle((title + ": " if title else "") + "pooled over seeds, bars: seed-level 95 % intervals", fontsize=10)
-    fig.tight_layout(rect=(0, 0, 1, 0.95))
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7.5, loc="lower center", ncol=min(3, len(labels)), frameon=False)
+    fig.suptitle((title + ": " if title else "") + "pooled over seeds, bars: seed-level 95 % intervals; grey: the "
+                 "De range of the pairs (u₀: the drained twin's peak wall speed)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.07, 1, 0.95))
     return save(fig, path, {"Title": title or "findings by group",
                             "Description": "pair fractions and ratio medians against the slip's Deborah number, "
                                            "one line per group of pairs (never pooled), seed-level intervals"})

@@ -1,5 +1,6 @@
 """A campaign's tables and figures, from its results records alone: table.csv, phase_diagram.csv,
-the regime map and the sweep figures (:func:`write_results`), and the rows behind them
+the regime map, the sweep figures and, over a normal-stress sweep, the loading cycle
+(:func:`write_results`, :func:`write_recurrence`), and the rows behind them
 (:func:`table_rows`, :func:`spec_pairs`)."""
 
 from __future__ import annotations
@@ -74,6 +75,7 @@ def write_results(s: Survey, log=print) -> dict:
     """table.csv (one row per run and per pair), phase_diagram.csv and the figures, from the
     results records alone."""
     from ..analysis.campaign_table import PHASE_COLUMNS, pairs_by_permeability, phase_cells, write_table
+    from ..analysis.regime import thesis_point
     from ..plots.phase import pair_histograms, phase_diagram_figure, sweep_figure
     from .campaign_spec import phase_axes
 
@@ -92,7 +94,7 @@ def write_results(s: Survey, log=print) -> dict:
             if cells:
                 out[f"phase_diagram{where}"] = phase_diagram_figure(
                     cells, x, y, figs / f"phase_diagram{where}.png",
-                    s.spec.name + (f", variant {variant}" if variant else ""))
+                    s.spec.name + (f", variant {variant}" if variant else ""), thesis_point())
             out[f"pair_histograms{where}"] = pair_histograms(pairs_by_permeability(vrows),
                                                              figs / variant if variant else figs)
             for c in cells:
@@ -105,7 +107,26 @@ def write_results(s: Survey, log=print) -> dict:
     if sweep_keys:
         out["slip_statistics"] = sweep_figure([r for r in rows if r["kind"] == "run"], sweep_keys,
                                               figs / "slip_statistics.png", s.spec.name)
+    out.update(write_recurrence([r for r in rows if r["kind"] == "run"], s.root, figs, s.spec.name))
     return out
+
+
+def write_recurrence(run_rows: list[dict], root: Path, figs: Path, title: str = "") -> dict:
+    """recurrence.csv (per normal stress: the runs that stick-slip, the mean drop, recurrence and
+    recurrence / (drop sigma / (k V)) with seed-level intervals: analysis.recurrence) under
+    ``root`` and figures/recurrence.png, for run rows that sweep ``loading.normal_stress``;
+    nothing otherwise."""
+    from ..analysis.campaign_table import write_table
+    from ..analysis.recurrence import RECURRENCE_COLUMNS, SIGMA_KEY, run_cycles, sigma_cycles
+    from ..plots.recurrence import recurrence_figure
+
+    if not run_rows or SIGMA_KEY not in run_rows[0]:
+        return {}
+    runs = run_cycles(run_rows)
+    cycles = sigma_cycles(runs)
+    return {"recurrence_csv": write_table([c.csv_row() for c in cycles], [], Path(root) / "recurrence.csv",
+                                          columns=RECURRENCE_COLUMNS),
+            "recurrence_figure": recurrence_figure(runs, cycles, Path(figs) / "recurrence.png", title)}
 
 
 def _by_variant(pair_rows: list[dict], spec: CampaignSpec) -> list[tuple[str, list[dict]]]:

@@ -1,12 +1,16 @@
 """The regime map's outputs from a table of pairs: regime.csv, delay.csv and their figures.
 
 Used by `gouge campaign` (a study campaign with two permeabilities or more) and by `gouge regime
-PAIRS.csv` (the same outputs again from a committed pair table, without simulating anything).
+PAIRS.csv` (the same outputs again from a committed pair table, without simulating anything), which
+also takes several labelled inputs (:class:`Source`: campaigns or pair tables) and draws their
+groups on one set of axes (groups.csv, groups.png: e.g. layer thicknesses beside the thin layer).
 """
 
 from __future__ import annotations
 
 import csv
+import re
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..errors import InputError
@@ -27,33 +31,114 @@ def read_pairs(path: str | Path) -> list[dict]:
     return [r for r in rows if r["kind"] == "pair"]
 
 
-def write_groups(pair_rows: list[dict], keys: list[str], root: Path, title: str = "") -> dict:
-    """:func:`write_regime` and a pairs.csv once per value of ``keys`` (never pooled), under
-    ``root/<key-value_..._hash>/`` (campaign_spec.point_name); at ``root`` itself when there is no key.
-    At ``root``: summary.md (:func:`summary_lines` of every group) and, with several groups,
-    groups.png (their findings on one set of axes, plots.regime.groups_figure)."""
-    from ..analysis.campaign_table import write_table
-    from .campaign_spec import point_name
+@dataclass(frozen=True)
+class Source:
+    """The pairs of one campaign or pair table: ``label`` names its groups and folder ('' for the
+    only source: groups named by their swept values alone); ``keys``: the columns its pairs are
+    never pooled over (swept keys but the seed, and the study variant; none for a pair table)."""
 
-    from ..analysis.regime import thesis_point
+    label: str
+    rows: list[dict]
+    keys: list[str]
+    table: bool = False        # a pair table: ``keys`` are candidates (:func:`table_keys`)
+
+
+def table_keys(rows: list[dict]) -> list[str]:
+    """The columns of a pair table that its pairs are never pooled over: the swept (dotted) config
+    keys and the study variant, those that take more than one value among ``rows``."""
+    candidates = [k for k in (rows[0] if rows else {}) if "." in k or k == "variant"]
+    return [k for k in candidates if len({str(r.get(k)) for r in rows}) > 1]
+
+
+def read_sources(args: list[str]) -> list[Source]:
+    """`gouge regime`'s inputs, each ``[LABEL=]PATH``: a campaign file (its results records,
+    :func:`gouge_cli.workflows.campaign_tables.spec_pairs`) or a pair table (:func:`read_pairs`).
+    An unlabelled source is named after the campaign file's stem or the table's folder when there
+    are several, '' when it is the only one; labels must differ."""
+    from .campaign_tables import spec_pairs
+
+    sources = []
+    for arg in args:
+        label, sep, text = arg.partition("=")
+        if not sep or Path(arg).exists():
+            label, text = "", arg
+        path = Path(text)
+        spec = path.suffix in (".yaml", ".yml") and path.is_file()
+        rows, keys = spec_pairs(path) if spec else (read_pairs(path), [])
+        if not label and len(args) > 1:
+            label = path.stem if spec else path.resolve().parent.name
+        sources.append(Source(label, rows, keys, table=not spec))
+    labels = [s.label for s in sources]
+    if len(set(labels)) < len(labels):
+        raise InputError(f"two inputs share a label ({', '.join(labels)}): give each LABEL=PATH")
+    return sources
+
+
+def select_sources(sources: list[Source], where: dict[str, str]) -> list[Source]:
+    """:func:`select` on each source, with the conditions on its own columns: a condition on a
+    column that one source lacks leaves that source whole (e.g. ``variant=w3`` keeps a campaign
+    without variants), but a column that no source has is refused. A source left without pairs
+    is refused, naming it. A pair table's groups are then its :func:`table_keys` (a table.csv of
+    a thickness sweep is split by thickness, never pooled; one value left by --where: one map)."""
+    if len(sources) == 1:
+        chosen = [(sources[0], select(sources[0].rows, where))]
+    else:
+        columns = [set(s.rows[0]) if s.rows else set() for s in sources]
+        for key in where:
+            if not any(key in c for c in columns):
+                raise InputError(f"--where {key}: no input has such a column")
+        chosen = [(s, select(s.rows, {k: v for k, v in where.items() if k in c})) for s, c in zip(sources, columns)]
+    for s, rows in chosen:
+        if not rows:
+            raise InputError(f"{s.label or 'input'}: no pair rows" +
+                             (" with " + ", ".join(f"{k}={v}" for k, v in where.items()) if where else ""))
+    return [Source(s.label, rows, table_keys(rows) if s.table else s.keys, s.table) for s, rows in chosen]
+
+
+def write_groups(pair_rows: list[dict], keys: list[str], root: Path, title: str = "") -> dict:
+    """:func:`write_sources` of one source (these pairs, never pooled over ``keys``)."""
+    return write_sources([Source("", pair_rows, keys)], root, title)
+
+
+def _folder_name(label: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", label).strip("_") or "source"
+
+
+def write_sources(sources: list[Source], root: Path, title: str = "") -> dict:
+    """:func:`write_regime` and a pairs.csv once per group: per source (under ``root/<label>/``,
+    at ``root`` for an unlabelled source), per value of its ``keys`` (never pooled) under
+    ``<key-value_..._hash>/`` (campaign_spec.point_name). At ``root``: summary.md
+    (:func:`summary_lines` of every group), groups.csv (one row per group and permeability,
+    :class:`~gouge_cli.analysis.regime.GroupCell`: the findings with seed-level intervals at the
+    measured De) and, with several groups, groups.png (plots.regime.groups_figure): the thickness
+    figure where the groups are thicknesses."""
+    from ..analysis.campaign_table import write_table
+    from ..analysis.regime import GROUP_COLUMNS, group_cells, thesis_point
     from ..plots.regime import groups_figure
+    from .campaign_spec import point_name
 
     out = {}
     lines = []
-    groups = []
-    for values, rows in by_swept(pair_rows, keys) if keys else [({}, pair_rows)]:
-        name = point_name(values) if values else ""
-        where = ", ".join(f"{k} = {v}" for k, v in values.items())
-        folder = Path(root) / name if name else Path(root)
-        out[f"pairs[{name}]"] = write_table(rows, [], folder / "pairs.csv")
-        tables = regime_tables(rows)            # (the bootstraps: once per group)
-        for key, path in write_regime(rows, folder, folder, f"{title}, {where}" if where else title,
-                                      tables).items():
-            out[f"{key}[{name}]"] = path
-        lines += summary_lines(rows, where or title, tables)
-        groups.append((where or title, tables[0]))
-    if len(groups) > 1:
-        out["groups_figure"] = groups_figure(groups, thesis_point(), Path(root) / "groups.png",
+    cells = []
+    for source in sources:
+        base = Path(root) / _folder_name(source.label) if source.label else Path(root)
+        for values, rows in by_swept(source.rows, source.keys) if source.keys else [({}, source.rows)]:
+            name = point_name(values) if values else ""
+            where = ", ".join(f"{k} = {v}" for k, v in values.items())
+            group = ": ".join(t for t in (source.label, where) if t) or title
+            key = "/".join(t for t in (_folder_name(source.label) if source.label else "", name) if t)
+            folder = base / name if name else base
+            out[f"pairs[{key}]"] = write_table(rows, [], folder / "pairs.csv")
+            tables = regime_tables(rows)            # (the bootstraps: once per group)
+            for k, path in write_regime(rows, folder, folder, f"{title}, {group}" if title and group != title
+                                        else group, tables).items():
+                out[f"{k}[{key}]"] = path
+            lines += summary_lines(rows, group, tables)
+            cells += group_cells(group, tables[0])
+    out["groups_csv"] = write_table([c.csv_row() for c in cells], [], Path(root) / "groups.csv",
+                                    columns=list(GROUP_COLUMNS))
+    if len({c.group for c in cells}) > 1:
+        out["groups_figure"] = groups_figure(cells, thesis_point(), Path(root) / "groups.png",
                                              f"{title}: every group" if title else "")
     path = Path(root) / "summary.md"
     path.write_text("\n".join(SUMMARY_HEADER + lines) + "\n")

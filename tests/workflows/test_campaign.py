@@ -203,8 +203,15 @@ def test_table_and_phase_diagram(campaign):
         assert n == len(inside) and int(c["n_type_II"]) == sum(r["base_type"] == "II" for r in inside)
         if n:
             assert float(c["frac_complex"]) == pytest.approx(sum(r["complex"] == "True" for r in inside) / n)
-    for name in ("phase_diagram.png", "slip_statistics.png", "pairs_perm_1e-03.png"):
+    for name in ("phase_diagram.png", "slip_statistics.png", "pairs_perm_1e-03.png", "recurrence.png"):
         assert (root / "figures" / name).stat().st_size > 10_000
+    # the loading cycle per normal stress (a sigma sweep): every run counted, stick-slip or not
+    cycles = list(csv.DictReader(open(root / "recurrence.csv")))
+    assert [(c["sigma"], int(c["n_runs"])) for c in cycles] == [("0.0003", 2), ("0.00035", 2)]
+    for c in cycles:
+        mine = [r for r in runs if r["loading.normal_stress"] == c["sigma"]]
+        assert int(c["n_stick_slip"]) == sum(int(r["n_slips"]) >= 2 for r in mine)
+        assert int(c["n_stick_slip"]) + int(c["n_one_slip"]) + int(c["n_steady"]) == 2
     assert any(line.startswith("phase cell permeability=0.001") for line in campaign["log"])
     finished = [line for line in campaign["log"] if line.startswith("[") and " finished, " in line]
     assert any("; ETA ~" in line for line in finished)                 # once a fork and a run are timed
