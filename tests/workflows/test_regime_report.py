@@ -117,9 +117,11 @@ def test_the_verdict_summary_counts_the_committed_records():
             assert int(cells[3]) == len({r["seed"] for r in mine}) and int(cells[4]) == len(mine)
             n1, n2, nt = (int(v) for v in cells[6].split(" / "))
             assert (n1, n2, nt) == tuple(sum(r["base_type"] == t for r in mine) for t in ("I", "II", "tie"))
-            for cell in cells[8:11]:                     # -C, slower, smaller drop: "p % [lo, hi]s"
-                p, lo, hi = (float(v) for v in cell.replace("%", "").replace("[", "").replace("]s", "")
-                             .replace(",", "").split())
+            for cell in cells[8:11]:     # -C, slower, smaller drop: "p % [lo, hi]s"; one seed: "p %" (no interval)
+                values = [float(v) for v in cell.replace("%", "").replace("[", "").replace("]s", "")
+                          .replace(",", "").split()]
+                assert len(values) == (1 if int(cells[3]) == 1 else 3), cell
+                p, lo, hi = values if len(values) == 3 else values * 3
                 assert lo <= p <= hi
 
 
