@@ -109,7 +109,8 @@ def register(app: typer.Typer):
         """Write the regime map (per seed, pooled, seed-level and per-pair intervals) and the onset-delay
         view from tables of pairs; nothing is simulated."""
         from ..errors import InputError
-        from ..workflows.regime_report import read_sources, select_sources, write_regime, write_sources
+        from ..workflows.campaign_tables import read_sources
+        from ..workflows.regime_report import select_sources, write_regime, write_sources
 
         conditions = {}
         for item in where:

@@ -54,8 +54,8 @@ def recurrence_figure(runs: list[RunCycle], cycles: list[SigmaCycle], path: Path
         if name == "ratio":
             ax.axhline(1.0, color="0.3", lw=0.8, ls="--")
         ax.set_xscale("log")
-        if log:
-            ax.set_yscale("log")
+        if log and any(getattr(r, name) > 0 for r in slipping):
+            ax.set_yscale("log")        # (not where no run stick-slips: nothing to place on it)
         if sigmas:
             ax.set_xlim(min(sigmas) / 1.8, max(sigmas) * 1.8)
             ax.set_xticks(sigmas, [f"{s:g}" for s in sigmas])

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..errors import InputError
 from .campaign_results import RUN_PIECE
 from .campaign_spec import CampaignSpec, load_spec
 from .campaign_survey import Survey, survey
@@ -146,3 +147,27 @@ def _regime_outputs(pair_rows: list[dict], s: Survey, figs: Path) -> dict:
     if not keys:
         return write_regime(pair_rows, s.root, figs, s.spec.name)
     return write_groups(pair_rows, keys, s.root / "regime", s.spec.name)
+
+
+def read_sources(args: list[str]) -> list[Source]:
+    """`gouge regime`'s inputs, each ``[LABEL=]PATH``: a campaign file (its results records,
+    :func:`spec_pairs`) or a pair table (:func:`gouge_cli.workflows.regime_report.read_pairs`).
+    An unlabelled source is named after the campaign file's stem or the table's folder when there
+    are several, '' when it is the only one; labels must differ."""
+    from .regime_report import Source, read_pairs
+
+    sources = []
+    for arg in args:
+        label, sep, text = arg.partition("=")
+        if not sep or Path(arg).exists():
+            label, text = "", arg
+        path = Path(text)
+        spec = path.suffix in (".yaml", ".yml") and path.is_file()
+        rows, keys = spec_pairs(path) if spec else (read_pairs(path), [])
+        if not label and len(args) > 1:
+            label = path.stem if spec else path.resolve().parent.name
+        sources.append(Source(label, rows, keys, table=not spec))
+    labels = [s.label for s in sources]
+    if len(set(labels)) < len(labels):
+        raise InputError(f"two inputs share a label ({', '.join(labels)}): give each LABEL=PATH")
+    return sources

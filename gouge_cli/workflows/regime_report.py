@@ -50,30 +50,6 @@ def table_keys(rows: list[dict]) -> list[str]:
     return [k for k in candidates if len({str(r.get(k)) for r in rows}) > 1]
 
 
-def read_sources(args: list[str]) -> list[Source]:
-    """`gouge regime`'s inputs, each ``[LABEL=]PATH``: a campaign file (its results records,
-    :func:`gouge_cli.workflows.campaign_tables.spec_pairs`) or a pair table (:func:`read_pairs`).
-    An unlabelled source is named after the campaign file's stem or the table's folder when there
-    are several, '' when it is the only one; labels must differ."""
-    from .campaign_tables import spec_pairs
-
-    sources = []
-    for arg in args:
-        label, sep, text = arg.partition("=")
-        if not sep or Path(arg).exists():
-            label, text = "", arg
-        path = Path(text)
-        spec = path.suffix in (".yaml", ".yml") and path.is_file()
-        rows, keys = spec_pairs(path) if spec else (read_pairs(path), [])
-        if not label and len(args) > 1:
-            label = path.stem if spec else path.resolve().parent.name
-        sources.append(Source(label, rows, keys, table=not spec))
-    labels = [s.label for s in sources]
-    if len(set(labels)) < len(labels):
-        raise InputError(f"two inputs share a label ({', '.join(labels)}): give each LABEL=PATH")
-    return sources
-
-
 def select_sources(sources: list[Source], where: dict[str, str]) -> list[Source]:
     """:func:`select` on each source, with the conditions on its own columns: a condition on a
     column that one source lacks leaves that source whole (e.g. ``variant=w3`` keeps a campaign

@@ -66,6 +66,8 @@ def test_runs_that_do_not_stick_slip_are_kept_and_counted(tmp_path):
     assert [(float(r["sigma"]), r["state"], int(r["n_runs"])) for r in table] == [
         (1e-4, "steady", 3), (3e-4, "stick-slip", 4), (1e-3, "stick-slip", 3)]
     assert "without stick-slip" in Image.open(out["recurrence_figure"]).info["Description"]
+    still = [r for r in _rows() if r["loading.normal_stress"] != 3e-4 and r["n_slips"] < 2]   # no run stick-slips
+    assert len(still) == 3 and Path(write_recurrence(still, tmp_path / "still", tmp_path / "still")["recurrence_figure"]).is_file()
     assert write_recurrence([{k: v for k, v in r.items() if k != "loading.normal_stress"} for r in _rows()],
                             tmp_path / "none", tmp_path / "none") == {}          # sigma not swept: nothing
 
