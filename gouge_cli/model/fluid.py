@@ -42,7 +42,6 @@ change alters wet results: 1, gouge <= 0.2 and the filtered grid; 2, the wall pl
 gradient of s and the pore pressure's force on the planes (docs/physics/fluid.md)."""
 
 
-
 def saved_revision(arrays: dict) -> int:
     """The coupling revision that wrote a checkpoint's fluid arrays (FluidGrid.arrays()): 1 where
     the fluid state lacks the planes' forces (S_F_BOT, S_F_TOP), else COUPLING_REVISION."""
@@ -165,7 +164,7 @@ class FluidGrid:
         for name in self.EVOLVING:
             target = getattr(self, name)
             source = np.asarray(arrays[name])
-            if name == "state" and source.shape[0] < target.shape[0]:   # (a checkpoint before the plane forces)
+            if name == "state" and saved_revision(arrays) == 1:     # (no plane forces saved: zero until an update)
                 source = np.concatenate([source, target[source.shape[0]:]])
             if source.shape != target.shape:
                 raise ValueError(f"fluid array {name!r} in the checkpoint has shape {source.shape}, "
